@@ -1,0 +1,26 @@
+"""avblocks: vectorized building blocks for multi-vehicle and multi-agent systems.
+
+>>> import avblocks as av
+>>> d = av.Diagram()
+"""
+
+from . import blocks, controllers, core, environment, utility, vehicles
+from .core import Block, Continuous, Diagram, Periodic, Port, Results, Simulator, simulate
+from .core.errors import (
+                   AlgebraicLoopError,
+                   AvError,
+                   ParameterError,
+                   ScenarioError,
+                   ShapeError,
+                   SimulationError,
+                   WiringError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "blocks", "controllers", "core", "environment", "utility", "vehicles",
+    "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
+    "simulate", "AvError", "ParameterError", "WiringError", "ShapeError",
+    "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
+]

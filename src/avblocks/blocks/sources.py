@@ -1,0 +1,107 @@
+"""Sources: constant, clock, step and sine signals.
+
+Each source takes its value's shape from its parameters; a per-agent signal
+is simply an array whose first axis is the agent axis.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.block import Block
+from ..core.params import finite_array
+
+
+class Constant(Block):
+    """A constant signal.
+
+    Ports
+    -----
+    y : out, shape of ``value``
+
+    Parameters
+    ----------
+    value : array_like
+        The value (its first axis is the agent axis when ``agents`` is true).
+    agents : bool
+        Whether the first axis of ``value`` counts agents.
+    """
+
+    def __init__(self, value, *, agents=True, unit=""):
+        super().__init__()
+        v = np.asarray(value)
+        if v.dtype.kind not in "biu":
+            v = finite_array(value, "Constant", "value")
+        self.value = v
+        self.declare_output("y", v.shape, v.dtype.name, unit=unit,
+                            agents=agents and v.ndim > 0)
+
+    def output(self, t, x, u, xp):
+        return {"y": xp.asarray(self.value)}
+
+
+class Clock(Block):
+    """Simulation time as a signal.
+
+    Ports
+    -----
+    y : out, shape (), seconds
+    """
+
+    def __init__(self):
+        super().__init__()
+        self.declare_output("y", (), unit="s", agents=False)
+
+    def output(self, t, x, u, xp):
+        return {"y": xp.asarray(t, dtype=float)}
+
+
+class Step(Block):
+    """A step: ``before`` for t < ``time``, ``after`` from then on.
+
+    Ports
+    -----
+    y : out, shape of ``after``
+
+    Equations
+    ---------
+    y(t) = before + (after - before) * [t >= time]
+    """
+
+    def __init__(self, time=1.0, before=0.0, after=1.0, *, agents=True):
+        super().__init__()
+        a = finite_array(after, "Step", "after")
+        b = finite_array(before, "Step", "before")
+        b = np.broadcast_to(b, a.shape).copy()
+        self.time = float(finite_array(time, "Step", "time", ()))
+        self.before, self.after = b, a
+        self.declare_output("y", a.shape, agents=agents and a.ndim > 0)
+
+    def output(self, t, x, u, xp):
+        return {"y": xp.where(t >= self.time, xp.asarray(self.after),
+                              xp.asarray(self.before))}
+
+
+class Sine(Block):
+    """A sine wave: ``y = amplitude * sin(2 pi frequency t + phase) + bias``.
+
+    Ports
+    -----
+    y : out, broadcast shape of the parameters
+    """
+
+    def __init__(self, amplitude=1.0, frequency=1.0, phase=0.0, bias=0.0, *,
+                 agents=True):
+        super().__init__()
+        arrs = np.broadcast_arrays(*(finite_array(v, "Sine", n) for v, n in
+                                     ((amplitude, "amplitude"), (frequency, "frequency"),
+                                      (phase, "phase"), (bias, "bias"))))
+        self.amplitude, self.frequency, self.phase, self.bias = (a.copy() for a in arrs)
+        self.declare_output("y", arrs[0].shape, agents=agents and arrs[0].ndim > 0)
+
+    def output(self, t, x, u, xp):
+        return {"y": self.amplitude * xp.sin(2 * np.pi * self.frequency * t + self.phase)
+                + self.bias}
+
+
+__all__ = ["Constant", "Clock", "Step", "Sine"]

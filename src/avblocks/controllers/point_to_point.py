@@ -1,0 +1,173 @@
+"""Point-to-point motion through waypoints by feedback linearization.
+
+Equations
+---------
+For a unicycle at (x, y, theta) the point at distance d ahead,
+``p = (x + d cos theta, y + d sin theta)``, has velocity
+
+    dp/dt = R(theta) diag(1, d) [v, omega]^T,
+
+an invertible map for d != 0. Commanding ``dp/dt = w`` with
+``w = sat_{v_max}(K (g - p))`` (g the current waypoint) therefore gives
+
+    v     =  cos(theta) w_x + sin(theta) w_y
+    omega = (-sin(theta) w_x + cos(theta) w_y) / d
+
+and p converges exponentially to g with rate K (until the saturation).
+
+Reference: AVLib paper, Section III.B (point-to-point by feedback
+linearization); J. Cortes, *Distributed control of robotic networks*
+(2009) and Lawton, Beard & Young (2003), "A decentralized approach to
+formation maneuvers", IEEE TRA 19(6) for the off-axis point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.block import Block
+from ..core.errors import ParameterError
+from ..core.params import agent_array, positive_scalar
+
+
+def waypoint_array(waypoints, n, block="PointToPoint"):
+    """Normalize waypoints to a padded (N, M, 2) array and counts (N,).
+
+    Accepts one list (M, 2) shared by all agents, an (N, M, 2) array, or a
+    list of N arrays (M_i, 2) of different lengths (padded with the last one).
+    """
+    if isinstance(waypoints, (list, tuple)) and len(waypoints) and all(
+            np.ndim(w) == 2 for w in waypoints):
+        lists = [np.asarray(w, dtype=float) for w in waypoints]
+        if len(lists) != n:
+            raise ParameterError("one waypoint list per agent", block=block,
+                                 param="waypoints", expected=n, found=len(lists))
+    else:
+        try:
+            a = np.asarray(waypoints, dtype=float)
+        except (TypeError, ValueError):
+            raise ParameterError("waypoints must be numeric", block=block,
+                                 param="waypoints") from None
+        if a.ndim == 1 and a.shape == (2,):
+            a = a[None]
+        if a.ndim == 2 and a.shape[1] == 2:
+            lists = [a] * n
+        elif a.ndim == 3 and a.shape[0] == n and a.shape[2] == 2:
+            lists = list(a)
+        else:
+            raise ParameterError("wrong shape", block=block, param="waypoints",
+                                 expected=f"(M, 2), ({n}, M, 2) or a list of {n} "
+                                          "(M_i, 2) arrays", found=a.shape)
+    counts = np.array([len(w) for w in lists], dtype=np.int64)
+    if np.any(counts < 1):
+        raise ParameterError("every agent needs at least one waypoint", block=block,
+                             param="waypoints")
+    for w in lists:
+        if w.ndim != 2 or w.shape[1] != 2 or not np.all(np.isfinite(w)):
+            raise ParameterError("each waypoint list must be a finite (M, 2) array",
+                                 block=block, param="waypoints", found=w.shape)
+    m = int(counts.max())
+    out = np.empty((n, m, 2))
+    for i, w in enumerate(lists):
+        out[i, :len(w)] = w
+        out[i, len(w):] = w[-1]
+    return out, counts
+
+
+def point_to_point_law(pose, goal, d, gain, v_max, xp=np):
+    """(v, omega) driving the off-axis point of each unicycle to ``goal``.
+
+    ``pose`` (N, 3), ``goal`` (N, 2), ``d``, ``gain``, ``v_max`` scalars or (N,).
+    """
+    th = pose[:, 2]
+    c, s = xp.cos(th), xp.sin(th)
+    px = pose[:, 0] + d * c
+    py = pose[:, 1] + d * s
+    wx = gain * (goal[:, 0] - px)
+    wy = gain * (goal[:, 1] - py)
+    norm = xp.sqrt(wx * wx + wy * wy)
+    scale = xp.minimum(1.0, v_max / xp.maximum(norm, 1e-300))
+    wx, wy = wx * scale, wy * scale
+    return xp.stack([c * wx + s * wy, (-s * wx + c * wy) / d], axis=-1)
+
+
+class PointToPoint(Block):
+    """Drives N unicycles, each through its own list of waypoints.
+
+    Ports
+    -----
+    pose : in, (N, 3) — vehicle poses (direct feedthrough).
+    cmd : out, (N, 2) — (v, omega) for a unicycle-family vehicle.
+    target : out, (N, 2) — the waypoint each agent is heading to.
+    done : out, (N,) bool — true once the last waypoint is reached.
+
+    State
+    -----
+    wp : discrete (N,) int — index of the current waypoint, advanced at major
+    steps when the controlled point is within ``radius`` of it. The agent
+    holds at its last waypoint.
+
+    Parameters
+    ----------
+    waypoints : (M, 2), (N, M, 2) or list of N (M_i, 2)
+    n : int, optional
+        Number of agents (needed when ``waypoints`` is shared).
+    d : float
+        Distance of the controlled point ahead of the axle (m), > 0.
+    gain : float or (N,)
+        Convergence rate K (1/s).
+    v_max : float or (N,)
+        Speed limit of the controlled point (m/s).
+    radius : float
+        Arrival radius (m).
+
+    Equations: see the module docstring.
+    """
+
+    def __init__(self, waypoints, *, n=None, d=0.1, gain=1.0, v_max=1.0, radius=0.2):
+        super().__init__()
+        if n is None:
+            a = waypoints if not isinstance(waypoints, (list, tuple)) else None
+            if a is not None and np.ndim(a) == 3:
+                n = np.shape(a)[0]
+            elif isinstance(waypoints, (list, tuple)) and waypoints and all(
+                    np.ndim(w) == 2 for w in waypoints) and np.ndim(waypoints) != 2:
+                n = len(waypoints)
+            else:
+                raise ParameterError("n (number of agents) is needed when all "
+                                     "agents share one waypoint list",
+                                     block="PointToPoint", param="n")
+        self.n = n = int(n)
+        self.wps, self.counts = waypoint_array(waypoints, n)
+        self.d = positive_scalar(d, "PointToPoint", "d")
+        self.gain = agent_array(gain, n, "PointToPoint", "gain", positive=True)
+        self.v_max = agent_array(v_max, n, "PointToPoint", "v_max", positive=True)
+        self.radius = positive_scalar(radius, "PointToPoint", "radius")
+        self._rows = np.arange(n)
+        self._last = self.counts - 1
+        self.declare_discrete_state("wp", np.zeros(n, dtype=np.int64))
+        self.declare_input("pose", (n, 3), unit="m, m, rad")
+        self.declare_output("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"))
+        self.declare_output("target", (n, 2), unit="m", labels=("x", "y"))
+        self.declare_output("done", (n,), "bool")
+
+    def _goal(self, wp, xp):
+        return xp.asarray(self.wps)[self._rows, wp]
+
+    def _dist(self, pose, goal, xp):
+        px = pose[:, 0] + self.d * xp.cos(pose[:, 2])
+        py = pose[:, 1] + self.d * xp.sin(pose[:, 2])
+        return xp.sqrt((goal[:, 0] - px) ** 2 + (goal[:, 1] - py) ** 2)
+
+    def output(self, t, x, u, xp):
+        goal = self._goal(x["wp"], xp)
+        pose = u["pose"]
+        cmd = point_to_point_law(pose, goal, self.d, self.gain, self.v_max, xp)
+        done = (x["wp"] == self._last) & (self._dist(pose, goal, xp) <= self.radius)
+        return {"cmd": cmd, "target": goal, "done": done}
+
+    def update(self, t, x, u, xp):
+        wp = x["wp"]
+        goal = self._goal(wp, xp)
+        reached = self._dist(u["pose"], goal, xp) <= self.radius
+        return {"wp": xp.where(reached & (wp < self._last), wp + 1, wp)}

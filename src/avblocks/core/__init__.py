@@ -1,0 +1,26 @@
+"""The engine: ports, blocks, diagrams, solvers, the simulator and results."""
+
+from . import rng
+from .block import CONTINUOUS, Block, Continuous, Periodic
+from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
+from .errors import (
+                     AlgebraicLoopError,
+                     AvError,
+                     ParameterError,
+                     ScenarioError,
+                     ShapeError,
+                     SimulationError,
+                     WiringError,
+)
+from .ports import Port
+from .results import Results
+from .simulator import Simulator, simulate
+from .solvers import RK4, Euler, Scipy, Solver, make_solver
+
+__all__ = [
+    "rng", "Block", "Continuous", "Periodic", "CONTINUOUS", "Diagram", "BlockHandle",
+    "PortRef", "CompiledDiagram", "AvError", "ParameterError", "WiringError",
+    "ShapeError", "AlgebraicLoopError", "SimulationError", "ScenarioError", "Port",
+    "Results", "Simulator", "simulate", "Solver", "Euler", "RK4", "Scipy",
+    "make_solver",
+]

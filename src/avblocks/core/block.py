@@ -1,0 +1,276 @@
+"""The :class:`Block` base class: a declaration plus pure functions.
+
+A block declares, in its constructor, everything the simulator needs to know:
+its input and output ports, its continuous and discrete states with their
+initial values, its sample time and which inputs feed directly through to its
+outputs. It then computes only from values the simulator hands it:
+
+``output(t, x, u, xp) -> {output_name: array}``
+    outputs from time ``t``, state dict ``x`` (continuous and discrete states
+    by name) and input dict ``u``.
+``derivative(t, x, u, xp) -> {continuous_state_name: array}``
+    time derivative of each continuous state.
+``update(t, x, u, xp) -> {discrete_state_name: array}``
+    next value of each discrete state, at the block's sample hits.
+
+``xp`` is the array namespace (``numpy`` by default, ``jax.numpy`` when a
+diagram is traced). The functions never write into ``x`` or ``u``; they draw
+randomness only from random-key states (see :mod:`avblocks.core.rng`).
+
+Example
+-------
+A proportional heading controller in a few lines:
+
+>>> import numpy as np, avblocks as av
+>>> class HeadingP(av.Block):
+...     def __init__(self, n, gain=1.0, heading=0.0):
+...         super().__init__()
+...         self.gain, self.heading = gain, heading
+...         self.declare_input("pose", (n, 3))
+...         self.declare_output("cmd", (n, 2))
+...     def output(self, t, x, u, xp):
+...         err = av.utility.wrap_angle(self.heading - u["pose"][:, 2], xp)
+...         return {"cmd": xp.stack([xp.ones_like(err), self.gain * err], axis=-1)}
+>>> b = HeadingP(2)
+>>> b.output(0.0, {}, {"pose": np.zeros((2, 3))}, np)["cmd"].shape
+(2, 2)
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ParameterError
+from .ports import Port
+
+
+@dataclass(frozen=True)
+class Continuous:
+    """Sample time of a continuous-time block.
+
+    Its outputs are recomputed at every solver stage. Its discrete states,
+    if any (modes such as "current waypoint"), are updated at every major
+    step.
+    """
+
+    def __repr__(self):
+        return "Continuous()"
+
+
+@dataclass(frozen=True)
+class Periodic:
+    """Sample time of a discrete block: hits at ``offset + k * period``.
+
+    Outputs are computed at hits and held between them (zero-order hold);
+    discrete states are updated at hits.
+    """
+
+    period: float
+    offset: float = 0.0
+
+    def __post_init__(self):
+        if not (math.isfinite(self.period) and self.period > 0):
+            raise ParameterError("sample period must be a positive number",
+                                 param="period", expected="> 0", found=self.period)
+        if not (math.isfinite(self.offset) and 0 <= self.offset < self.period):
+            raise ParameterError("sample offset must lie in [0, period)",
+                                 param="offset", expected=f"[0, {self.period})",
+                                 found=self.offset)
+
+
+CONTINUOUS = Continuous()
+
+
+class Block:
+    """Base class of every block. See the module docstring for the contract.
+
+    Subclasses call ``super().__init__()`` and then the ``declare_*`` methods.
+    Set ``self.n`` to the number of agents when the block has an agent axis.
+    """
+
+    #: True when ``on_major_step`` has side effects (I/O, drawing, hardware).
+    side_effects = False
+
+    def __init__(self):
+        self._inputs: dict[str, Port] = {}
+        self._outputs: dict[str, Port] = {}
+        self._feedthrough: set[str] = set()
+        self._cstates: dict[str, Port] = {}
+        self._dstates: dict[str, Port] = {}
+        self._init: dict[str, np.ndarray] = {}
+        self._random: set[str] = set()
+        self.sample_time = CONTINUOUS
+
+    # ------------------------------------------------------------------ declare
+    def _check_new(self, name, state=False):
+        if not hasattr(self, "_inputs"):
+            raise ParameterError(
+                f"{type(self).__name__}.__init__ must call super().__init__() "
+                "before declaring ports or states")
+        if state and (name in self._cstates or name in self._dstates):
+            raise ParameterError("state declared twice", block=type(self).__name__,
+                                 param=name)
+
+    def declare_input(self, name, shape=None, dtype="float64", *, unit="",
+                      labels=(), doc="", agents=True, feedthrough=True) -> Port:
+        """Declare an input port.
+
+        ``feedthrough=False`` promises that the outputs do not depend on this
+        input at the same instant (only through state); the diagram uses it
+        to order blocks and to detect algebraic loops.
+        """
+        self._check_new(name)
+        if name in self._inputs:
+            raise ParameterError("input declared twice", block=type(self).__name__,
+                                 port=name)
+        p = Port(name, shape, dtype, unit, tuple(labels), doc, agents)
+        self._inputs[name] = p
+        if feedthrough:
+            self._feedthrough.add(name)
+        else:
+            self._feedthrough.discard(name)
+        return p
+
+    def declare_output(self, name, shape=None, dtype="float64", *, unit="",
+                       labels=(), doc="", agents=True) -> Port:
+        """Declare an output port."""
+        self._check_new(name)
+        if name in self._outputs:
+            raise ParameterError("output declared twice", block=type(self).__name__,
+                                 port=name)
+        p = Port(name, shape, dtype, unit, tuple(labels), doc, agents)
+        self._outputs[name] = p
+        return p
+
+    def declare_continuous_state(self, name, value, *, unit="", labels=(),
+                                 doc="", agents=True) -> Port:
+        """Declare a continuous state with its initial value (float array)."""
+        self._check_new(name, state=True)
+        v = np.array(value, dtype=float)
+        p = Port(name, v.shape, "float64", unit, tuple(labels), doc, agents)
+        self._cstates[name] = p
+        self._init[name] = v
+        return p
+
+    def declare_discrete_state(self, name, value, *, dtype=None, unit="",
+                               labels=(), doc="", agents=True) -> Port:
+        """Declare a discrete state with its initial value."""
+        self._check_new(name, state=True)
+        v = np.array(value, dtype=dtype)
+        p = Port(name, v.shape, v.dtype.name, unit, tuple(labels), doc, agents)
+        self._dstates[name] = p
+        self._init[name] = v
+        return p
+
+    def declare_random_state(self, name="key") -> Port:
+        """Declare a random-generator key, seeded by the simulator.
+
+        Draw with :mod:`avblocks.core.rng` in ``update`` and return the next
+        key. Each block gets its own stream from the run's seed and the
+        block's name, so runs are repeatable.
+        """
+        from . import rng as _rng
+        p = self.declare_discrete_state(name, _rng.key(0), agents=False)
+        self._random.add(name)
+        return p
+
+    def declare_periodic(self, period, offset=0.0):
+        """Make the block discrete with sample hits at ``offset + k*period``."""
+        self.sample_time = Periodic(float(period), float(offset))
+
+    # ------------------------------------------------------------ introspection
+    @property
+    def input_ports(self) -> dict[str, Port]:
+        return dict(self._inputs)
+
+    @property
+    def output_ports(self) -> dict[str, Port]:
+        return dict(self._outputs)
+
+    @property
+    def continuous_states(self) -> dict[str, Port]:
+        return dict(self._cstates)
+
+    @property
+    def discrete_states(self) -> dict[str, Port]:
+        return dict(self._dstates)
+
+    @property
+    def random_states(self) -> set[str]:
+        return set(self._random)
+
+    @property
+    def feedthrough(self) -> set[str]:
+        """Names of inputs that feed directly through to the outputs."""
+        return set(self._feedthrough)
+
+    def initial_state(self) -> dict[str, np.ndarray]:
+        """Initial values of all states by name (copies)."""
+        return {k: v.copy() for k, v in self._init.items()}
+
+    def set_initial(self, name, value):
+        """Replace the initial value of a declared state (same shape)."""
+        if name not in self._init:
+            raise ParameterError("no such state", block=type(self).__name__,
+                                 param=name, expected=sorted(self._init), found=name)
+        old = self._init[name]
+        v = np.array(value, dtype=old.dtype)
+        if v.shape != old.shape:
+            raise ParameterError("initial value has the wrong shape",
+                                 block=type(self).__name__, param=name,
+                                 expected=old.shape, found=v.shape)
+        self._init[name] = v
+
+    @property
+    def has_derivative(self) -> bool:
+        return bool(self._cstates)
+
+    @property
+    def has_update(self) -> bool:
+        return bool(self._dstates)
+
+    # --------------------------------------------------------------- behaviour
+    def configure(self, inputs: dict[str, Port]) -> None:
+        """Hook for shape-polymorphic blocks, called once when the diagram is
+        built, with the resolved specs of the signals wired to the inputs.
+        Re-declare outputs/states here (``redeclare_*``). Default: nothing.
+        """
+
+    def redeclare_output(self, name, shape, dtype=None):
+        """Fix the shape of an output whose shape was left open."""
+        self._outputs[name] = self._outputs[name].with_shape(shape, dtype)
+
+    def redeclare_input(self, name, shape, dtype=None):
+        self._inputs[name] = self._inputs[name].with_shape(shape, dtype)
+
+    def output(self, t, x, u, xp):
+        """Outputs at time ``t`` (dict by output name). Default: none."""
+        return {}
+
+    def derivative(self, t, x, u, xp):
+        """Derivatives of the continuous states (dict by state name)."""
+        raise NotImplementedError(
+            f"{type(self).__name__} declares continuous states but no derivative()")
+
+    def update(self, t, x, u, xp):
+        """Next values of the discrete states (dict by state name)."""
+        raise NotImplementedError(
+            f"{type(self).__name__} declares discrete states but no update()")
+
+    def on_major_step(self, t, x, u, y):
+        """Side effects at a major step (drawing, I/O). Only called when the
+        class sets ``side_effects = True``; never inside solver stages."""
+
+    def on_start(self):
+        """Called once before a run (open windows, connections)."""
+
+    def on_stop(self):
+        """Called once after a run, also when it failed (close resources)."""
+
+    def __repr__(self):
+        ins = ", ".join(self._inputs)
+        outs = ", ".join(self._outputs)
+        return f"{type(self).__name__}(in: [{ins}], out: [{outs}])"

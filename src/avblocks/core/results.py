@@ -1,0 +1,154 @@
+"""Logged signals of a run: time x agent x component arrays.
+
+>>> import numpy as np, avblocks as av
+>>> r = av.Results(np.array([0.0, 1.0]), {"a.y": np.zeros((2, 3, 2))})
+>>> r["a.y"].shape
+(2, 3, 2)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .errors import AvError
+from .ports import Port
+
+
+class Results:
+    """Recorded outputs of a simulation.
+
+    Attributes
+    ----------
+    t : ndarray, shape (T,)
+        Times of the samples.
+    data : dict of str -> ndarray, shape (T, *port shape)
+        One array per logged port, keyed ``"block.port"``.
+    ports : dict of str -> Port
+        The specs of the logged ports (units, component labels).
+    meta : dict
+        Run facts: solver, dt, seed, steps, agents, wall time, real-time
+        factor, overruns (when paced), error (when it failed).
+    """
+
+    def __init__(self, t, data, ports=None, meta=None, aliases=None):
+        self.t = np.asarray(t)
+        self.data = dict(data)
+        self.ports = dict(ports or {})
+        self.meta = dict(meta or {})
+        self.aliases = dict(aliases or {})
+        for k, v in self.data.items():
+            if len(v) != len(self.t):
+                raise AvError(f"signal '{k}' has {len(v)} samples but there are "
+                              f"{len(self.t)} times")
+
+    def _key(self, ref) -> str:
+        from .diagram import PortRef
+        key = ref.path if isinstance(ref, PortRef) else str(ref)
+        key = self.aliases.get(key, key)
+        if key not in self.data:
+            raise KeyError(f"'{key}' was not logged; logged: {sorted(self.data)}")
+        return key
+
+    def __getitem__(self, ref) -> np.ndarray:
+        return self.data[self._key(ref)]
+
+    def __contains__(self, ref):
+        try:
+            self._key(ref)
+            return True
+        except KeyError:
+            return False
+
+    def keys(self):
+        return self.data.keys()
+
+    def final(self, ref) -> np.ndarray:
+        """Last logged value of a signal."""
+        return self[ref][-1]
+
+    def __repr__(self):
+        sigs = ", ".join(f"{k} {v.shape[1:]}" for k, v in self.data.items())
+        return (f"Results({len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
+                f", {self.t[-1] if len(self.t) else 0}]: {sigs})")
+
+    # --------------------------------------------------------------- xarray
+    def to_xarray(self):
+        """The results as an :class:`xarray.Dataset`.
+
+        Each signal is a variable with dimensions ``time``, then ``agent``
+        for per-agent signals (``<signal>.agent`` when the agent counts of
+        the logged signals differ), then ``<signal>.comp...`` with component
+        labels as coordinates when the port declares them.
+        """
+        import xarray as xr
+
+        counts = {p.n for k, p in self.ports.items() if p.n is not None}
+        shared_agent = len(counts) == 1
+        variables, coords = {}, {"time": ("time", self.t)}
+        for k, v in self.data.items():
+            p = self.ports.get(k, Port(k.replace(".", "_"), v.shape[1:], v.dtype.name))
+            dims = ["time"]
+            rest = list(v.shape[1:])
+            if p.agents and rest:
+                dims.append("agent" if shared_agent else f"{k}.agent")
+                rest = rest[1:]
+            for j, _ in enumerate(rest):
+                dims.append(f"{k}.comp" if j == 0 else f"{k}.comp{j}")
+            if p.labels and rest and len(p.labels) == rest[-1]:
+                coords[dims[-1]] = (dims[-1], list(p.labels))
+            variables[k] = (dims, v, {"unit": p.unit, "doc": p.doc,
+                                      "agents": int(p.agents)})
+        ds = xr.Dataset(variables, coords=coords)
+        ds.attrs["avblocks_meta"] = json.dumps(self.meta, default=_jsonable)
+        return ds
+
+    def save(self, path) -> Path:
+        """Save to NetCDF (``.nc``, through h5netcdf) or Zarr (``.zarr``)."""
+        path = Path(path)
+        ds = self.to_xarray()
+        if path.suffix == ".zarr":
+            ds.to_zarr(path, mode="w")
+        else:
+            ds.to_netcdf(path, engine="h5netcdf")
+        return path
+
+    @classmethod
+    def load(cls, path) -> Results:
+        """Load results saved by :meth:`save`."""
+        import xarray as xr
+
+        path = Path(path)
+        if not path.exists():
+            raise AvError(f"no results file at {path}")
+        if path.suffix == ".zarr":
+            ds = xr.open_zarr(path).load()
+        else:
+            with xr.open_dataset(path, engine="h5netcdf") as f:
+                ds = f.load()
+        return cls.from_xarray(ds)
+
+    @classmethod
+    def from_xarray(cls, ds) -> Results:
+        data, ports = {}, {}
+        for k, var in ds.data_vars.items():
+            v = np.asarray(var.values)
+            data[k] = v
+            labels = ()
+            last = var.dims[-1]
+            if last in ds.coords and last != "time" and not last.endswith("agent"):
+                labels = tuple(str(s) for s in ds.coords[last].values)
+            ports[k] = Port(k.rsplit(".", 1)[-1], v.shape[1:], v.dtype.name,
+                            str(var.attrs.get("unit", "")), labels,
+                            str(var.attrs.get("doc", "")),
+                            bool(var.attrs.get("agents", 1)))
+        meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
+        return cls(np.asarray(ds["time"].values), data, ports, meta)
+
+
+def _jsonable(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    return str(o)

@@ -1,0 +1,403 @@
+"""Running a diagram: :class:`Simulator` (step by hand) and :func:`simulate`.
+
+The major step
+--------------
+With major step ``h`` and ``t_k = t0 + k h``, the simulator does::
+
+    init:   X <- initial states (random keys seeded from seed and block path)
+            Y <- outputs of every block at t0          (initial outputs)
+            side effects at t0; log k = 0
+    repeat for k = 0 .. K-1:
+        1. X <- discrete updates at t_k, from X and Y:
+               continuous-time blocks with discrete states: every step;
+               periodic blocks: only at their hits.
+        2. X <- solver advances continuous states from t_k to t_k+1,
+               with k1 = f(t_k, X, Y); later stages recompute the outputs
+               of continuous blocks; periodic blocks hold theirs.
+        3. Y <- outputs at t_k+1 in sorted order; a periodic block recomputes
+               its outputs only at a hit and holds them otherwise.
+        4. check X and Y are finite; side effects (on_major_step) at t_k+1;
+           log every ``log_every`` steps; pace to the wall clock.
+
+So a discrete block's output at a hit uses its state before that hit's
+update (outputs, then updates), its value is held until its next hit, and
+a continuous block sees the discrete value through the whole step.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import sys
+import time as _time
+
+import numpy as np
+
+from . import rng as _rng
+from .diagram import CompiledDiagram, Diagram, PortRef
+from .engine import Engine
+from .errors import AvError, ParameterError, ShapeError, SimulationError
+from .results import Results
+from .solvers import make_solver
+
+
+class Simulator:
+    """Steps a diagram by hand; :func:`simulate` wraps it.
+
+    Parameters
+    ----------
+    diagram : Diagram or CompiledDiagram
+    dt : float
+        Major step (fixed-step solvers integrate with it; variable-step
+        solvers restart at each major step).
+    solver : str or Solver
+        ``"rk4"`` (default), ``"euler"``, or a :func:`scipy.integrate.solve_ivp`
+        method (``"RK45"``, ``"DOP853"``, ``"LSODA"``...) or a Solver object.
+    seed : int
+        Seeds every random-key state; same seed, same run, bit for bit.
+    t0 : float
+        Start time.
+    check_finite : bool
+        Stop with :class:`SimulationError` at the first NaN or inf.
+
+    Example
+    -------
+    >>> import avblocks as av
+    >>> d = av.Diagram()
+    >>> c = d.add(av.blocks.Constant([[1.0]]), name="c")
+    >>> i = d.add(av.blocks.Integrator([[0.0]]), name="i")
+    >>> d.connect(c.y, i.u)
+    >>> sim = av.Simulator(d, dt=0.1)
+    >>> for _ in range(10):
+    ...     sim.step()
+    >>> round(float(sim.value(i.y)[0, 0]), 12)
+    1.0
+    """
+
+    def __init__(self, diagram, dt=0.01, solver="rk4", *, seed=0, t0=0.0,
+                 check_finite=True):
+        if isinstance(diagram, Diagram):
+            diagram = diagram.build()
+        if not isinstance(diagram, CompiledDiagram):
+            raise ParameterError("simulate needs a Diagram", param="diagram",
+                                 expected="Diagram", found=type(diagram).__name__)
+        self.compiled = diagram
+        try:
+            dt = float(dt)
+        except (TypeError, ValueError):
+            dt = float("nan")
+        if not (math.isfinite(dt) and dt > 0):
+            raise ParameterError("major step must be a positive number",
+                                 param="dt", expected="> 0", found=dt)
+        self.dt = dt
+        self.solver = make_solver(solver)
+        self.seed = int(seed)
+        self.t0 = float(t0)
+        self.check_finite = bool(check_finite)
+        self.eng = Engine(diagram, dt)
+        self._fx = [(i, o) for i in self.eng.with_outputs
+                    for o, p in diagram.blocks[i]._outputs.items()
+                    if np.issubdtype(np.dtype(p.dtype), np.inexact)]
+        self._fx_state = [(i, nm) for i in self.eng.cont
+                          for nm in self.eng.cont_names[i]]
+        self._fx_dstate = [(i, nm) for i in self.eng.disc
+                           for nm, p in diagram.blocks[i]._dstates.items()
+                           if np.issubdtype(np.dtype(p.dtype), np.inexact)]
+        self._side = [i for i, b in enumerate(diagram.blocks) if b.side_effects]
+        self.k = 0
+        self.X = None
+        self.Y = None
+
+    # --------------------------------------------------------------- state
+    @property
+    def t(self) -> float:
+        return self.t0 + self.k * self.dt
+
+    def initial_states(self):
+        X = []
+        for name, b in zip(self.compiled.names, self.compiled.blocks):
+            x = b.initial_state()
+            for r in b._random:
+                x[r] = _rng.key(self.seed, f"{name}.{r}")
+            X.append(x)
+        return X
+
+    def init(self):
+        """Reset to ``t0``: initial states, initial outputs, side effects."""
+        self.k = 0
+        self.X = self.initial_states()
+        Y0 = [dict() for _ in self.compiled.blocks]
+        self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
+        self._check_declared()
+        self._check(self.t0)
+        for i in self._side:
+            self.compiled.blocks[i].on_start()
+        self._side_effects()
+        return self
+
+    def _check_declared(self):
+        """First outputs must have the declared shapes and dtypes."""
+        for i, b in enumerate(self.compiled.blocks):
+            y = self.Y[i]
+            for o, p in b._outputs.items():
+                if o not in y:
+                    raise ShapeError("output() did not return this port",
+                                     block=self.compiled.names[i], port=o,
+                                     expected=sorted(b._outputs), found=sorted(y))
+                a = np.asarray(y[o])
+                if a.shape != p.shape:
+                    raise ShapeError("output() returned the wrong shape",
+                                     block=self.compiled.names[i], port=o,
+                                     expected=p.shape, found=a.shape)
+                if a.dtype.kind != np.dtype(p.dtype).kind:
+                    raise ShapeError("output() returned the wrong dtype",
+                                     block=self.compiled.names[i], port=o,
+                                     expected=p.dtype, found=a.dtype.name)
+
+    def _guard(self, fn, t, *args):
+        try:
+            return fn(t, *args)
+        except AvError:
+            raise
+        except Exception as e:  # noqa: BLE001 - add the block context
+            name = _blame(e, self.compiled)
+            hint = None
+            if isinstance(e, KeyError):
+                hint = ("output() only receives inputs declared with "
+                        "feedthrough=True; derivative() and update() receive all")
+            raise SimulationError(f"{type(e).__name__}: {e}", block=name,
+                                  time=t, hint=hint) from e
+
+    def _check(self, t):
+        if not self.check_finite:
+            return
+        Y, X = self.Y, self.X
+        for i, o in self._fx:
+            if not np.isfinite(np.sum(Y[i][o])):
+                raise SimulationError("output is NaN or infinite",
+                                      block=self.compiled.names[i], port=o, time=t)
+        for i, nm in self._fx_state + self._fx_dstate:
+            if not np.isfinite(np.sum(X[i][nm])):
+                raise SimulationError(
+                    f"state '{nm}' became NaN or infinite (its derivative or "
+                    "update produced it)", block=self.compiled.names[i], time=t)
+
+    def _side_effects(self):
+        for i in self._side:
+            b = self.compiled.blocks[i]
+            b.on_major_step(self.t, self.X[i], self.eng.gather(i, self.Y), self.Y[i])
+
+    def step(self):
+        """One major step: updates at t_k, integrate to t_k+1, outputs at t_k+1."""
+        if self.X is None:
+            self.init()
+        eng, k, h = self.eng, self.k, self.dt
+        t = self.t0 + k * h
+        X = self._guard(eng.update, t, self.X, self.Y, eng.hits(k))
+        X = self._guard(lambda tt, XX: self.solver.step(eng, tt, XX, self.Y, h), t, X)
+        t1 = self.t0 + (k + 1) * h
+        self.Y = self._guard(eng.major_outputs, t1, X, self.Y, eng.hits(k + 1))
+        self.X = X
+        self.k = k + 1
+        self._check(t1)
+        if self._side:
+            self._side_effects()
+
+    def value(self, ref):
+        """Current value of an output port (handle or ``"block.port"``)."""
+        i, o = self.compiled.resolve(ref)
+        return self.Y[i][o]
+
+    def state(self, block, name):
+        """Current value of a state of a block (by path)."""
+        return self.X[self.compiled.index(block)][name]
+
+    def close(self):
+        for i in self._side:
+            self.compiled.blocks[i].on_stop()
+
+
+def _blame(exc, compiled):
+    """Name of the block whose method raised ``exc`` (from the traceback)."""
+    tb = exc.__traceback__
+    found = None
+    ids = {id(b): n for n, b in zip(compiled.names, compiled.blocks)}
+    while tb is not None:
+        slf = tb.tb_frame.f_locals.get("self")
+        if slf is not None and id(slf) in ids:
+            found = ids[id(slf)]
+        tb = tb.tb_next
+    return found
+
+
+def default_log(compiled):
+    """Outputs logged when the user names none: every ``pose``/``position``
+    output, else every output of the diagram."""
+    refs = [f"{n}.{o}" for n, b in zip(compiled.names, compiled.blocks)
+            for o in b._outputs if o in ("pose", "position")]
+    if not refs:
+        refs = [f"{n}.{o}" for n, b in zip(compiled.names, compiled.blocks)
+                for o in b._outputs]
+    return refs
+
+
+def _progress_wanted(progress):
+    if progress is not None:
+        return bool(progress)
+    return sys.stderr.isatty() and not os.environ.get("CI")
+
+
+def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
+             seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
+             max_log_bytes=2 * 1024**3):
+    """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
+
+    Parameters
+    ----------
+    diagram : Diagram
+    t_final : float
+        End time (a whole number of steps is run: ``round((t_final-t0)/dt)``).
+    dt : float
+        Major step. Discrete periods must be multiples of it.
+    solver : str or Solver
+        ``"rk4"`` (default), ``"euler"``, ``"RK45"``, ``"DOP853"``, ``"LSODA"``
+        or a :class:`~avblocks.core.solvers.Solver`.
+    log : list of port handles or ``"block.port"`` strings, optional
+        What to record. Default: every ``pose``/``position`` output (else all).
+    log_every : int
+        Record every ``log_every``-th major step (decimation).
+    seed : int
+        Seed for every random block.
+    realtime : float, optional
+        Pace the run to the wall clock: 1.0 is real time, 2.0 twice as fast.
+        Late steps are counted as overruns; the run keeps going.
+    progress : bool, optional
+        Progress bar (default: only when stderr is a terminal and not in CI).
+    check_finite : bool
+        Stop at the first NaN/inf, naming the block and port.
+    max_log_bytes : int
+        Refuse a run whose log would exceed this much memory.
+
+    Returns
+    -------
+    Results
+        Logged signals; on failure the :class:`SimulationError` carries the
+        results logged so far in ``err.results``.
+    """
+    sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite)
+    try:
+        span = float(t_final) - sim.t0
+    except (TypeError, ValueError):
+        span = float("nan")
+    if not (math.isfinite(span) and span >= 0):
+        raise ParameterError("t_final must be a number >= t0", param="t_final",
+                             expected=f">= {sim.t0}", found=t_final)
+    nsteps = int(round(span / sim.dt))
+    log_every = int(log_every)
+    if log_every < 1:
+        raise ParameterError("log_every must be >= 1", param="log_every",
+                             expected=">= 1", found=log_every)
+    if realtime is not None and not (float(realtime) > 0):
+        raise ParameterError("realtime factor must be > 0", param="realtime",
+                             expected="> 0", found=realtime)
+    refs = default_log(sim.compiled) if log is None else list(log)
+    if isinstance(log, (str, PortRef)):
+        refs = [log]
+    idx, names, specs, aliases = [], [], [], {}
+    for r in refs:
+        i, o = sim.compiled.resolve(r)
+        name = f"{sim.compiled.names[i]}.{o}"
+        if name in names:
+            continue
+        idx.append((i, o))
+        names.append(name)
+        specs.append(sim.compiled.blocks[i]._outputs[o])
+        alias = r.path if isinstance(r, PortRef) else str(r)
+        if alias != name:
+            aliases[alias] = name
+    nlog = nsteps // log_every + 1
+    need = sum(nlog * int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize for p in specs)
+    if need > max_log_bytes:
+        raise ParameterError(
+            f"the log would take {need / 1e9:.2f} GB", param="log",
+            expected=f"<= {max_log_bytes / 1e9:.2f} GB",
+            found=f"{len(specs)} signals x {nlog} samples",
+            hint="log fewer signals or decimate with log_every")
+    bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
+    tlog = np.empty(nlog)
+    meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": sim.seed,
+            "t0": sim.t0, "t_final": sim.t0 + nsteps * sim.dt,
+            "log_every": log_every, "steps": nsteps,
+            "agents": max([p.n or 0 for p in specs] + [0]),
+            "blocks": len(sim.compiled.blocks)}
+    count = 0
+
+    def record():
+        nonlocal count
+        for b, (i, o) in zip(bufs, idx):
+            b[count] = sim.Y[i][o]
+        tlog[count] = sim.t
+        count += 1
+
+    def partial():
+        return Results(tlog[:count].copy(), {n: b[:count].copy()
+                                             for n, b in zip(names, bufs)},
+                       dict(zip(names, specs)), meta, aliases)
+
+    bar = None
+    if _progress_wanted(progress) and nsteps > 0:
+        try:
+            from tqdm import tqdm
+            bar = tqdm(total=nsteps, unit="step", leave=False)
+        except ImportError:  # pragma: no cover - tqdm is a core dependency
+            bar = None
+    pace = None if realtime is None else float(realtime)
+    overruns, worst = 0, 0.0
+    wall0 = _time.perf_counter()
+    try:
+        sim.init()
+        record()
+        tick = max(1, nsteps // 100)
+        for k in range(nsteps):
+            sim.step()
+            if (k + 1) % log_every == 0:
+                record()
+            if pace is not None:
+                target = wall0 + (k + 1) * sim.dt / pace
+                now = _time.perf_counter()
+                if now < target:
+                    _time.sleep(target - now)
+                else:
+                    late = now - target
+                    worst = max(worst, late)
+                    if late > sim.dt / pace:
+                        overruns += 1
+            if bar is not None and (k + 1) % tick == 0:
+                bar.update(tick)
+    except SimulationError as e:
+        meta["wall_time"] = _time.perf_counter() - wall0
+        meta["error"] = str(e)
+        e.results = partial()
+        raise
+    except KeyboardInterrupt:
+        meta["interrupted_at"] = sim.t
+        meta["wall_time"] = _time.perf_counter() - wall0
+        res = partial()
+        res.meta["interrupted"] = True
+        return res
+    finally:
+        if bar is not None:
+            bar.close()
+        sim.close()
+    wall = _time.perf_counter() - wall0
+    meta["wall_time"] = wall
+    meta["realtime_factor"] = (nsteps * sim.dt / wall) if wall > 0 else math.inf
+    if pace is not None:
+        meta["overruns"] = overruns
+        meta["max_lateness"] = worst
+    if hasattr(sim.solver, "nfev"):
+        meta["nfev"] = sim.solver.nfev
+    if count < nlog:
+        return partial()
+    return Results(tlog, dict(zip(names, bufs)), dict(zip(names, specs)), meta,
+                   aliases)

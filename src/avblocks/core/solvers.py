@@ -1,0 +1,133 @@
+"""Integrators. They live only here, never inside blocks.
+
+A solver advances the continuous states of a whole diagram over one major
+step ``h``. Fixed-step solvers (:class:`Euler`, :class:`RK4`) call the
+engine's pure functions, so they also run traced under JAX. :class:`Scipy`
+hands the flattened state to :func:`scipy.integrate.solve_ivp`.
+
+The engine interface a solver uses:
+
+``eng.derivs(t, X, Y) -> K``
+    derivatives of every continuous state, given states ``X`` and the outputs
+    ``Y`` that belong to them;
+``eng.minor_outputs(t, X, Y) -> Y``
+    outputs at a solver stage (discrete blocks hold their values);
+``eng.axpy(X, a, K) -> X + a*K`` and ``eng.combine(X, [(a_i, K_i)])``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ParameterError
+
+
+class Solver:
+    """Base class; subclasses implement :meth:`step`."""
+
+    name = "solver"
+    order = None
+    fixed_step = True
+
+    def step(self, eng, t, X, Y, h):  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def __repr__(self):
+        return f"{type(self).__name__}()"
+
+
+class Euler(Solver):
+    """Forward Euler: ``x+ = x + h f(t, x)``. First order."""
+
+    name = "euler"
+    order = 1
+
+    def step(self, eng, t, X, Y, h):
+        return eng.axpy(X, h, eng.derivs(t, X, Y))
+
+
+class RK4(Solver):
+    """Classical fourth-order Runge-Kutta. The default.
+
+    Outputs of continuous blocks are recomputed at each of the four stages;
+    discrete blocks hold theirs.
+    """
+
+    name = "rk4"
+    order = 4
+
+    def step(self, eng, t, X, Y, h):
+        k1 = eng.derivs(t, X, Y)
+        X2 = eng.axpy(X, 0.5 * h, k1)
+        k2 = eng.derivs(t + 0.5 * h, X2, eng.minor_outputs(t + 0.5 * h, X2, Y))
+        X3 = eng.axpy(X, 0.5 * h, k2)
+        k3 = eng.derivs(t + 0.5 * h, X3, eng.minor_outputs(t + 0.5 * h, X3, Y))
+        X4 = eng.axpy(X, h, k3)
+        k4 = eng.derivs(t + h, X4, eng.minor_outputs(t + h, X4, Y))
+        return eng.combine(X, [(h / 6, k1), (h / 3, k2), (h / 3, k3), (h / 6, k4)])
+
+
+class Scipy(Solver):
+    """Variable-step integration with :func:`scipy.integrate.solve_ivp`.
+
+    Integrates adaptively inside each major step (restarting at every major
+    step, where discrete states may change) with the given method (``RK45``,
+    ``DOP853``, ``LSODA``, ``Radau``, ``BDF``...) and tolerances.
+    """
+
+    fixed_step = False
+    _methods = ("RK45", "RK23", "DOP853", "LSODA", "Radau", "BDF")
+
+    def __init__(self, method="RK45", *, rtol=1e-6, atol=1e-9, max_step=np.inf):
+        if method not in self._methods:
+            raise ParameterError("unknown solve_ivp method", param="method",
+                                 expected=f"one of {self._methods}", found=method)
+        self.method = method
+        self.rtol = float(rtol)
+        self.atol = float(atol)
+        self.max_step = float(max_step)
+        self.name = method.lower()
+        self.nfev = 0
+
+    def __repr__(self):
+        return f"Scipy({self.method!r}, rtol={self.rtol}, atol={self.atol})"
+
+    def step(self, eng, t, X, Y, h):
+        from scipy.integrate import solve_ivp
+
+        y0 = eng.pack(X)
+        if y0.size == 0:
+            return X
+
+        def f(tt, yy):
+            Xs = eng.unpack(yy, X)
+            return eng.pack_derivs(eng.derivs(tt, Xs, eng.minor_outputs(tt, Xs, Y)))
+
+        sol = solve_ivp(f, (t, t + h), y0, method=self.method, rtol=self.rtol,
+                        atol=self.atol, max_step=min(self.max_step, h))
+        self.nfev += sol.nfev
+        if not sol.success:
+            from .errors import SimulationError
+            raise SimulationError(f"solve_ivp ({self.method}) failed: {sol.message}",
+                                  time=t)
+        return eng.unpack(sol.y[:, -1], X)
+
+
+_BY_NAME = {"euler": Euler, "rk4": RK4}
+
+
+def make_solver(spec) -> Solver:
+    """A solver from a name (``"rk4"``, ``"euler"``, ``"RK45"``, ``"DOP853"``,
+    ``"LSODA"``...) or a :class:`Solver` instance."""
+    if isinstance(spec, Solver):
+        return spec
+    if isinstance(spec, str):
+        if spec.lower() in _BY_NAME:
+            return _BY_NAME[spec.lower()]()
+        up = spec.upper()
+        if up in Scipy._methods:
+            return Scipy(up)
+    raise ParameterError("unknown solver", param="solver",
+                         expected="'rk4', 'euler', a solve_ivp method name "
+                                  f"{Scipy._methods} or a Solver object",
+                         found=repr(spec))

@@ -1,0 +1,94 @@
+"""First-order unicycle, AVLib paper eq. (1).
+
+Equations
+---------
+    dx/dt = v cos(theta)
+    dy/dt = v sin(theta)
+    dtheta/dt = omega
+
+with (v, omega) optionally clipped to ``|v| <= v_max``, ``|omega| <= omega_max``.
+
+Reference: Miklic et al., "A modular control architecture for multi-vehicle
+systems" (AVLib), Section III.A, eq. (1); Siegwart & Nourbakhsh,
+*Introduction to Autonomous Mobile Robots*, ch. 3.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.block import Block
+from ..core.params import agent_array, poses
+from ..utility.angles import wrap_angle
+
+
+def unicycle_rhs(pose, cmd, xp=np):
+    """Pose derivative of N unicycles: ``pose`` (N, 3), ``cmd`` (N, 2) -> (N, 3)."""
+    th = pose[:, 2]
+    v = cmd[:, 0]
+    return xp.stack([v * xp.cos(th), v * xp.sin(th), cmd[:, 1]], axis=-1)
+
+
+def clip_cmd(cmd, v_max, omega_max, xp=np):
+    """Clip (v, omega) to symmetric limits (arrays of shape (N,) or scalars)."""
+    v = xp.clip(cmd[:, 0], -v_max, v_max)
+    w = xp.clip(cmd[:, 1], -omega_max, omega_max)
+    return xp.stack([v, w], axis=-1)
+
+
+class Unicycle(Block):
+    """N first-order unicycles (paper eq. 1) in one block.
+
+    Ports
+    -----
+    cmd : in, (N, 2) [m/s, rad/s]
+        Forward speed v and turn rate omega (not direct feedthrough).
+    pose : out, (N, 3) [m, m, rad]
+        x, y and heading wrapped to (-pi, pi].
+
+    State
+    -----
+    pose : continuous (N, 3); the heading state is not wrapped, the output is.
+
+    Parameters
+    ----------
+    pose0 : array_like, (N, 3)
+        Initial poses; N is the number of vehicles.
+    v_max, omega_max : float or (N,), optional
+        Symmetric input limits (default: none).
+
+    Example
+    -------
+    >>> import numpy as np, avblocks as av
+    >>> b = av.vehicles.Unicycle(pose0=np.zeros((2, 3)))
+    >>> b.derivative(0, b.initial_state(), {"cmd": np.array([[1.0, 0.5]] * 2)}, np)["pose"][0]
+    array([1. , 0. , 0.5])
+    """
+
+    def __init__(self, pose0, *, v_max=np.inf, omega_max=np.inf):
+        super().__init__()
+        p0 = poses(pose0, "Unicycle", "pose0")
+        self.n = n = p0.shape[0]
+        self.v_max = np.broadcast_to(np.asarray(v_max, float), (n,)).copy()
+        self.omega_max = np.broadcast_to(np.asarray(omega_max, float), (n,)).copy()
+        for nm, a in (("v_max", self.v_max), ("omega_max", self.omega_max)):
+            if np.any(np.isnan(a)) or np.any(a < 0):
+                agent_array(-1.0, n, "Unicycle", nm, nonnegative=True)
+        self._limited = bool(np.any(np.isfinite(self.v_max)) or
+                             np.any(np.isfinite(self.omega_max)))
+        self.declare_continuous_state("pose", p0, unit="m, m, rad",
+                                      labels=("x", "y", "theta"))
+        self.declare_input("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"),
+                           doc="forward speed and turn rate", feedthrough=False)
+        self.declare_output("pose", (n, 3), unit="m, m, rad",
+                            labels=("x", "y", "theta"), doc="pose, heading in (-pi, pi]")
+
+    def output(self, t, x, u, xp):
+        p = x["pose"]
+        return {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1)}
+
+    def derivative(self, t, x, u, xp):
+        cmd = u["cmd"]
+        if self._limited:
+            cmd = clip_cmd(cmd, self.v_max, self.omega_max, xp)
+        return {"pose": unicycle_rhs(x["pose"], cmd, xp)}

@@ -1,0 +1,1 @@
+"""avblocks.viz."""

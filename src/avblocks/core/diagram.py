@@ -273,8 +273,8 @@ class CompiledDiagram:
                                       port=inp,
                                       hint="connect it with diagram.connect(src, "
                                            f"{names[i].rsplit('.', 1)[-1]}.{inp})")
-        _resolve_shapes(names, blocks, srcs)
         order = _sort(names, blocks, srcs)
+        _resolve_shapes(names, blocks, srcs)
         remap = {old: new for new, old in enumerate(order)}
         self.names = [names[i] for i in order]
         self.blocks = [blocks[i] for i in order]
@@ -437,13 +437,12 @@ def _sort(names, blocks, srcs) -> list[int]:
         if state[i] == 1:
             k = stack.index(i)
             cyc = stack[k:] + [i]
-            labels = []
+            wires = []
             for a, b2 in zip(cyc[:-1], cyc[1:]):
-                port = next(inp for inp, (s, _o) in srcs[a].items()
-                            if s == b2 and inp in blocks[a].feedthrough)
-                labels.append(f"{names[a]}.{port}")
-            labels.append(f"{names[cyc[-1]]}")
-            raise AlgebraicLoopError(list(reversed(labels)))
+                port, out = next((inp, o) for inp, (s, o) in srcs[a].items()
+                                 if s == b2 and inp in blocks[a].feedthrough)
+                wires.append(f"{names[b2]}.{out} -> {names[a]}.{port}")
+            raise AlgebraicLoopError(list(reversed(wires)))
         state[i] = 1
         stack.append(i)
         for s in sorted(deps[i]):

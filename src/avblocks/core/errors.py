@@ -43,8 +43,13 @@ class AvError(Exception):
         if self.param is not None:
             where.append(f"parameter '{self.param}'")
         msg = ("in " + ", ".join(where) + ": " if where else "") + self.cause
-        if self.expected is not None or self.found is not None:
-            msg += f" (expected {self.expected}, found {self.found})"
+        parts = []
+        if self.expected is not None:
+            parts.append(f"expected {self.expected}")
+        if self.found is not None:
+            parts.append(f"found {self.found}")
+        if parts:
+            msg += " (" + ", ".join(parts) + ")"
         if self.hint:
             msg += f". {self.hint}"
         return msg
@@ -67,9 +72,9 @@ class AlgebraicLoopError(WiringError):
 
     def __init__(self, cycle):
         self.cycle = list(cycle)
-        path = " -> ".join(self.cycle)
+        path = ", ".join(self.cycle)
         super().__init__(
-            f"algebraic loop: {path}",
+            f"algebraic loop (direct-feedthrough wires with no state): {path}",
             hint="break the cycle with a block that has state (Integrator, "
                  "UnitDelay, a vehicle model) or declare the input as not "
                  "direct-feedthrough")

@@ -30,14 +30,23 @@ from ..core.errors import ParameterError
 from ..core.params import agent_array, positive_scalar
 
 
+def _per_agent_lists(w) -> bool:
+    """True for a list of per-agent (M_i, 2) waypoint arrays."""
+    if not isinstance(w, (list, tuple)) or not w:
+        return False
+    try:
+        return all(np.asarray(e, dtype=float).ndim == 2 for e in w)
+    except (TypeError, ValueError):
+        return False
+
+
 def waypoint_array(waypoints, n, block="PointToPoint"):
     """Normalize waypoints to a padded (N, M, 2) array and counts (N,).
 
     Accepts one list (M, 2) shared by all agents, an (N, M, 2) array, or a
     list of N arrays (M_i, 2) of different lengths (padded with the last one).
     """
-    if isinstance(waypoints, (list, tuple)) and len(waypoints) and all(
-            np.ndim(w) == 2 for w in waypoints):
+    if _per_agent_lists(waypoints):
         lists = [np.asarray(w, dtype=float) for w in waypoints]
         if len(lists) != n:
             raise ParameterError("one waypoint list per agent", block=block,
@@ -127,11 +136,7 @@ class PointToPoint(Block):
     def __init__(self, waypoints, *, n=None, d=0.1, gain=1.0, v_max=1.0, radius=0.2):
         super().__init__()
         if n is None:
-            a = waypoints if not isinstance(waypoints, (list, tuple)) else None
-            if a is not None and np.ndim(a) == 3:
-                n = np.shape(a)[0]
-            elif isinstance(waypoints, (list, tuple)) and waypoints and all(
-                    np.ndim(w) == 2 for w in waypoints) and np.ndim(waypoints) != 2:
+            if _per_agent_lists(waypoints):
                 n = len(waypoints)
             else:
                 raise ParameterError("n (number of agents) is needed when all "

@@ -56,6 +56,13 @@ class Unicycle(Block):
         Initial poses; N is the number of vehicles.
     v_max, omega_max : float or (N,), optional
         Symmetric input limits (default: none).
+    saturation_output : bool, optional
+        Add an output ``saturated`` (N, 2) bool: whether ``|v| > v_max`` and
+        ``|omega| > omega_max`` for the current command. It depends on the
+        command at the same instant, so asking for it declares ``cmd``
+        direct-feedthrough; a controller that reads ``pose`` and drives
+        ``cmd`` then forms an algebraic loop. Off by default for that reason
+        (log or display it only, or use a Saturation block in front).
 
     Example
     -------
@@ -65,7 +72,8 @@ class Unicycle(Block):
     array([1. , 0. , 0.5])
     """
 
-    def __init__(self, pose0, *, v_max=np.inf, omega_max=np.inf):
+    def __init__(self, pose0, *, v_max=np.inf, omega_max=np.inf,
+                 saturation_output=False):
         super().__init__()
         p0 = poses(pose0, "Unicycle", "pose0")
         self.n = n = p0.shape[0]
@@ -79,13 +87,22 @@ class Unicycle(Block):
         self.declare_continuous_state("pose", p0, unit="m, m, rad",
                                       labels=("x", "y", "theta"))
         self.declare_input("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"),
-                           doc="forward speed and turn rate", feedthrough=False)
+                           doc="forward speed and turn rate",
+                           feedthrough=bool(saturation_output))
         self.declare_output("pose", (n, 3), unit="m, m, rad",
                             labels=("x", "y", "theta"), doc="pose, heading in (-pi, pi]")
+        self.saturation_output = bool(saturation_output)
+        if self.saturation_output:
+            self.declare_output("saturated", (n, 2), "bool", labels=("v", "omega"),
+                                doc="command exceeds the limit (cmd is feedthrough)")
 
     def output(self, t, x, u, xp):
         p = x["pose"]
-        return {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1)}
+        y = {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1)}
+        if self.saturation_output:
+            lim = xp.stack([self.v_max, self.omega_max], axis=-1)
+            y["saturated"] = xp.abs(u["cmd"]) > lim
+        return y
 
     def derivative(self, t, x, u, xp):
         cmd = u["cmd"]

@@ -90,14 +90,12 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np):
     """
     th = pose[:, 2]
     c, s = xp.cos(th), xp.sin(th)
-    px = pose[:, 0] + d * c
-    py = pose[:, 1] + d * s
-    wx = gain * (goal[:, 0] - px)
-    wy = gain * (goal[:, 1] - py)
-    norm = xp.sqrt(wx * wx + wy * wy)
-    scale = xp.minimum(1.0, v_max / xp.maximum(norm, 1e-300))
-    wx, wy = wx * scale, wy * scale
-    return xp.stack([c * wx + s * wy, (-s * wx + c * wy) / d], axis=-1)
+    ex = goal[:, 0] - pose[:, 0] - d * c
+    ey = goal[:, 1] - pose[:, 1] - d * s
+    # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
+    k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(ex * ex + ey * ey), 1e-300))
+    wx, wy = k * ex, k * ey
+    return xp.stack([c * wx + s * wy, (c * wy - s * wx) * (1.0 / d)], axis=-1)
 
 
 class PointToPoint(Block):
@@ -108,13 +106,16 @@ class PointToPoint(Block):
     pose : in, (N, 3) — vehicle poses (direct feedthrough).
     cmd : out, (N, 2) — (v, omega) for a unicycle-family vehicle.
     target : out, (N, 2) — the waypoint each agent is heading to.
-    done : out, (N,) bool — true once the last waypoint is reached.
+    done : out, (N,) bool — true once the last waypoint has been reached
+        (latched; set at the major step where the arrival is detected and
+        visible from the next one).
 
     State
     -----
     wp : discrete (N,) int — index of the current waypoint, advanced at major
     steps when the controlled point is within ``radius`` of it. The agent
     holds at its last waypoint.
+    done : discrete (N,) bool — latched arrival at the last waypoint.
 
     Parameters
     ----------
@@ -138,6 +139,8 @@ class PointToPoint(Block):
         if n is None:
             if _per_agent_lists(waypoints):
                 n = len(waypoints)
+            elif np.ndim(waypoints) == 3:
+                n = np.shape(waypoints)[0]
             else:
                 raise ParameterError("n (number of agents) is needed when all "
                                      "agents share one waypoint list",
@@ -148,31 +151,36 @@ class PointToPoint(Block):
         self.gain = agent_array(gain, n, "PointToPoint", "gain", positive=True)
         self.v_max = agent_array(v_max, n, "PointToPoint", "v_max", positive=True)
         self.radius = positive_scalar(radius, "PointToPoint", "radius")
-        self._rows = np.arange(n)
+        m = self.wps.shape[1]
+        self._single = m == 1
+        self._flat = self.wps.reshape(n * m, 2)
+        self._base = np.arange(n) * m
         self._last = self.counts - 1
         self.declare_discrete_state("wp", np.zeros(n, dtype=np.int64))
+        self.declare_discrete_state("done", np.zeros(n, dtype=bool))
         self.declare_input("pose", (n, 3), unit="m, m, rad")
         self.declare_output("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"))
         self.declare_output("target", (n, 2), unit="m", labels=("x", "y"))
         self.declare_output("done", (n,), "bool")
 
     def _goal(self, wp, xp):
-        return xp.asarray(self.wps)[self._rows, wp]
-
-    def _dist(self, pose, goal, xp):
-        px = pose[:, 0] + self.d * xp.cos(pose[:, 2])
-        py = pose[:, 1] + self.d * xp.sin(pose[:, 2])
-        return xp.sqrt((goal[:, 0] - px) ** 2 + (goal[:, 1] - py) ** 2)
+        if self._single:
+            return xp.asarray(self.wps[:, 0])
+        return xp.take(xp.asarray(self._flat), self._base + wp, axis=0)
 
     def output(self, t, x, u, xp):
         goal = self._goal(x["wp"], xp)
-        pose = u["pose"]
-        cmd = point_to_point_law(pose, goal, self.d, self.gain, self.v_max, xp)
-        done = (x["wp"] == self._last) & (self._dist(pose, goal, xp) <= self.radius)
-        return {"cmd": cmd, "target": goal, "done": done}
+        cmd = point_to_point_law(u["pose"], goal, self.d, self.gain, self.v_max, xp)
+        return {"cmd": cmd, "target": goal, "done": x["done"]}
 
     def update(self, t, x, u, xp):
         wp = x["wp"]
         goal = self._goal(wp, xp)
-        reached = self._dist(u["pose"], goal, xp) <= self.radius
-        return {"wp": xp.where(reached & (wp < self._last), wp + 1, wp)}
+        pose = u["pose"]
+        th = pose[:, 2]
+        ex = goal[:, 0] - pose[:, 0] - self.d * xp.cos(th)
+        ey = goal[:, 1] - pose[:, 1] - self.d * xp.sin(th)
+        reached = ex * ex + ey * ey <= self.radius ** 2
+        last = wp == self._last
+        return {"wp": xp.where(reached & ~last, wp + 1, wp),
+                "done": x["done"] | (reached & last)}

@@ -47,6 +47,8 @@ class Engine:
         self.cont = [i for i, b in enumerate(self.blocks) if b._cstates]
         self.cont_names = {i: tuple(self.blocks[i]._cstates) for i in self.cont}
         self.disc = [i for i, b in enumerate(self.blocks) if b._dstates]
+        self.any_periodic = any(self.periodic)
+        self._no_hits = [None] * nb
         # sample hits on the major-step grid
         self.per_k = [0] * nb
         self.off_k = [0] * nb
@@ -90,6 +92,8 @@ class Engine:
     # ----------------------------------------------------------------- pieces
     def hits(self, k):
         """Per-block sample-hit flags at major step ``k`` (None if continuous)."""
+        if not self.any_periodic:
+            return self._no_hits
         traced = not isinstance(k, (int, np.integer))
         out = [None] * len(self.blocks)
         for i, p in enumerate(self.periodic):

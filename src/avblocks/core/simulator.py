@@ -130,6 +130,7 @@ class Simulator:
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
         self._check_declared()
         self._check(self.t0)
+        self.check_outputs(self.t0)
         for i in self._side:
             self.compiled.blocks[i].on_start()
         self._side_effects()
@@ -169,18 +170,40 @@ class Simulator:
                                   time=t, hint=hint) from e
 
     def _check(self, t):
+        """Stop at the first non-finite value. Every step checks the float
+        states (one reduction each); when one is bad, the outputs are scanned
+        in evaluation order to blame the first block and port that produced
+        a NaN/inf. Logged outputs are checked when they are recorded."""
         if not self.check_finite:
             return
-        Y, X = self.Y, self.X
+        X = self.X
+        for i, nm in self._fx_state:
+            if not math.isfinite(X[i][nm].sum()):
+                self._blame_nonfinite(t, (i, nm))
+        for i, nm in self._fx_dstate:
+            if not math.isfinite(X[i][nm].sum()):
+                self._blame_nonfinite(t, (i, nm))
+
+    def check_outputs(self, t, ports=None):
+        """Raise if any of ``ports`` ([(block index, name)], default all float
+        outputs) is non-finite, naming the first in evaluation order."""
+        if not self.check_finite:
+            return
+        Y = self.Y
+        for i, o in (self._fx if ports is None else ports):
+            if not math.isfinite(np.sum(Y[i][o])):
+                self._blame_nonfinite(t, None)
+
+    def _blame_nonfinite(self, t, state):
         for i, o in self._fx:
-            if not np.isfinite(np.sum(Y[i][o])):
+            if not np.all(np.isfinite(self.Y[i][o])):
                 raise SimulationError("output is NaN or infinite",
                                       block=self.compiled.names[i], port=o, time=t)
-        for i, nm in self._fx_state + self._fx_dstate:
-            if not np.isfinite(np.sum(X[i][nm])):
-                raise SimulationError(
-                    f"state '{nm}' became NaN or infinite (its derivative or "
-                    "update produced it)", block=self.compiled.names[i], time=t)
+        if state is not None:
+            i, nm = state
+            raise SimulationError(
+                f"state '{nm}' became NaN or infinite (its derivative or update "
+                "produced it)", block=self.compiled.names[i], time=t)
 
     def _side_effects(self):
         for i in self._side:
@@ -332,8 +355,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
             "blocks": len(sim.compiled.blocks)}
     count = 0
 
+    logged_float = [(i, o) for (i, o), p in zip(idx, specs)
+                    if np.issubdtype(np.dtype(p.dtype), np.inexact)]
+
     def record():
         nonlocal count
+        sim.check_outputs(sim.t, logged_float)
         for b, (i, o) in zip(bufs, idx):
             b[count] = sim.Y[i][o]
         tlog[count] = sim.t

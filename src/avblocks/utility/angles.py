@@ -13,7 +13,7 @@ def wrap_angle(a, xp=np):
     >>> float(wrap_angle(-np.pi))
     3.141592653589793
     """
-    return np.pi - xp.mod(np.pi - a, 2 * np.pi)
+    return a - (2 * np.pi) * xp.ceil((a - np.pi) * (0.5 / np.pi))
 
 
 def angle_diff(a, b, xp=np):

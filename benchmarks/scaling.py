@@ -1,0 +1,176 @@
+"""Reproduce the AVLib paper's Figure 3: wall time to simulate 30 s
+(dt = 10 ms) of N unicycles under a go-to-goal law.
+
+Compared:
+  legacy   a Python loop over agents (math module, one agent at a time)
+  numpy    the same law as a plain vectorized NumPy loop (Euler)
+  euler    avblocks, Unicycle + PointToPoint diagram, Euler
+  rk4      avblocks, same diagram, RK4
+
+Long cases are timed over fewer steps and scaled to the 3000 steps of 30 s
+(marked with *); pass --full to run every case to the end.
+
+    python benchmarks/scaling.py            # table + benchmarks/scaling.png
+    python benchmarks/scaling.py --quick    # N up to 3000
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+import avblocks as av
+
+T_FINAL, DT = 30.0, 0.01
+STEPS = int(round(T_FINAL / DT))
+D, K, VMAX, R = 0.1, 1.0, 1.0, 0.2
+
+
+def setup(n, seed=1):
+    rng = np.random.default_rng(seed)
+    p0 = np.column_stack([rng.uniform(0, 100, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    goal = rng.uniform(0, 100, (n, 2))
+    return p0, goal
+
+
+def legacy(n, steps):
+    p0, goal = setup(n)
+    pose = [list(p) for p in p0]
+    g = [tuple(q) for q in goal]
+    done = [False] * n
+    for _ in range(steps):
+        for i in range(n):
+            x, y, th = pose[i]
+            c, s = math.cos(th), math.sin(th)
+            ex, ey = g[i][0] - x - D * c, g[i][1] - y - D * s
+            done[i] = done[i] or ex * ex + ey * ey <= R * R
+            wx, wy = K * ex, K * ey
+            nrm = math.hypot(wx, wy)
+            if nrm > VMAX:
+                wx, wy = wx * VMAX / nrm, wy * VMAX / nrm
+            v = c * wx + s * wy
+            w = (-s * wx + c * wy) / D
+            pose[i] = [x + DT * v * c, y + DT * v * s, th + DT * w]
+    return pose
+
+
+def plain_numpy(n, steps):
+    pose, goal = setup(n)
+    done = np.zeros(n, bool)
+    for _ in range(steps):
+        th = pose[:, 2]
+        c, s = np.cos(th), np.sin(th)
+        ex = goal[:, 0] - pose[:, 0] - D * c
+        ey = goal[:, 1] - pose[:, 1] - D * s
+        done |= ex * ex + ey * ey <= R * R
+        wx, wy = K * ex, K * ey
+        scale = np.minimum(1.0, VMAX / np.maximum(np.hypot(wx, wy), 1e-300))
+        wx, wy = wx * scale, wy * scale
+        v = c * wx + s * wy
+        w = (-s * wx + c * wy) / D
+        pose = pose + DT * np.column_stack([v * c, v * s, w])
+    return pose
+
+
+def diagram(n):
+    p0, goal = setup(n)
+    d = av.Diagram()
+    fleet = d.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
+    drive = d.add(av.controllers.PointToPoint(goal[:, None, :], d=D, gain=K, v_max=VMAX,
+                                              radius=R), name="drive")
+    d.connect(fleet.pose, drive.pose)
+    d.connect(drive.cmd, fleet.cmd)
+    return d, fleet
+
+
+def avblocks_run(solver):
+    def run(n, steps):
+        d, fleet = diagram(n)
+        return av.simulate(d, steps * DT, dt=DT, solver=solver, log=[fleet.pose],
+                           log_every=max(1, steps // 30), progress=False)
+    return run
+
+
+def time_it(fn, n, steps):
+    t0 = time.perf_counter()
+    fn(n, steps)
+    return time.perf_counter() - t0
+
+
+def budget_steps(kind, n, full):
+    if full:
+        return STEPS
+    work = {"legacy": 4e6, "numpy": 3e8, "euler": 3e8, "rk4": 1e8}[kind]
+    return int(min(STEPS, max(50, work // max(n, 1))))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="N up to 3000 only")
+    ap.add_argument("--full", action="store_true", help="run every case for 3000 steps")
+    ap.add_argument("--out", default=str(Path(__file__).with_name("scaling.png")))
+    args = ap.parse_args()
+    ns = [10, 30, 100, 300, 1000, 3000] + ([] if args.quick else [10000, 30000])
+    kinds = {"legacy": legacy, "numpy": plain_numpy, "euler": avblocks_run("euler"),
+             "rk4": avblocks_run("rk4")}
+    rows = {}
+    for n in ns:
+        for kind, fn in kinds.items():
+            steps = budget_steps(kind, n, args.full)
+            wall = time_it(fn, n, steps) * STEPS / steps
+            rows[(n, kind)] = (wall, steps < STEPS)
+    print(f"\nWall time to simulate {T_FINAL:.0f} s at dt = {DT * 1e3:.0f} ms "
+          f"({STEPS} steps); * = timed over fewer steps and scaled\n")
+    print("| N | legacy s | numpy s | avblocks euler s | avblocks rk4 s | euler/numpy "
+          "| legacy/euler | RT factor (euler) | ns/agent-step (euler) |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n in ns:
+        def f(kind):
+            w, est = rows[(n, kind)]
+            return f"{w:.3g}{'*' if est else ''}"
+        e, npy, leg = rows[(n, "euler")][0], rows[(n, "numpy")][0], rows[(n, "legacy")][0]
+        print(f"| {n} | {f('legacy')} | {f('numpy')} | {f('euler')} | {f('rk4')} | "
+              f"{e / npy:.2f} | {leg / e:.1f} | {T_FINAL / e:.0f} | "
+              f"{e / STEPS / n * 1e9:.0f} |")
+    # per-step overhead of a two-block diagram at N = 1
+    one_av = time_it(avblocks_run("euler"), 1, STEPS) / STEPS
+    one_np = time_it(plain_numpy, 1, STEPS) / STEPS
+    d = av.Diagram()
+    f = d.add(av.vehicles.Unicycle(pose0=np.zeros((1, 3))), name="f")
+    c = d.add(av.blocks.Constant(np.array([[1.0, 0.1]])), name="c")
+    d.connect(c.y, f.cmd)
+    t0 = time.perf_counter()
+    av.simulate(d, T_FINAL, dt=DT, solver="euler", log=[f.pose], progress=False)
+    trivial = (time.perf_counter() - t0) / STEPS
+    print(f"\nN = 1, Euler: avblocks {one_av * 1e6:.1f} us/step, plain NumPy "
+          f"{one_np * 1e6:.1f} us/step, framework overhead {(one_av - one_np) * 1e6:.1f} "
+          f"us/step; Constant + Unicycle diagram {trivial * 1e6:.1f} us/step")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, ax = plt.subplots(figsize=(6, 4.2))
+        for kind, style in (("legacy", "o-"), ("numpy", "s-"), ("euler", "^-"),
+                            ("rk4", "v-")):
+            ax.loglog(ns, [rows[(n, kind)][0] for n in ns], style,
+                      label={"legacy": "Python loop over agents", "numpy": "plain NumPy",
+                             "euler": "avblocks (Euler)", "rk4": "avblocks (RK4)"}[kind])
+        ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
+        ax.set_xlabel("number of unicycles N")
+        ax.set_ylabel("wall time for 30 s simulated [s]")
+        ax.set_title("Go-to-goal unicycles, dt = 10 ms (cf. AVLib Fig. 3)")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(args.out, dpi=110)
+        print(f"plot: {args.out}")
+    except ImportError:
+        pass
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,150 @@
+"""Where swarm controllers get their neighbour sets from.
+
+Every swarm controller works on the standard neighbour format of
+:mod:`avblocks.environment.neighbors`: an ``(N, K)`` int64 array of agent
+indices padded with ``-1`` (``idx >= 0`` is the mask), optionally with
+``(N, K)`` weights. Three sources are offered, chosen when the block is built:
+
+``"port"`` (default)
+    a ``neighbors`` input port (N, K) int64, e.g. from an environment
+    Neighbors block; ``K`` is taken from whatever is wired to it.
+``adjacency=A``
+    a fixed communication graph: an (N, N) adjacency matrix (dense or
+    scipy.sparse, weights allowed), turned once into padded neighbour lists.
+``radius=r, k_max=K``
+    neighbours computed inside ``output()`` with
+    :func:`~avblocks.environment.neighbors.radius_neighbors` (a k-d tree:
+    NumPy only, not traceable by JAX).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import ParameterError, ShapeError
+from ..core.params import positive_scalar
+from ..environment.neighbors import radius_neighbors
+
+
+def adjacency_to_neighbors(adjacency, n, block):
+    """Padded neighbour lists ``(idx, w)`` of shape (N, K) from an (N, N) matrix.
+
+    Row ``i`` lists the ``j`` with ``A[i, j] != 0`` (``j != i``); ``K`` is the
+    largest degree (at least 1).
+    """
+    try:
+        import scipy.sparse as sp
+        if sp.issparse(adjacency):
+            a = sp.coo_array(adjacency)
+            rows, cols, vals = a.row, a.col, a.data.astype(float)
+            shape = a.shape
+        else:
+            dense = np.asarray(adjacency, dtype=float)
+            shape = dense.shape
+            if dense.ndim != 2:
+                raise ValueError
+            rows, cols = np.nonzero(dense)
+            vals = dense[rows, cols]
+    except (TypeError, ValueError):
+        raise ParameterError("adjacency must be an (N, N) numeric matrix",
+                             block=block, param="adjacency") from None
+    if tuple(shape) != (n, n):
+        raise ParameterError("adjacency has the wrong shape", block=block,
+                             param="adjacency", expected=(n, n), found=tuple(shape))
+    keep = (rows != cols) & (vals != 0)
+    rows, cols, vals = rows[keep], cols[keep], vals[keep]
+    if not np.all(np.isfinite(vals)):
+        raise ParameterError("adjacency weights must be finite", block=block,
+                             param="adjacency")
+    order = np.lexsort((cols, rows))
+    rows, cols, vals = rows[order], cols[order], vals[order]
+    deg = np.bincount(rows, minlength=n)
+    k = max(int(deg.max(initial=0)), 1)
+    start = np.concatenate([[0], np.cumsum(deg)[:-1]])
+    slot = np.arange(len(rows)) - start[rows]
+    idx = np.full((n, k), -1, dtype=np.int64)
+    w = np.zeros((n, k))
+    idx[rows, slot] = cols
+    w[rows, slot] = vals
+    return idx, w
+
+
+def laplacian(adjacency):
+    """Graph Laplacian ``L = D - A`` of a dense (N, N) adjacency matrix."""
+    a = np.asarray(adjacency, dtype=float)
+    a = a - np.diag(np.diag(a))
+    return np.diag(a.sum(axis=1)) - a
+
+
+class NeighborSource:
+    """Declares and resolves the neighbour set of a swarm controller block.
+
+    Call :meth:`declare` from the block's ``__init__`` and :meth:`get` from
+    ``output()``; :meth:`configure` from the block's ``configure``.
+    """
+
+    def __init__(self, block, n, *, adjacency=None, radius=None, k_max=None,
+                 position_port="position"):
+        name = type(block).__name__
+        self.block = name
+        self.n = n
+        self.position_port = position_port
+        self.fixed = None
+        self.radius = None
+        if adjacency is not None and radius is not None:
+            raise ParameterError("give either adjacency or radius, not both",
+                                 block=name, param="adjacency")
+        if adjacency is not None:
+            self.mode = "fixed"
+            self.fixed = adjacency_to_neighbors(adjacency, n, name)
+        elif radius is not None:
+            self.mode = "radius"
+            self.radius = positive_scalar(radius, name, "radius", allow_inf=True)
+            if k_max is None:
+                raise ParameterError("k_max is needed with radius", block=name,
+                                     param="k_max")
+            self.k_max = int(k_max)
+            if self.k_max < 1:
+                raise ParameterError("k_max must be >= 1", block=name,
+                                     param="k_max", found=k_max)
+        else:
+            self.mode = "port"
+            block.declare_input("neighbors", None, "int64",
+                                doc="(N, K) neighbour indices, -1 padded")
+
+    def configure(self, inputs):
+        if self.mode != "port":
+            return
+        sp = inputs.get("neighbors")
+        if sp is None:
+            return
+        if sp.shape is None or len(sp.shape) != 2 or sp.shape[0] != self.n:
+            raise ShapeError("neighbors must be (N, K)", block=self.block,
+                             port="neighbors", expected=f"({self.n}, K)",
+                             found=sp.shape)
+        if not np.issubdtype(np.dtype(sp.dtype), np.integer):
+            raise ShapeError("neighbors must be integer indices", block=self.block,
+                             port="neighbors", expected="int64", found=sp.dtype)
+
+    def get(self, u, pos, xp):
+        """``(idx, w)``: (N, K) indices (-1 padded) and weights (1 or from A)."""
+        if self.mode == "fixed":
+            idx, w = self.fixed
+            return xp.asarray(idx), xp.asarray(w)
+        if self.mode == "radius":
+            idx, _ = radius_neighbors(np.asarray(pos), self.radius, self.k_max)
+        else:
+            idx = u["neighbors"]
+        return idx, xp.where(idx >= 0, 1.0, 0.0)
+
+
+def gather(x, idx, xp):
+    """``x[idx]`` with padded entries (-1) replaced by the agent's own row.
+
+    Returns ``(xj, mask)``: (N, K, ...) neighbour values and (N, K) bool.
+    """
+    mask = idx >= 0
+    n = x.shape[0]
+    own = xp.arange(n)[:, None]
+    safe = xp.where(mask, idx, own)
+    return x[safe], mask

@@ -15,8 +15,9 @@ the mass)::
 ``sat_a`` scales the acceleration down to norm ``a_max``; ``c`` is an
 optional linear drag [N s/m]. ``P`` enforces the speed limit: when
 ``|v| >= v_max`` the component of the acceleration along v that would
-speed the agent up further is removed (the tangential part is kept), so
-speed never exceeds ``v_max`` by more than one step's integration error.
+speed the agent up further is removed (the tangential part is kept); as
+the switch happens inside a solver step, speed may overshoot ``v_max`` by
+at most ``a_max dt`` and is then held.
 All norms are Euclidean over the 2 or 3 components (limits are isotropic).
 
 Reference: the standard agent models of consensus and flocking, e.g.

@@ -1,1 +1,53 @@
-"""avblocks.environment."""
+"""avblocks.environment: obstacles, collisions, neighbours, communication,
+range sensors and target detection.
+
+- :class:`World` (plain data): obstacles (polygons, rectangles, circles,
+  GeoJSON, WKT, occupancy bitmaps), bounds and walls, a :class:`Background`.
+- :class:`Collision` and :class:`StopOnCollision` (footprints:
+  :class:`Disc`, :func:`Rectangle`, :class:`PolygonFootprint`).
+- :class:`Neighbors` (range, k-nearest, field of view) and the functions
+  :func:`radius_neighbors`, :func:`knn`, :func:`fov_neighbors`,
+  :func:`to_networkx`.
+- :class:`CommChannel` (range, loss, latency), :class:`Gossip` and
+  :class:`Broadcast` (information propagation).
+- :class:`RangeSensor` (lidar-like rays) and :func:`cast_rays`.
+- :class:`TargetDetection` (search and pickup).
+
+These blocks compute with NumPy, SciPy k-d trees and shapely (spatial
+indexes, never an N^2 loop); they run in the NumPy simulator and are not
+JAX-traceable.
+"""
+
+from .collision import Collision, StopOnCollision, collide
+from .comm import Broadcast, CommChannel, Gossip, gossip_step
+from .footprint import (
+    FAMILY_FOOTPRINTS,
+    Disc,
+    Footprint,
+    PolygonFootprint,
+    Rectangle,
+    default_footprint,
+)
+from .neighbors import (
+    PAD_DISTANCE,
+    Neighbors,
+    fov_neighbors,
+    knn,
+    radius_neighbors,
+    to_networkx,
+)
+from .range_sensor import RangeSensor, cast_rays, ray_angles
+from .targets import TargetDetection, detect_targets
+from .world import Background, Circle, World, rectangle
+
+__all__ = [
+    "World", "Background", "Circle", "rectangle",
+    "Footprint", "Disc", "PolygonFootprint", "Rectangle", "default_footprint",
+    "FAMILY_FOOTPRINTS",
+    "Collision", "StopOnCollision", "collide",
+    "Neighbors", "radius_neighbors", "knn", "fov_neighbors", "to_networkx",
+    "PAD_DISTANCE",
+    "CommChannel", "Gossip", "Broadcast", "gossip_step",
+    "RangeSensor", "cast_rays", "ray_angles",
+    "TargetDetection", "detect_targets",
+]

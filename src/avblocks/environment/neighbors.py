@@ -10,9 +10,15 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core.block import Block
+from ..core.errors import ParameterError
+from ._common import agent_count, declare_agents_input, maybe_periodic
+
 
 def radius_neighbors(pos, radius, k_max):
     """Up to ``k_max`` nearest other agents within ``radius`` of each agent.
+
+    The range is inclusive: an agent exactly ``radius`` away is a neighbour.
 
     Parameters
     ----------
@@ -29,7 +35,8 @@ def radius_neighbors(pos, radius, k_max):
     n = pos.shape[0]
     k = min(int(k_max) + 1, n)
     tree = cKDTree(pos)
-    dist, idx = tree.query(pos, k=k, distance_upper_bound=radius)
+    # the tree's bound is strict; make the range inclusive (|d| <= radius)
+    dist, idx = tree.query(pos, k=k, distance_upper_bound=np.nextafter(radius, np.inf))
     dist = dist.reshape(n, k)
     idx = idx.reshape(n, k)
     # drop self (distance 0 to itself; with duplicates the self index may be
@@ -53,3 +60,167 @@ def radius_neighbors(pos, radius, k_max):
 def knn(pos, k):
     """The ``k`` nearest other agents of each agent (no range limit)."""
     return radius_neighbors(pos, np.inf, k)
+
+
+def fov_neighbors(pose, radius, k_max, fov):
+    """Up to ``k_max`` nearest agents within ``radius`` and the field of view.
+
+    Agent ``j`` is in agent ``i``'s field of view when the bearing of ``j``
+    seen from ``i``, relative to ``i``'s heading, lies in ``[-fov/2, fov/2]``
+    (boundaries included). The k-d tree is queried for a few more than
+    ``k_max`` candidates; rows that still lack neighbours are re-queried with
+    twice as many (a handful of rounds, never a loop over agents).
+
+    Parameters
+    ----------
+    pose : (N, 3) array (x, y, theta)
+    radius : float
+    k_max : int
+    fov : float
+        Full opening angle in radians, ``(0, 2 pi]``.
+
+    Returns
+    -------
+    idx : (N, k_max) int64 padded with -1, nearest first
+    dist : (N, k_max) float, ``inf`` where padded
+    """
+    pose = np.asarray(pose, dtype=float)
+    n = pose.shape[0]
+    k_max = int(k_max)
+    out_i = np.full((n, k_max), -1, dtype=np.int64)
+    out_d = np.full((n, k_max), np.inf)
+    if n < 2 or k_max < 1:
+        return out_i, out_d
+    pos = pose[:, :2]
+    half = 0.5 * float(fov)
+    tree = cKDTree(pos)
+    rows = np.arange(n)
+    kq = min(n, max(2 * (k_max + 1), 8))
+    while rows.size:
+        d, j = tree.query(pos[rows], k=kq,
+                          distance_upper_bound=np.nextafter(radius, np.inf))
+        d, j = d.reshape(len(rows), kq), j.reshape(len(rows), kq)
+        valid = (j < n) & (j != rows[:, None])
+        jc = np.where(valid, j, 0)
+        delta = pos[jc] - pos[rows][:, None, :]
+        rel = np.arctan2(delta[..., 1], delta[..., 0]) - pose[rows, 2][:, None]
+        rel = np.abs((rel + np.pi) % (2 * np.pi) - np.pi)
+        vis = valid & (rel <= half + 1e-12)
+        done = (vis.sum(axis=1) >= k_max) | (kq >= n) | ~np.isfinite(d[:, -1])
+        r = rows[done]
+        order = np.argsort(~vis[done], axis=1, kind="stable")[:, :k_max]
+        vi = np.take_along_axis(vis[done], order, axis=1)
+        ji = np.take_along_axis(j[done], order, axis=1)
+        di = np.take_along_axis(d[done], order, axis=1)
+        m = order.shape[1]
+        out_i[r, :m] = np.where(vi, ji, -1)
+        out_d[r, :m] = np.where(vi, di, np.inf)
+        rows = rows[~done]
+        kq = min(n, 2 * kq)
+    return out_i, out_d
+
+
+def to_networkx(idx, dist=None, *, directed=False):
+    """The neighbour graph of an ``(N, K)`` index array as a networkx graph.
+
+    Nodes are ``0 .. N-1`` (isolated agents included); an edge ``i -> j``
+    for every ``j = idx[i, k] >= 0``, with attribute ``distance`` when
+    ``dist`` is given. ``directed=False`` (default) gives an undirected
+    ``Graph`` (an edge when either agent lists the other).
+    """
+    import networkx as nx
+    idx = np.asarray(idx)
+    g = nx.DiGraph() if directed else nx.Graph()
+    g.add_nodes_from(range(idx.shape[0]))
+    i, k = np.nonzero(idx >= 0)
+    j = idx[i, k]
+    if dist is None:
+        g.add_edges_from(zip(i.tolist(), j.tolist()))
+    else:
+        dd = np.asarray(dist)[i, k]
+        g.add_edges_from((a, b, {"distance": c})
+                         for a, b, c in zip(i.tolist(), j.tolist(), dd.tolist()))
+    return g
+
+
+#: Distance reported by the :class:`Neighbors` block where ``neighbors`` is
+#: padded (the simulator rejects infinite outputs; the index ``-1`` is the mask).
+PAD_DISTANCE = -1.0
+
+
+class Neighbors(Block):
+    """Range-limited, k-nearest and field-of-view neighbour sets (k-d tree).
+
+    Ports
+    -----
+    pose : in, (N, 3) [m, m, rad]  (or ``position`` (N, 2) with input="position")
+    neighbors : out, (N, K) int64
+        Indices of up to ``K`` other agents, nearest first, padded with -1.
+    distance : out, (N, K) float [m]
+        Their distances; ``PAD_DISTANCE`` (-1) where padded.
+
+    Parameters
+    ----------
+    n : int
+        Number of agents.
+    k : int
+        ``K``, the most neighbours kept per agent (static shape).
+    radius : float
+        Sensing range (default: unlimited; then the k nearest).
+    fov : float, optional
+        Full field-of-view angle in radians (needs ``input="pose"``); a
+        neighbour's bearing relative to the heading must lie in
+        ``[-fov/2, fov/2]``. Default: all around.
+    input : "pose" or "position"
+    period : float, optional
+        Discrete block with this period (outputs held between hits).
+
+    Equations
+    ---------
+    ``N_i = the K nearest j != i with |p_j - p_i| <= radius`` and, with a
+    field of view, ``|wrap(atan2(p_j - p_i) - theta_i)| <= fov / 2``.
+
+    Notes
+    -----
+    SciPy k-d tree side computation: not JAX-traceable.
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from avblocks.environment import Neighbors
+    >>> b = Neighbors(3, k=2, radius=1.5, input="position")
+    >>> y = b.output(0.0, {}, {"position": np.array([[0.0, 0], [1, 0], [3, 0]])}, np)
+    >>> y["neighbors"].tolist()
+    [[1, -1], [0, -1], [-1, -1]]
+    """
+
+    def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None):
+        super().__init__()
+        self.n = n = agent_count(n, "Neighbors")
+        self.k = k = agent_count(k, "Neighbors")
+        radius = float(radius)
+        if not radius > 0:
+            raise ParameterError("radius must be > 0", block="Neighbors",
+                                 param="radius", expected="> 0", found=radius)
+        if fov is not None:
+            fov = float(fov)
+            if not (0 < fov <= 2 * np.pi):
+                raise ParameterError("fov must lie in (0, 2 pi]", block="Neighbors",
+                                     param="fov", expected="(0, 2 pi]", found=fov)
+            if fov >= 2 * np.pi:
+                fov = None
+        self.radius, self.fov = radius, fov
+        self.input = declare_agents_input(self, n, input, need_heading=fov is not None)
+        self.declare_output("neighbors", (n, k), "int64",
+                            doc="neighbour indices, nearest first, -1 padded")
+        self.declare_output("distance", (n, k), unit="m",
+                            doc="neighbour distances, -1 where padded")
+        maybe_periodic(self, period)
+
+    def output(self, t, x, u, xp):
+        p = np.asarray(u[self.input])
+        if self.fov is None:
+            idx, dist = radius_neighbors(p[:, :2], self.radius, self.k)
+        else:
+            idx, dist = fov_neighbors(p, self.radius, self.k, self.fov)
+        return {"neighbors": idx, "distance": np.where(idx >= 0, dist, PAD_DISTANCE)}

@@ -1,0 +1,47 @@
+"""Helpers shared by the environment blocks (private)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.errors import ParameterError
+from ..core.params import positive_scalar
+
+_KINDS = {"pose": (3, "m, m, rad", ("x", "y", "theta"), "agent poses"),
+          "position": (2, "m, m", ("x", "y"), "agent positions")}
+
+
+def declare_agents_input(block, n, kind, *, feedthrough=True, need_heading=False):
+    """Declare the agent input: ``pose`` (N, 3) or ``position`` (N, 2)."""
+    name = type(block).__name__
+    if kind not in _KINDS:
+        raise ParameterError("input must be 'pose' or 'position'", block=name,
+                             param="input", expected=sorted(_KINDS), found=kind)
+    if need_heading and kind != "pose":
+        raise ParameterError("this option needs headings: use input='pose'",
+                             block=name, param="input", found=kind)
+    dim, unit, labels, doc = _KINDS[kind]
+    block.declare_input(kind, (n, dim), unit=unit, labels=labels, doc=doc,
+                        feedthrough=feedthrough)
+    return kind
+
+
+def agent_count(n, block):
+    try:
+        n = int(n)
+    except (TypeError, ValueError):
+        n = -1
+    if n < 1:
+        raise ParameterError("number of agents must be an integer >= 1", block=block,
+                             param="n", expected=">= 1", found=n)
+    return n
+
+
+def maybe_periodic(block, period):
+    """Make ``block`` discrete with ``period`` (None: continuous)."""
+    if period is not None:
+        block.declare_periodic(positive_scalar(period, type(block).__name__, "period"))
+
+
+def to_numpy(a):
+    return np.asarray(a)

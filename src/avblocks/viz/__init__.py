@@ -1,1 +1,17 @@
-"""avblocks.viz."""
+"""Visualization: 2D animation, movies, scopes and signal plots, 3D views,
+diagram pictures.
+
+Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
+``movie`` extra (imageio-ffmpeg), GIFs only Pillow.
+"""
+
+from .animation import Animation, Animation2D, animate, find_pose, save_movie
+from .movie import MovieWriter, read_video, write_movie
+from .scene import Group, Scene2D, obstacle_paths
+from .shapes import DRAWINGS, Drawing, drawing
+
+__all__ = [
+    "animate", "save_movie", "Animation", "Animation2D", "Scene2D", "Group",
+    "Drawing", "DRAWINGS", "drawing", "obstacle_paths", "MovieWriter", "write_movie",
+    "read_video", "find_pose",
+]

@@ -1,0 +1,426 @@
+"""2D animation: replay a saved run (:func:`animate`, :func:`save_movie`) or
+draw while simulating (:class:`Animation2D` block).
+
+Both draw through a :class:`~avblocks.viz.scene.Scene2D` (one collection per
+agent group, vectorized vertex transforms), so they stay usable with
+thousands of agents.
+
+Example
+-------
+>>> import numpy as np, avblocks as av, avblocks.viz
+>>> t = np.linspace(0, 1, 11)
+>>> pose = np.zeros((11, 2, 3)); pose[:, 1, 0] = t
+>>> anim = av.viz.animate(av.Results(t, {"fleet.pose": pose}), trail=0.5)
+>>> len(anim), anim.render(3).shape
+(11, (600, 600, 3))
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import matplotlib as mpl
+import numpy as np
+
+from ..core.block import Block
+from ..core.errors import ParameterError
+from .movie import MovieWriter, html5_video, write_movie
+from .scene import Scene2D, auto_extent, obstacle_bounds
+
+_MAX_TRAIL_POINTS = 60
+
+
+def find_pose(results, pose=None, suffix=".pose") -> str:
+    """The key of the pose signal: ``pose`` itself, or the first logged
+    signal whose name ends in ``suffix``."""
+    if pose is not None:
+        return results._key(pose)
+    for k in results.keys():
+        if k.endswith(suffix) or k == suffix.lstrip("."):
+            return k
+    raise ParameterError(f"no logged signal ends in '{suffix}'; name one", param="pose",
+                         expected=f"one of {sorted(results.keys())}", found=None)
+
+
+def _per_agent(results, spec, shape_tn, name):
+    """A (T, N, ...) array from a signal name, PortRef or array (or None)."""
+    if spec is None:
+        return None
+    a = np.asarray(results[spec]) if isinstance(spec, str) or hasattr(spec, "path") \
+        else np.asarray(spec)
+    if a.shape[:2] != shape_tn:
+        raise ParameterError("signal does not have one value per sample and agent",
+                             param=name, expected=f"{shape_tn} + (...)", found=a.shape)
+    return a
+
+
+def is_interactive_backend() -> bool:
+    """True when Matplotlib's backend can open windows."""
+    from matplotlib.backends import BackendFilter, backend_registry
+    b = mpl.get_backend().lower()
+    return b in backend_registry.list_builtin(BackendFilter.INTERACTIVE)
+
+
+def real_time_fps(dt, every=1, lo=1.0, hi=50.0) -> float:
+    """Frame rate that plays samples ``dt`` apart, every ``every``-th, in real
+    time, clipped to [lo, hi]."""
+    if not (dt and np.isfinite(dt) and dt > 0):
+        return 20.0
+    return float(np.clip(round(1.0 / (dt * every), 3), lo, hi))
+
+
+def _thin(hist):
+    """At most _MAX_TRAIL_POINTS points of a (L, N, 2) history, keeping the last."""
+    step = max(1, math.ceil(len(hist) / _MAX_TRAIL_POINTS))
+    return hist[::-1][::step][::-1] if step > 1 else hist
+
+
+class _Frames:
+    """Shared movie export for frame sources (``len`` and ``render(k)``)."""
+
+    fps_default = 20.0
+
+    def frames(self):
+        """Iterate over the frames as (H, W, 3) uint8 arrays."""
+        for k in range(len(self)):
+            yield self.render(k)
+
+    def save(self, path, fps=None, *, progress=None, **kw) -> Path:
+        """Write the movie (``.mp4`` through ffmpeg, ``.gif`` through Pillow)."""
+        return write_movie(self.frames(), path, fps or self.fps_default, total=len(self),
+                           progress=progress, **kw)
+
+    def to_html5(self, fps=None, *, progress=None, embed_limit_mb=40.0) -> str:
+        """The movie as an HTML5 ``<video>`` tag (shown inline in notebooks)."""
+        return html5_video(self.frames(), fps or self.fps_default, total=len(self),
+                           progress=progress, embed_limit_mb=embed_limit_mb)
+
+    def _repr_html_(self):
+        return self.to_html5() if len(self) else None
+
+    def close(self):
+        """Close the figure."""
+        if getattr(self, "scene", None) is not None:
+            self.scene.close()
+
+
+class Animation(_Frames):
+    """Replay of a saved run; see :func:`animate` for the parameters.
+
+    Attributes
+    ----------
+    scene : Scene2D
+    index : ndarray of int
+        Sample index of each frame.
+    """
+
+    def __init__(self, results, pose=None, *, every=1, trail=0.0, color=None,
+                 collision=None, steer=None, world=None, obstacles=None, extent=None,
+                 **scene_options):
+        self.results = results
+        self.key = find_pose(results, pose)
+        self.pose = np.asarray(results[self.key], float)
+        if self.pose.ndim != 3 or self.pose.shape[2] < 3:
+            raise ParameterError("pose signal must have shape (T, N, 3)", param="pose",
+                                 expected="(T, N, 3)", found=self.pose.shape)
+        self.t = np.asarray(results.t, float)
+        T, n = self.pose.shape[:2]
+        every = int(every)
+        if every < 1:
+            raise ParameterError("every must be a positive integer", param="every",
+                                 expected=">= 1", found=every)
+        self.every = every
+        self.index = np.arange(0, T, every)
+        self.trail = float(trail or 0.0)
+        self.color = _per_agent(results, color, (T, n), "color")
+        self.collision = _per_agent(results, collision, (T, n), "collision")
+        self.steer = _per_agent(results, steer, (T, n), "steer")
+        obstacles = obstacles if obstacles is not None else world
+        if extent is None:
+            extent = auto_extent(self.pose[..., :2], obstacle_bounds(obstacles),
+                                 scene_options.get("background_extent"))
+        if (self.color is not None and self.color.dtype.kind == "f"
+                and scene_options.get("clim") is None):
+            scene_options["clim"] = (float(np.nanmin(self.color)),
+                                     float(np.nanmax(self.color)))
+        self.scene = Scene2D(n, obstacles=obstacles, extent=extent, **scene_options)
+        dt = float(np.median(np.diff(self.t))) if T > 1 else 0.0
+        self.fps_default = real_time_fps(dt, every)
+
+    def __len__(self):
+        return len(self.index)
+
+    def update(self, k):
+        """Move the scene to frame ``k`` (without drawing)."""
+        i = int(self.index[k])
+        trails = None
+        if self.trail > 0:
+            j0 = int(np.searchsorted(self.t, self.t[i] - self.trail, side="left"))
+            trails = _thin(self.pose[j0:i + 1, :, :2])
+
+        def pick(a):
+            return None if a is None else a[i]
+
+        self.scene.update(self.t[i], self.pose[i], trails=trails, color=pick(self.color),
+                          collision=pick(self.collision), steer=pick(self.steer))
+
+    def render(self, k) -> np.ndarray:
+        """Frame ``k`` as an (H, W, 3) uint8 array."""
+        self.update(k)
+        return self.scene.render()
+
+    def show(self, fps=None):
+        """Play in a window (needs an interactive Matplotlib backend and the
+        animation made with ``pyplot=True``); returns the FuncAnimation."""
+        import matplotlib.pyplot as plt
+        from matplotlib.animation import FuncAnimation
+        fa = FuncAnimation(self.scene.fig, lambda k: self.update(k), frames=len(self),
+                           interval=1000.0 / (fps or self.fps_default))
+        plt.show()
+        return fa
+
+
+def animate(results, pose=None, **options) -> Animation:
+    """Replay a run in 2D.
+
+    Parameters
+    ----------
+    results : Results
+    pose : str or PortRef, optional
+        The (T, N, 3) pose signal (default: the first logged ``*.pose``).
+    every : int
+        Frame decimation: draw every ``every``-th sample.
+    trail : float
+        Trail length in seconds (0: none, ``inf``: whole path).
+    color : str or array (T, N)
+        Colour agents by a signal: bool (e.g. informed), int (a palette
+        index) or float (mapped through ``cmap``/``clim``).
+    collision : str or array (T, N) bool
+        Draw a ring around colliding agents.
+    steer : str or array (T, N) or (T, N, k)
+        Steering angle for the ``car`` drawing (last component).
+    world, obstacles
+        Anything with an ``.obstacles`` list, shapely geometries or vertex
+        arrays.
+    extent : (xmin, xmax, ymin, ymax), optional
+        Fixed view (default: fits the whole run and the obstacles).
+    **options
+        Drawing options of :class:`~avblocks.viz.scene.Scene2D`: ``groups``,
+        ``drawing``, ``size``, ``color`` per group, ``cmap``, ``clim``,
+        ``background``, ``background_extent``, ``follow``, ``follow_width``,
+        ``timestamp``, ``figsize``, ``dpi``...
+
+    Returns
+    -------
+    Animation
+        ``len(anim)`` frames; ``anim.render(k)``, ``anim.save(path, fps)``,
+        ``anim.to_html5()``; shows inline in a notebook.
+    """
+    return Animation(results, pose, **options)
+
+
+def save_movie(results, path, pose=None, fps=None, every=1, *, progress=None,
+               **options) -> Path:
+    """Write a movie of a run to ``path`` (``.mp4`` or ``.gif``).
+
+    ``pose`` defaults to the first logged signal ending in ``.pose``; ``fps``
+    defaults to real time (clipped to 1..50); ``every`` keeps every k-th
+    sample; ``options`` are those of :func:`animate`.
+    """
+    anim = Animation(results, pose, every=every, **options)
+    try:
+        return anim.save(path, fps, progress=progress)
+    finally:
+        anim.close()
+
+
+class Animation2D(_Frames, Block):
+    """Draw N agents while a diagram runs (a side-effect block).
+
+    With an interactive Matplotlib backend (and ``live`` not False) it draws
+    into a window at major steps; otherwise it renders offscreen frames,
+    streamed to ``movie`` when given (written on stop) or kept in
+    :attr:`frame_list` for :meth:`save` / :meth:`to_html5` after the run.
+
+    Ports
+    -----
+    pose : in, (N, 3) [m, m, rad]
+    color : in, (N,) or (N, 1), only with ``color_input=True``
+        bool, int or float colour signal (see :meth:`Scene2D.colors`).
+    collision : in, (N,) bool, only with ``collision_input=True``
+    steer : in, (N,) or (N, k) [rad], only with ``steer_input=True``
+        Steering angle (last component, e.g. an Ackermann ``cmd``).
+
+    Parameters
+    ----------
+    n : int
+        Number of agents.
+    every : int
+        Draw every ``every``-th major step.
+    trail : float
+        Trail length in seconds.
+    movie : str or Path, optional
+        ``.mp4`` or ``.gif`` file written during the run.
+    fps : float, optional
+        Movie frame rate (default: real time from the step, clipped 1..50).
+    live : bool, optional
+        Force (True) or forbid (False) a live window; default: when the
+        backend is interactive.
+    keep_frames : bool, optional
+        Keep rendered frames in memory (default: when offscreen without a
+        movie file).
+    extent, world, obstacles, **scene_options
+        As for :func:`animate`; without ``extent`` the view fits the first
+        poses and the obstacles and grows when agents leave it.
+
+    Example
+    -------
+    >>> import numpy as np, avblocks as av, avblocks.viz
+    >>> d = av.Diagram()
+    >>> f = d.add(av.vehicles.Unicycle(np.zeros((3, 3))), name="fleet")
+    >>> c = d.add(av.blocks.Constant(np.ones((3, 2))), name="c")
+    >>> a = d.add(av.viz.Animation2D(3, every=5), name="anim")
+    >>> d.connect(c.y, f.cmd); d.connect(f.pose, a.pose)
+    >>> _ = av.simulate(d, 1.0, dt=0.05)
+    >>> len(a.block.frame_list)
+    5
+    """
+
+    side_effects = True
+
+    def __init__(self, n, *, every=1, trail=0.0, movie=None, fps=None, live=None,
+                 keep_frames=None, color_input=False, collision_input=False,
+                 steer_input=False, extent=None, world=None, obstacles=None,
+                 progress=None, **scene_options):
+        Block.__init__(self)
+        self.n = int(n)
+        self.every = max(1, int(every))
+        self.trail = float(trail or 0.0)
+        self.movie = None if movie is None else Path(movie)
+        self.fps = fps
+        self.live = live
+        self.keep_frames = keep_frames
+        self.extent = extent
+        self.obstacles = obstacles if obstacles is not None else world
+        self.scene_options = scene_options
+        self.declare_input("pose", (self.n, 3), unit="m, m, rad", feedthrough=False)
+        self.inputs_used = ["pose"]
+        for flag, name in ((color_input, "color"), (collision_input, "collision"),
+                           (steer_input, "steer")):
+            if flag:
+                self.declare_input(name, None, feedthrough=False)
+                self.inputs_used.append(name)
+        self.scene = None
+        self.frame_list = []
+        self.path = None
+
+    # ------------------------------------------------------------ run hooks
+    def on_start(self):
+        if self.scene is not None:
+            self.scene.close()
+        self.scene = None
+        self.frame_list = []
+        self._k = 0
+        self._times = []
+        self._hist = []
+        self._writer = None
+        self._pending = None
+        self._live = self.live if self.live is not None else is_interactive_backend()
+        self._keep = self.keep_frames if self.keep_frames is not None else \
+            (self.movie is None and not self._live)
+        self.fps_default = self.fps or 20.0
+
+    def _make_scene(self, pose):
+        ext = self.extent
+        self._auto = ext is None and self.scene_options.get("follow") is None
+        if ext is None:
+            ext = auto_extent(pose[:, :2], obstacle_bounds(self.obstacles),
+                              self.scene_options.get("background_extent"), margin=0.15)
+        self.scene = Scene2D(self.n, extent=ext, obstacles=self.obstacles,
+                             pyplot=self._live, **self.scene_options)
+        if self._live:
+            import matplotlib.pyplot as plt
+            plt.show(block=False)
+
+    def on_major_step(self, t, x, u, y):
+        pose = np.asarray(u["pose"], float)
+        k = self._k
+        self._k += 1
+        if self.trail > 0:
+            self._times.append(float(t))
+            self._hist.append(pose[:, :2].copy())
+            cut = 0
+            while t - self._times[cut] > self.trail + 1e-12:
+                cut += 1
+            if cut:
+                del self._times[:cut], self._hist[:cut]
+        if k % self.every:
+            return
+        if self.scene is None:
+            self._make_scene(pose)
+        s = self.scene
+        if self._auto:
+            lo, hi = pose[:, :2].min(0), pose[:, :2].max(0)
+            e = s.extent
+            if lo[0] < e[0] or hi[0] > e[1] or lo[1] < e[2] or hi[1] > e[3]:
+                s.set_view(auto_extent(pose[:, :2], e, margin=0.15))
+        trails = _thin(np.stack(self._hist)) if self.trail > 0 else None
+        s.update(t, pose, trails=trails, color=u.get("color"),
+                 collision=u.get("collision"), steer=u.get("steer"))
+        if self._live:
+            s.fig.canvas.draw_idle()
+            s.fig.canvas.flush_events()
+            import matplotlib.pyplot as plt
+            plt.pause(1e-3)
+            if not (self.movie or self._keep):
+                return
+        frame = s.render()
+        if self._keep:
+            self.frame_list.append(frame)
+        if self.movie is not None:
+            self._to_movie(t, frame)
+
+    def _to_movie(self, t, frame):
+        if self._writer is None:
+            if self.fps is None and self._pending is None:
+                self._pending = (t, frame)      # wait for the 2nd frame's time
+                return
+            fps = self.fps
+            if fps is None:
+                fps = real_time_fps(t - self._pending[0])
+            self.fps_default = fps
+            self._writer = MovieWriter(self.movie, fps)
+            if self._pending is not None:
+                self._writer.append(self._pending[1])
+                self._pending = None
+        self._writer.append(frame)
+
+    def on_stop(self):
+        if self.movie is None:
+            return
+        if self._writer is None and self._pending is not None:
+            self._writer = MovieWriter(self.movie, self.fps or 20.0)
+            self._writer.append(self._pending[1])
+            self._pending = None
+        if self._writer is not None:
+            self.path = self._writer.close()
+            self._writer = None
+
+    # ------------------------------------------------------- after the run
+    def __len__(self):
+        return len(self.frame_list)
+
+    def render(self, k):
+        return self.frame_list[k]
+
+    def save(self, path, fps=None, *, progress=None, **kw) -> Path:
+        """Write the kept frames to a movie file."""
+        if not self.frame_list:
+            raise ParameterError("no frames kept: run the diagram first (offscreen, or "
+                                 "with keep_frames=True)", param="keep_frames")
+        return super().save(path, fps, progress=progress, **kw)
+
+    def __repr__(self):
+        return Block.__repr__(self)
+

@@ -21,17 +21,17 @@ def bounds(value, block, name):
     return a
 
 
-def broadcast_to_input(param, inp: Port, block, pname):
-    """Check that parameter array ``param`` broadcasts to the input's shape."""
+def broadcast_to_input(param, inp: Port, block, pname, port="u"):
+    """Check that parameter array ``param`` broadcasts to the shape of the
+    signal ``inp`` wired to input ``port`` (``inp.name`` is the driver's)."""
     try:
         out = np.broadcast_shapes(inp.shape, np.shape(param))
     except ValueError:
         out = None
     if out != tuple(inp.shape):
         raise ShapeError(f"parameter '{pname}' does not broadcast to the input",
-                         block=block, port=inp.name, expected=f"an input that "
-                         f"{pname} of shape {np.shape(param)} broadcasts to",
-                         found=inp.shape)
+                         block=block, port=port, expected=f"a signal that {pname} "
+                         f"of shape {np.shape(param)} broadcasts to", found=inp.shape)
 
 
 def set_output(block, name, shape, dtype, agents=None):

@@ -29,9 +29,9 @@ def _index_array(index, block, param):
     return a.astype(np.int64)
 
 
-def _agent_input(p, block):
+def _agent_input(p, block, port="u"):
     if p.shape is None or len(p.shape) == 0:
-        raise ShapeError("input has no agent axis", block=block, port=p.name,
+        raise ShapeError("input has no agent axis", block=block, port=port,
                          expected="(N, ...)", found=p.shape)
     return p.shape[0]
 
@@ -148,7 +148,7 @@ class Gather(Block):
 
     def configure(self, inputs):
         p = inputs["u"]
-        n = _agent_input(p, "Gather")
+        n = _agent_input(p, "Gather", "u")
         if self.dynamic:
             ip = inputs["index"]
             if ip.shape is None or len(ip.shape) != 1 or np.dtype(ip.dtype).kind not in "iu":
@@ -215,13 +215,14 @@ class Concatenate(Block):
 
     def configure(self, inputs):
         ps = [inputs[nm] for nm in self.names]
-        for p in ps:
-            _agent_input(p, "Concatenate")
+        for nm, p in zip(self.names, ps):
+            _agent_input(p, "Concatenate", nm)
         tails = {p.shape[1:] for p in ps}
         if len(tails) != 1:
+            bad = next(nm for nm, p in zip(self.names, ps) if p.shape[1:] != ps[0].shape[1:])
             raise ShapeError("inputs differ beyond the agent axis", block="Concatenate",
-                             port=ps[-1].name, expected=f"(N_j, *{ps[0].shape[1:]})",
-                             found={p.name: p.shape for p in ps})
+                             port=bad, expected=f"(N_j, *{ps[0].shape[1:]})",
+                             found={nm: p.shape for nm, p in zip(self.names, ps)})
         dtype = np.result_type(*(np.dtype(p.dtype) for p in ps))
         n = sum(p.shape[0] for p in ps)
         set_output(self, "y", (n, *ps[0].shape[1:]), dtype.name, True)
@@ -283,10 +284,10 @@ class Mux(Block):
         comps = [_components(p) for p in ps]
         prefixes = {c[0] for c in comps}
         if len(prefixes) != 1:
+            bad = next(nm for nm, c in zip(self.names, comps) if c[0] != comps[0][0])
             raise ShapeError("inputs do not share their leading axes", block="Mux",
-                             port=ps[-1].name,
-                             expected="(*P, c_j) or P with a common P",
-                             found={p.name: p.shape for p in ps})
+                             port=bad, expected=f"{(*comps[0][0], 'c')} or {comps[0][0]}",
+                             found={nm: p.shape for nm, p in zip(self.names, ps)})
         self._expand = [c[2] for c in comps]
         prefix = comps[0][0]
         dtype = np.result_type(*(np.dtype(p.dtype) for p in ps))

@@ -92,8 +92,8 @@ def quat_derivative(q, omega, gain=1.0, xp=np):
 
     The first term is the exact kinematics (Sola 2017, eq. 97). The second is
     zero on the unit sphere and pulls ``|q|`` back to 1 when integration
-    error drifts it: with ``s = |q|^2``, ``ds/dt = 4 gain (1 - s) s``, a
-    stable equilibrium at ``s = 1`` (time constant ``1 / (4 gain)``). It is
+    error drifts it: with ``s = |q|^2``, ``ds/dt = 2 gain (1 - s) s``, a
+    stable equilibrium at ``s = 1`` (time constant ``1 / (2 gain)``). It is
     the Baumgarte-style stabilization of e.g. Markley & Crassidis,
     *Fundamentals of Spacecraft Attitude Determination and Control* (2014),
     Section 3.3.

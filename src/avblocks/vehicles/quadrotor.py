@@ -15,9 +15,10 @@ Equations
 with collective thrust T [N], body torques tau [N m], diagonal inertia
 ``J = diag(Jx, Jy, Jz)``, linear drag c [N s/m] (world frame, per axis).
 The quaternion is kept normalized in two ways: the derivative carries the
-stabilizing term ``k_q (1 - |q|^2) q`` (zero on the unit sphere, pulls the
-norm back at rate ``4 k_q``), and the ``attitude`` output and the rotation
-used in the dynamics are computed from ``q / |q|``.
+stabilizing term ``k_q (1 - |q|^2) q`` (zero on the unit sphere; it pulls
+the norm back, ``d|q|^2/dt = 2 k_q (1 - |q|^2) |q|^2``), and the
+``attitude`` output and the rotation used in the dynamics are computed
+from ``q / |q|``.
 
 Rotor mixer (``input="rotors"``): rotor i sits at angle a_i in the body xy
 plane at distance l (arm length) and spins with sign s_i; its thrust f_i
@@ -323,9 +324,11 @@ class QuadrotorVelocityControl(Block):
     Rate loop: ``tau = J k_rate (omega_d - omega) + omega x J omega``.
 
     Performance: with the default gains and a 1 kg, J = (0.01, 0.01, 0.02)
-    vehicle, a 1 m/s horizontal velocity step settles to within 2 % in about
-    1.9 s (measured in ``tests/vehicles/test_quadrotor.py``), a vertical one
-    in about 1.6 s (first order, 1/kv time constant).
+    vehicle, starting from hover, a 1 m/s horizontal velocity step settles to
+    within 2 % in 1.08 s, a vertical one in 1.57 s (first order with time
+    constant 1/kv: ln(50)/kv), measured with RK4 at dt = 5 ms in
+    ``tests/vehicles/test_quadrotor.py``. Yaw stays within 0.03 rad of its
+    set-point during a diagonal step.
 
     References
     ----------

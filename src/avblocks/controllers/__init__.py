@@ -1,11 +1,30 @@
-"""Controllers: each a block with standard ports, its law a pure function."""
+"""Controllers: each a block with standard ports, its law a pure function.
 
+Unicycles (``pose`` in, ``cmd`` = (v, omega) out): PointToPoint,
+LeaderFollower, RandomWalk, HolonomicToUnicycle (+ OffAxisPoint).
+Single integrators (``position`` in, ``velocity`` out): HolonomicPointToPoint,
+Consensus, DisplacementFormation, CyclicPursuit, Coverage,
+CollisionAvoidance. Double integrators (``accel`` out): Flocking.
+Discrete-event: Supervisor, AgentModes. Formation helpers: formation() etc.
+"""
+
+from .consensus import Consensus, consensus_law
+from .cyclic_pursuit import CyclicPursuit, cyclic_pursuit_law
+from .displacement_formation import DisplacementFormation, displacement_formation_law
+from .flocking import Flocking, bump, flocking_law, order_parameter, phi_alpha, sigma_norm
 from .formations import formation, formation_offsets, leader_tree, references, virtual_grid
+from .holonomic_point_to_point import HolonomicPointToPoint, holonomic_point_to_point_law
 from .leader_follower import LeaderFollower, leader_follower_law, leader_follower_terms
+from .offaxis import HolonomicToUnicycle, OffAxisPoint, holonomic_to_unicycle, off_axis_point
 from .point_to_point import PointToPoint, point_to_point_law
 
 __all__ = [
     "PointToPoint", "point_to_point_law",
+    "HolonomicPointToPoint", "holonomic_point_to_point_law",
     "LeaderFollower", "leader_follower_law", "leader_follower_terms",
     "formation", "formation_offsets", "leader_tree", "references", "virtual_grid",
+    "OffAxisPoint", "HolonomicToUnicycle", "off_axis_point", "holonomic_to_unicycle",
+    "Consensus", "consensus_law", "DisplacementFormation", "displacement_formation_law",
+    "CyclicPursuit", "cyclic_pursuit_law",
+    "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
 ]

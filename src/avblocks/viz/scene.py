@@ -202,6 +202,7 @@ class Scene2D:
                  follow_width=None, timestamp=True, title=None, collision_color="red",
                  figsize=(6.0, 6.0), dpi=100, ax=None, pyplot=False, legend=None):
         self.n = int(n)
+        self._static_key = None
         self.extent = tuple(float(v) for v in (extent or (-1.0, 1.0, -1.0, 1.0)))
         if ax is None:
             if pyplot:
@@ -378,11 +379,46 @@ class Scene2D:
         self._follow(pose)
 
     # ---------------------------------------------------------------- output
-    def render(self) -> np.ndarray:
-        """Draw and return the frame as an (H, W, 3) uint8 array."""
-        self.fig.canvas.draw()
+    def _dynamic(self):
+        arts = []
+        for g in self.groups:
+            arts += [g["trail"], g["poly"]] + ([g["artist"]] if g["artist"] is not None
+                                              else [])
+        arts.append(self.halo)
+        leg = self.ax.get_legend()
+        if leg is not None:
+            arts.append(leg)
+        if self.timestamp is not None:
+            arts.append(self.timestamp)
+        return [a for a in arts if a.axes is not None or a is leg]
+
+    def render(self, blit=True) -> np.ndarray:
+        """Draw and return the frame as an (H, W, 3) uint8 array.
+
+        With ``blit`` the static part (axes, ticks, background, obstacles)
+        is drawn once and reused while the view and figure size stay the
+        same; only agents, trails, rings and the time stamp are redrawn.
+        """
+        canvas = self.fig.canvas
+        arts = self._dynamic()
+        key = (self.extent, canvas.get_width_height(), len(arts))
+        if not blit or self._static_key != key:
+            if blit:
+                for a in arts:
+                    a.set_animated(True)
+                canvas.draw()
+                self._static = canvas.copy_from_bbox(self.fig.bbox)
+                self._static_key = key
+                for a in arts:
+                    a.set_animated(False)
+            else:
+                canvas.draw()
+        if blit:
+            canvas.restore_region(self._static)
+            for a in sorted(arts, key=lambda a: a.get_zorder()):
+                self.fig.draw_artist(a)
         self._drawn = True
-        return np.array(self.fig.canvas.buffer_rgba())[:, :, :3]
+        return np.array(canvas.buffer_rgba())[:, :, :3]
 
     def pixel(self, x, y) -> tuple[int, int]:
         """(row, column) in :meth:`render`'s image of world point (x, y)."""

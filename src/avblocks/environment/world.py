@@ -362,7 +362,7 @@ class World:
         boxes = shapely.box(ox + c_s * res, oy + y * res, ox + c_e * res, oy + (y + 1) * res)
         polys = []
         if len(boxes):
-            merged = shapely.coverage_union_all(boxes)
+            merged = shapely.union_all(boxes)
             merged = shapely.simplify(merged, 0.0)
             polys = [p for p in shapely.get_parts(merged) if p.area > 0]
         kw.setdefault("bounds", (ox, oy, ox + w * res, oy + h * res))

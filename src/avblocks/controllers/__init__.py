@@ -17,6 +17,7 @@ from .holonomic_point_to_point import HolonomicPointToPoint, holonomic_point_to_
 from .leader_follower import LeaderFollower, leader_follower_law, leader_follower_terms
 from .offaxis import HolonomicToUnicycle, OffAxisPoint, holonomic_to_unicycle, off_axis_point
 from .point_to_point import PointToPoint, point_to_point_law
+from .random_walk import Distribution, RandomWalk, random_walk_cmd
 
 __all__ = [
     "PointToPoint", "point_to_point_law",
@@ -26,5 +27,6 @@ __all__ = [
     "OffAxisPoint", "HolonomicToUnicycle", "off_axis_point", "holonomic_to_unicycle",
     "Consensus", "consensus_law", "DisplacementFormation", "displacement_formation_law",
     "CyclicPursuit", "cyclic_pursuit_law",
+    "RandomWalk", "Distribution", "random_walk_cmd",
     "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
 ]

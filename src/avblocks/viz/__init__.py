@@ -8,10 +8,11 @@ Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
 from .animation import Animation, Animation2D, animate, find_pose, save_movie
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
+from .scope import Scope, plot_signals, plot_trajectories
 from .shapes import DRAWINGS, Drawing, drawing
 
 __all__ = [
     "animate", "save_movie", "Animation", "Animation2D", "Scene2D", "Group",
     "Drawing", "DRAWINGS", "drawing", "obstacle_paths", "MovieWriter", "write_movie",
-    "read_video", "find_pose",
+    "read_video", "find_pose", "Scope", "plot_signals", "plot_trajectories",
 ]

@@ -83,19 +83,24 @@ def waypoint_array(waypoints, n, block="PointToPoint"):
     return out, counts
 
 
-def point_to_point_law(pose, goal, d, gain, v_max, xp=np):
+def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     """(v, omega) driving the off-axis point of each unicycle to ``goal``.
 
     ``pose`` (N, 3), ``goal`` (N, 2), ``d``, ``gain``, ``v_max`` scalars or (N,).
+    With ``radius`` also returns whether each point is within it of its goal.
     """
     th = pose[:, 2]
     c, s = xp.cos(th), xp.sin(th)
     ex = goal[:, 0] - pose[:, 0] - d * c
     ey = goal[:, 1] - pose[:, 1] - d * s
     # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
-    k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(ex * ex + ey * ey), 1e-300))
+    e2 = ex * ex + ey * ey
+    k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
     wx, wy = k * ex, k * ey
-    return xp.stack([c * wx + s * wy, (c * wy - s * wx) * (1.0 / d)], axis=-1)
+    cmd = xp.stack([c * wx + s * wy, (c * wy - s * wx) * (1.0 / d)], axis=-1)
+    if radius is None:
+        return cmd
+    return cmd, e2 <= radius * radius
 
 
 class PointToPoint(Block):
@@ -106,6 +111,8 @@ class PointToPoint(Block):
     pose : in, (N, 3) — vehicle poses (direct feedthrough).
     cmd : out, (N, 2) — (v, omega) for a unicycle-family vehicle.
     target : out, (N, 2) — the waypoint each agent is heading to.
+    arrived : out, (N,) bool — the controlled point is within ``radius`` of
+        its current target.
     done : out, (N,) bool — true once the last waypoint has been reached
         (latched; set at the major step where the arrival is detected and
         visible from the next one).
@@ -134,6 +141,8 @@ class PointToPoint(Block):
     Equations: see the module docstring.
     """
 
+    update_uses_outputs = True
+
     def __init__(self, waypoints, *, n=None, d=0.1, gain=1.0, v_max=1.0, radius=0.2):
         super().__init__()
         if n is None:
@@ -161,6 +170,7 @@ class PointToPoint(Block):
         self.declare_input("pose", (n, 3), unit="m, m, rad")
         self.declare_output("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"))
         self.declare_output("target", (n, 2), unit="m", labels=("x", "y"))
+        self.declare_output("arrived", (n,), "bool")
         self.declare_output("done", (n,), "bool")
 
     def _goal(self, wp, xp):
@@ -170,17 +180,12 @@ class PointToPoint(Block):
 
     def output(self, t, x, u, xp):
         goal = self._goal(x["wp"], xp)
-        cmd = point_to_point_law(u["pose"], goal, self.d, self.gain, self.v_max, xp)
-        return {"cmd": cmd, "target": goal, "done": x["done"]}
+        cmd, arrived = point_to_point_law(u["pose"], goal, self.d, self.gain, self.v_max,
+                                          xp, radius=self.radius)
+        return {"cmd": cmd, "target": goal, "arrived": arrived, "done": x["done"]}
 
-    def update(self, t, x, u, xp):
-        wp = x["wp"]
-        goal = self._goal(wp, xp)
-        pose = u["pose"]
-        th = pose[:, 2]
-        ex = goal[:, 0] - pose[:, 0] - self.d * xp.cos(th)
-        ey = goal[:, 1] - pose[:, 1] - self.d * xp.sin(th)
-        reached = ex * ex + ey * ey <= self.radius ** 2
+    def update(self, t, x, u, xp, y):
+        wp, reached = x["wp"], y["arrived"]
         last = wp == self._last
         return {"wp": xp.where(reached & ~last, wp + 1, wp),
                 "done": x["done"] | (reached & last)}

@@ -39,7 +39,7 @@ A proportional heading controller in a few lines:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -94,6 +94,12 @@ class Block:
     #: True when ``on_major_step`` has side effects (I/O, drawing, hardware).
     side_effects = False
 
+    #: True when ``update`` needs this block's own outputs of the same major
+    #: step (Simulink's and Drake's discrete updates may read them too). The
+    #: simulator then calls ``update(t, x, u, xp, y=outputs)``, so work done in
+    #: ``output`` (a distance, a mode test) is not repeated in ``update``.
+    update_uses_outputs = False
+
     def __init__(self):
         self._inputs: dict[str, Port] = {}
         self._outputs: dict[str, Port] = {}
@@ -102,6 +108,7 @@ class Block:
         self._dstates: dict[str, Port] = {}
         self._init: dict[str, np.ndarray] = {}
         self._random: set[str] = set()
+        self._inherited: set[str] = set()
         self.sample_time = CONTINUOUS
 
     # ------------------------------------------------------------------ declare
@@ -128,6 +135,8 @@ class Block:
                                  port=name)
         p = Port(name, shape, dtype, unit, tuple(labels), doc, agents)
         self._inputs[name] = p
+        if shape is None:
+            self._inherited.add(name)
         if feedthrough:
             self._feedthrough.add(name)
         else:
@@ -235,16 +244,34 @@ class Block:
     # --------------------------------------------------------------- behaviour
     def configure(self, inputs: dict[str, Port]) -> None:
         """Hook for shape-polymorphic blocks, called once when the diagram is
-        built, with the resolved specs of the signals wired to the inputs.
-        Re-declare outputs/states here (``redeclare_*``). Default: nothing.
+        built, with ``{input name: spec of the output wired to it}`` (the
+        spec's ``name`` is the source port's). Re-declare outputs/states here
+        (``redeclare_output``, ``redeclare_state``). Default: nothing.
         """
 
-    def redeclare_output(self, name, shape, dtype=None):
-        """Fix the shape of an output whose shape was left open."""
-        self._outputs[name] = self._outputs[name].with_shape(shape, dtype)
+    def redeclare_output(self, name, shape, dtype=None, *, agents=None):
+        """Fix the shape (and dtype, agent flag) of an output, in ``configure``."""
+        p = self._outputs[name].with_shape(shape, dtype)
+        if agents is not None:
+            p = replace(p, agents=bool(agents))
+        self._outputs[name] = p
 
     def redeclare_input(self, name, shape, dtype=None):
         self._inputs[name] = self._inputs[name].with_shape(shape, dtype)
+
+    def redeclare_state(self, name, value, *, dtype=None):
+        """Replace a declared state's initial value, shape and dtype (for
+        shape-polymorphic blocks, in ``configure``)."""
+        if name in self._cstates:
+            v = np.array(value, dtype=float)
+            self._cstates[name] = replace(self._cstates[name], shape=v.shape)
+        elif name in self._dstates:
+            v = np.array(value, dtype=dtype)
+            self._dstates[name] = replace(self._dstates[name], shape=v.shape,
+                                          dtype=v.dtype.name)
+        else:
+            raise ParameterError("no such state", block=type(self).__name__, param=name)
+        self._init[name] = v
 
     def output(self, t, x, u, xp):
         """Outputs at time ``t`` (dict by output name). Default: none."""
@@ -256,7 +283,11 @@ class Block:
             f"{type(self).__name__} declares continuous states but no derivative()")
 
     def update(self, t, x, u, xp):
-        """Next values of the discrete states (dict by state name)."""
+        """Next values of the discrete states (dict by state name).
+
+        With ``update_uses_outputs = True`` the signature is
+        ``update(t, x, u, xp, y)``: ``y`` holds the block's outputs at ``t``.
+        """
         raise NotImplementedError(
             f"{type(self).__name__} declares discrete states but no update()")
 

@@ -123,7 +123,16 @@ def _check_one(b, n, inputs, seed, fail):
     if b._cstates:
         calls.append(("derivative", b._cstates, lambda: b.derivative(0.3, x, u, np)))
     if b._dstates:
-        calls.append(("update", b._dstates, lambda: b.update(0.3, x, u, np)))
+        if b.update_uses_outputs:
+            def upd():
+                y = b.output(0.3, x, u_ft, np)
+                if not isinstance(y, dict):
+                    y = {next(iter(b._outputs)): y}
+                return b.update(0.3, x, u, np, y=y)
+        else:
+            def upd():
+                return b.update(0.3, x, u, np)
+        calls.append(("update", b._dstates, upd))
     for fname, decl, call in calls:
         try:
             r1 = call()

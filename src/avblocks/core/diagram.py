@@ -394,11 +394,14 @@ def _resolve_shapes(names, blocks, srcs):
                 continue
             for inp, sp in specs.items():
                 mine = _inputs_of(b)[inp]
-                if mine.shape is None:
+                if mine.shape is None or inp in getattr(b, "_inherited", ()):
                     b.redeclare_input(inp, sp.shape, sp.dtype)
             try:
                 b.configure(specs)
-            except ShapeError:
+            except ShapeError as e:
+                if e.block is None or e.block == type(b).__name__:
+                    e.block = names[i]
+                    e.args = (e._format(),)
                 raise
             except Exception as e:  # noqa: BLE001 - add context, keep cause
                 raise ShapeError(f"configure failed: {e}", block=names[i]) from e

@@ -161,7 +161,10 @@ class Engine:
             if h is False:
                 continue
             b = self.blocks[i]
-            new = b.update(t, X[i], self.gather(i, Y), xp)
+            if b.update_uses_outputs:
+                new = b.update(t, X[i], self.gather(i, Y), xp, y=Y[i])
+            else:
+                new = b.update(t, X[i], self.gather(i, Y), xp)
             merged = {**X[i], **new}
             X[i] = _select(h, merged, X[i], xp)
         return X

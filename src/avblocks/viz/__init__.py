@@ -10,9 +10,11 @@ from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
 from .scope import Scope, plot_signals, plot_trajectories
 from .shapes import DRAWINGS, Drawing, drawing
+from .view3d import Animation3D, animate3d, quat_to_matrix
 
 __all__ = [
     "animate", "save_movie", "Animation", "Animation2D", "Scene2D", "Group",
     "Drawing", "DRAWINGS", "drawing", "obstacle_paths", "MovieWriter", "write_movie",
     "read_video", "find_pose", "Scope", "plot_signals", "plot_trajectories",
+    "animate3d", "Animation3D", "quat_to_matrix",
 ]

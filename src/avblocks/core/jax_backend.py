@@ -4,8 +4,7 @@ This runs the same :class:`~avblocks.core.engine.Engine` the NumPy loop uses,
 with ``xp = jax.numpy``: that only works because blocks are pure functions
 of the values they are handed. Fixed-step solvers only; no side effects.
 
->>> # doctest: +SKIP
->>> res = simulate_jax(diagram, 30.0, dt=0.01, log=[fleet.pose])
+    res = simulate_jax(diagram, 30.0, dt=0.01, log=[fleet.pose])
 """
 
 from __future__ import annotations

@@ -15,8 +15,10 @@ against a circle (centre ``c``, radius ``r``), with ``f = c - o``::
 Broad phase: one shapely ``STRtree`` query of every agent's sensing box
 against the boxes of all edges and circles (``World.ray_tree``) and one
 k-d tree pair query between agents, so the work is ~ N log N plus the pairs
-actually in range, never N x all segments. Every candidate pair is then
-intersected with all its rays at once in NumPy.
+actually in range, never N x all segments. Each candidate pair is then
+intersected only with the rays inside the arc of directions it subtends
+(found by a binary search in the sorted ray angles), all in flat NumPy
+arrays.
 
 NumPy/shapely side computation: not JAX-traceable.
 """
@@ -49,42 +51,99 @@ def ray_angles(n_rays, fov=2 * np.pi):
     return np.linspace(-fov / 2, fov / 2, n_rays)
 
 
-def _reduce_min(out, rows, vals):
-    """out[rows[p]] = min(out[rows[p]], vals[p]) for all p (vectorized)."""
-    if len(rows) == 0:
-        return
-    order = np.argsort(rows, kind="stable")
-    rows, vals = rows[order], vals[order]
-    starts = np.flatnonzero(np.r_[True, rows[1:] != rows[:-1]])
-    red = np.minimum.reduceat(vals, starts, axis=0)
-    u = rows[starts]
-    out[u] = np.minimum(out[u], red)
-
-
-def _ray_segment(o, d, seg):
-    """Hit distances (P, R) of rays from o (P, 2) with dirs d (P, R, 2) on seg (P, 4)."""
-    a = seg[:, None, :2]
-    e = (seg[:, 2:] - seg[:, :2])[:, None, :]
-    ao = a - o[:, None, :]
-    den = d[..., 0] * e[..., 1] - d[..., 1] * e[..., 0]
+def _ray_segment(ox, oy, cs, sn, seg):
+    """Hit distance of rays (origin ox, oy; direction cs, sn) on segments
+    ``seg`` (..., 4); all arguments broadcast element-wise; inf on a miss."""
+    ex, ey = seg[..., 2] - seg[..., 0], seg[..., 3] - seg[..., 1]
+    ax, ay = seg[..., 0] - ox, seg[..., 1] - oy
+    den = cs * ey - sn * ex
     with np.errstate(divide="ignore", invalid="ignore"):
-        t = (ao[..., 0] * e[..., 1] - ao[..., 1] * e[..., 0]) / den
-        s = (ao[..., 0] * d[..., 1] - ao[..., 1] * d[..., 0]) / den
-    ok = (np.abs(den) > _EPS) & (t >= 0) & (s >= -_EPS) & (s <= 1 + _EPS)
+        inv = 1.0 / den
+        t = (ax * ey - ay * ex) * inv
+        u = (ax * sn - ay * cs) * inv
+    ok = (np.abs(den) > _EPS) & (t >= 0) & (u >= -_EPS) & (u <= 1 + _EPS)
     return np.where(ok, t, np.inf)
 
 
-def _ray_circle(o, d, c, r):
-    """Hit distances (P, R) of rays from o (P, 2), dirs d (P, R, 2) on circles c (P, 2), r (P,)."""
-    f = (c - o)[:, None, :]
-    tca = f[..., 0] * d[..., 0] + f[..., 1] * d[..., 1]
-    d2 = np.sum(f * f, axis=-1) - tca**2
-    r2 = (r**2)[:, None]
+def _ray_circle(ox, oy, cs, sn, cx, cy, r):
+    """Hit distance of rays on circles (centre cx, cy, radius r), element-wise;
+    0 when the origin is inside, inf on a miss."""
+    fx, fy = cx - ox, cy - oy
+    tca = fx * cs + fy * sn
+    ff = fx * fx + fy * fy
+    d2 = ff - tca * tca
+    r2 = r * r
     thc = np.sqrt(np.maximum(r2 - d2, 0.0))
-    inside = np.sum(f * f, axis=-1) <= r2
-    t = np.where(inside, 0.0, tca - thc)
+    inside = ff <= r2
     ok = inside | ((d2 <= r2) & (tca - thc >= 0))
-    return np.where(ok, t, np.inf)
+    return np.where(ok, np.where(inside, 0.0, tca - thc), np.inf)
+
+
+class _Rays:
+    """Ray bookkeeping: which rays of an agent fall in an angular interval."""
+
+    def __init__(self, angles, heading):
+        self.R = R = len(angles)
+        rel = np.mod(angles, 2 * np.pi)
+        self.perm = np.argsort(rel, kind="stable")
+        srt = rel[self.perm]
+        self.sorted2 = np.concatenate([srt, srt + 2 * np.pi])
+        self.heading = heading
+        phi = heading[:, None] + angles[None, :]
+        self.cs, self.sn = np.cos(phi), np.sin(phi)
+        self.R = R
+
+    def candidates(self, agent, lo, span):
+        """(pair index, ray index) of rays of ``agent[p]`` whose direction lies
+        in the arc ``[lo[p], lo[p] + span[p]]`` (absolute angles)."""
+        R = self.R
+        start = np.mod(lo - self.heading[agent] - _ARC_EPS, 2 * np.pi)
+        k0 = np.searchsorted(self.sorted2, start, side="left")
+        k1 = np.searchsorted(self.sorted2, start + span + 2 * _ARC_EPS, side="right")
+        cnt = np.minimum(k1 - k0, R)
+        total = int(cnt.sum())
+        pair = np.repeat(np.arange(len(agent)), cnt)
+        off = np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        ray = self.perm[(k0[pair] + off) % R]
+        return pair, ray
+
+
+_ARC_EPS = 1e-9
+
+
+def _reduce_min_flat(out, flat, vals):
+    """out.flat[flat[p]] = min(out.flat[flat[p]], vals[p]) (vectorized)."""
+    if len(flat) == 0:
+        return
+    o = out.reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    flat, vals = flat[order], vals[order]
+    starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
+    u = flat[starts]
+    o[u] = np.minimum(o[u], np.minimum.reduceat(vals, starts))
+
+
+def _circle_arcs(ox, oy, cx, cy, r):
+    """Start angle and span of the arc of directions that can hit a circle."""
+    fx, fy = cx - ox, cy - oy
+    d = np.hypot(fx, fy)
+    half = np.arcsin(np.clip(r / np.maximum(d, 1e-300), 0.0, 1.0))
+    full = d <= r
+    lo = np.where(full, 0.0, np.arctan2(fy, fx) - half)
+    span = np.where(full, 2 * np.pi, 2 * half)
+    return lo, span
+
+
+def _segment_arcs(ox, oy, seg):
+    """Start angle and span of the directions from (ox, oy) that meet a segment."""
+    ax, ay = seg[:, 0] - ox, seg[:, 1] - oy
+    bx, by = seg[:, 2] - ox, seg[:, 3] - oy
+    cross = ax * by - ay * bx
+    dot = ax * bx + ay * by
+    span = np.arctan2(np.abs(cross), dot)
+    lo = np.where(cross >= 0, np.arctan2(ay, ax), np.arctan2(by, bx))
+    full = (span > np.pi - 1e-6) | (np.hypot(ax, ay) < 1e-12) | (np.hypot(bx, by) < 1e-12)
+    return np.where(full, 0.0, lo), np.where(full, 2 * np.pi, span)
 
 
 def cast_rays(world, pose, angles, max_range, agent_radius=None):
@@ -100,15 +159,27 @@ def cast_rays(world, pose, angles, max_range, agent_radius=None):
     agent_radius : float or (N,), optional
         Other agents seen as discs of this radius (None: agents invisible).
         An agent never sees its own disc.
+
+    Each candidate (agent, edge/circle/agent) pair from the broad phase is
+    intersected only with the rays whose directions fall in the arc the
+    edge or circle subtends from the agent (a sorted-angle search), so the
+    narrow phase costs ~ pairs x (rays per arc), not pairs x all rays.
     """
     pose = np.asarray(pose, dtype=float)
     n = pose.shape[0]
-    angles = np.asarray(angles, dtype=float)
+    angles = np.asarray(angles, dtype=float).ravel()
+    R = len(angles)
     o = pose[:, :2]
     th = pose[:, 2] if pose.shape[1] >= 3 else np.zeros(n)
-    phi = th[:, None] + angles[None, :]
-    dirs = np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (N, R, 2)
-    out = np.full((n, len(angles)), float(max_range))
+    rays = _Rays(angles, th)
+    out = np.full((n, R), float(max_range))
+
+    def narrow(agent, lo, span, hit_fn):
+        p, k = rays.candidates(agent, lo, span)
+        ag = agent[p]
+        t = hit_fn(p, ag, rays.cs[ag, k], rays.sn[ag, k])
+        _reduce_min_flat(out, ag * R + k, t)
+
     if world is not None and world.n_obstacles:
         import shapely
         boxes = shapely.box(o[:, 0] - max_range, o[:, 1] - max_range,
@@ -117,20 +188,25 @@ def cast_rays(world, pose, angles, max_range, agent_radius=None):
         ns = len(world.segments)
         seg = g < ns
         if np.any(seg):
-            aa = a[seg]
-            _reduce_min(out, aa, _ray_segment(o[aa], dirs[aa], world.segments[g[seg]]))
+            aa, sg = a[seg], world.segments[g[seg]]
+            lo, span = _segment_arcs(o[aa, 0], o[aa, 1], sg)
+            narrow(aa, lo, span, lambda p, ag, c, s_: _ray_segment(
+                o[ag, 0], o[ag, 1], c, s_, sg[p]))
         if np.any(~seg):
             aa, cid = a[~seg], world.circle_ids[g[~seg] - ns]
-            t = _ray_circle(o[aa], dirs[aa], world.circle_center[cid],
-                            world.circle_radius[cid])
-            _reduce_min(out, aa, t)
+            cc, cr = world.circle_center[cid], world.circle_radius[cid]
+            lo, span = _circle_arcs(o[aa, 0], o[aa, 1], cc[:, 0], cc[:, 1], cr)
+            narrow(aa, lo, span, lambda p, ag, c, s_: _ray_circle(
+                o[ag, 0], o[ag, 1], c, s_, cc[p, 0], cc[p, 1], cr[p]))
     if agent_radius is not None and n > 1:
         r = np.broadcast_to(np.asarray(agent_radius, dtype=float), (n,))
         pairs = cKDTree(o).query_pairs(max_range + r.max(), output_type="ndarray")
         if len(pairs):
             i = np.concatenate([pairs[:, 0], pairs[:, 1]])
             j = np.concatenate([pairs[:, 1], pairs[:, 0]])
-            _reduce_min(out, i, _ray_circle(o[i], dirs[i], o[j], r[j]))
+            lo, span = _circle_arcs(o[i, 0], o[i, 1], o[j, 0], o[j, 1], r[j])
+            narrow(i, lo, span, lambda p, ag, c, s_: _ray_circle(
+                o[ag, 0], o[ag, 1], c, s_, o[j[p], 0], o[j[p], 1], r[j[p]]))
     return np.minimum(out, max_range)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import ParameterError
+from ._rotations import dot
 
 
 def limit(value, n, block, name, comp=()):
@@ -35,6 +36,6 @@ def any_finite(*arrays):
 
 def clip_norm(vec, max_norm, xp=np):
     """Scale rows of ``vec`` (N, k) down to Euclidean norm ``<= max_norm`` (N,)."""
-    nrm = xp.sqrt(xp.sum(vec * vec, axis=-1))
+    nrm = xp.sqrt(dot(vec, vec))
     scale = xp.minimum(1.0, max_norm / xp.maximum(nrm, 1e-300))
     return vec * scale[:, None]

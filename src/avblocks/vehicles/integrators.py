@@ -34,6 +34,7 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import agent_array, poses
 from ._common import any_finite, clip_norm, limit
+from ._rotations import dot
 
 
 def _dim(position0, dim, block):
@@ -48,9 +49,9 @@ def _dim(position0, dim, block):
 
 def speed_limited_accel(vel, acc, v_max, xp=np):
     """Remove the part of ``acc`` that would push ``|vel|`` beyond ``v_max``."""
-    speed = xp.sqrt(xp.sum(vel * vel, axis=-1))
+    speed = xp.sqrt(dot(vel, vel))
     vhat = vel / xp.maximum(speed, 1e-300)[:, None]
-    along = xp.sum(acc * vhat, axis=-1)
+    along = dot(acc, vhat)
     cut = xp.where((speed >= v_max) & (along > 0), along, 0.0)
     return acc - cut[:, None] * vhat
 

@@ -8,7 +8,9 @@ CollisionAvoidance. Double integrators (``accel`` out): Flocking.
 Discrete-event: Supervisor, AgentModes. Formation helpers: formation() etc.
 """
 
+from .collision_avoidance import CollisionAvoidance, safety_filter
 from .consensus import Consensus, consensus_law
+from .coverage import Coverage, cell_moments, coverage_cost, lloyd_velocity, voronoi_cells
 from .cyclic_pursuit import CyclicPursuit, cyclic_pursuit_law
 from .displacement_formation import DisplacementFormation, displacement_formation_law
 from .flocking import Flocking, bump, flocking_law, order_parameter, phi_alpha, sigma_norm
@@ -27,6 +29,8 @@ __all__ = [
     "OffAxisPoint", "HolonomicToUnicycle", "off_axis_point", "holonomic_to_unicycle",
     "Consensus", "consensus_law", "DisplacementFormation", "displacement_formation_law",
     "CyclicPursuit", "cyclic_pursuit_law",
+    "Coverage", "coverage_cost", "cell_moments", "lloyd_velocity", "voronoi_cells",
+    "CollisionAvoidance", "safety_filter",
     "RandomWalk", "Distribution", "random_walk_cmd",
     "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
 ]

@@ -142,7 +142,7 @@ def test_quaternion_norm_is_restored():
     np.testing.assert_allclose(np.linalg.norm(blk.output(0, x, {}, np)["attitude"]), 1.0)
 
 
-def _velocity_run(kind, ref, t_final=4.0):
+def _velocity_run(kind, ref, t_final=3.0):
     q = Quadrotor(np.zeros((len(ref), 3)), input=kind)
     d = av.Diagram()
     s = d.add(velocity_controlled_quadrotor(q), name="s")
@@ -167,7 +167,7 @@ def test_velocity_step_settling_time(kind):
     # documented in QuadrotorVelocityControl: ~1.1 s horizontal, ~1.6 s vertical
     assert 0.9 < ts[0] < 1.3 and 0.9 < ts[2] < 1.3, ts
     assert 1.4 < ts[1] < 1.8, ts
-    assert err[-1].max() < 1e-4
+    assert err[-1].max() < 1e-3                       # exp(-kv t) at t = 3 s
     assert np.abs(pose[..., 2]).max() < 0.05          # yaw held near its set-point 0
 
 
@@ -175,7 +175,7 @@ def test_holonomic_controller_flies_quadrotor_unchanged():
     """The same go-to-goal block drives a 3D SingleIntegrator and a quadrotor."""
 
     class GoTo(av.Block):
-        def __init__(self, n, goal, gain=0.8, v_max=1.0):
+        def __init__(self, n, goal, gain=1.5, v_max=1.5):
             super().__init__()
             self.goal, self.gain, self.v_max = np.asarray(goal, float), gain, v_max
             self.declare_input("position", (n, 3))
@@ -195,7 +195,7 @@ def test_holonomic_controller_flies_quadrotor_unchanged():
         c = d.add(GoTo(2, goal), name="ctrl")
         d.connect(a.position, c.position)
         d.connect(c.velocity, a.velocity)
-        res = av.simulate(d, 12.0, dt=0.01, log=[a.position], progress=False)
+        res = av.simulate(d, 8.0, dt=0.02, log=[a.position], progress=False)
         finals.append(res[a.position][-1])
     np.testing.assert_allclose(finals[0], goal, atol=1e-3)
     np.testing.assert_allclose(finals[1], goal, atol=2e-3)

@@ -6,6 +6,7 @@ Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
 """
 
 from .animation import Animation, Animation2D, animate, find_pose, save_movie
+from .diagram import draw_diagram, to_dot
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
 from .scope import Scope, plot_signals, plot_trajectories
@@ -17,4 +18,5 @@ __all__ = [
     "Drawing", "DRAWINGS", "drawing", "obstacle_paths", "MovieWriter", "write_movie",
     "read_video", "find_pose", "Scope", "plot_signals", "plot_trajectories",
     "animate3d", "Animation3D", "quat_to_matrix",
+    "to_dot", "draw_diagram",
 ]

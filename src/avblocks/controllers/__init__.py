@@ -20,6 +20,7 @@ from .leader_follower import LeaderFollower, leader_follower_law, leader_followe
 from .offaxis import HolonomicToUnicycle, OffAxisPoint, holonomic_to_unicycle, off_axis_point
 from .point_to_point import PointToPoint, point_to_point_law
 from .random_walk import Distribution, RandomWalk, random_walk_cmd
+from .supervisor import AgentModes, Supervisor
 
 __all__ = [
     "PointToPoint", "point_to_point_law",
@@ -31,6 +32,7 @@ __all__ = [
     "CyclicPursuit", "cyclic_pursuit_law",
     "Coverage", "coverage_cost", "cell_moments", "lloyd_velocity", "voronoi_cells",
     "CollisionAvoidance", "safety_filter",
+    "Supervisor", "AgentModes",
     "RandomWalk", "Distribution", "random_walk_cmd",
     "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
 ]

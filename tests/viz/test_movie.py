@@ -109,3 +109,16 @@ def test_animation_block_keeps_frames_offscreen_with_inputs(tmp_path):
     path = blk.save(tmp_path / "kept.gif", fps=4)
     with Image.open(path) as im:
         assert im.n_frames == 3
+
+
+def test_plain_colour_or_signal():
+    res = straight_run(T=3, n=1)
+    a = viz.animate(res, color="red", extent=(-1, 1, -1, 1), drawing="robot", size=0.8,
+                    timestamp=False, **SMALL)
+    img = a.render(0)
+    r, c = a.scene.pixel(0.0, 0.2)
+    assert tuple(img[r, c]) == (255, 0, 0)
+    a.close()
+    b = viz.animate(res, color="fleet.informed", **SMALL)
+    assert b.color.shape == (3, 1)
+    b.close()

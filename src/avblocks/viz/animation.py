@@ -22,6 +22,7 @@ from pathlib import Path
 
 import matplotlib as mpl
 import numpy as np
+from matplotlib.colors import is_color_like
 
 from ..core.block import Block
 from ..core.errors import ParameterError
@@ -133,6 +134,8 @@ class Animation(_Frames):
         self.every = every
         self.index = np.arange(0, T, every)
         self.trail = float(trail or 0.0)
+        if isinstance(color, str) and color not in results and is_color_like(color):
+            scene_options["color"], color = color, None     # a plain colour
         self.color = _per_agent(results, color, (T, n), "color")
         self.collision = _per_agent(results, collision, (T, n), "collision")
         self.steer = _per_agent(results, steer, (T, n), "steer")
@@ -195,7 +198,8 @@ def animate(results, pose=None, **options) -> Animation:
         Trail length in seconds (0: none, ``inf``: whole path).
     color : str or array (T, N)
         Colour agents by a signal: bool (e.g. informed), int (a palette
-        index) or float (mapped through ``cmap``/``clim``).
+        index) or float (mapped through ``cmap``/``clim``); a plain
+        Matplotlib colour name that is not a logged signal colours all.
     collision : str or array (T, N) bool
         Draw a ring around colliding agents.
     steer : str or array (T, N) or (T, N, k)

@@ -121,7 +121,7 @@ def references(offsets, leader, d=0.1):
     lead = np.where(leader >= 0, leader, np.arange(len(off)))
     r = off + np.array([float(d), 0.0]) - off[lead]
     l_ref = np.hypot(r[:, 0], r[:, 1])
-    alpha_ref = np.arctan2(-r[:, 1], -r[:, 0])
+    alpha_ref = np.arctan2(-r[:, 1], -r[:, 0]) + 0.0     # no -0.0
     root = leader < 0
     return np.where(root, 0.0, l_ref), np.where(root, 0.0, alpha_ref)
 

@@ -71,8 +71,8 @@ _SPIN = np.array([-1.0, 1.0, -1.0, 1.0])
 def _unit_mixer(frame):
     a = _ANGLES[frame]
     b = np.stack([np.ones(4), np.round(np.sin(a), 15), -np.round(np.cos(a), 15), _SPIN])
-    # transposes stored contiguous: (N, 4) @ (non-contiguous 4x4) is ~40x slower
-    mats = (b, np.ascontiguousarray(b.T), np.ascontiguousarray(np.linalg.inv(b).T))
+    inv = np.linalg.inv(b)
+    mats = (b, np.where(np.abs(inv) < 1e-12, 0.0, inv))
     for m in mats:
         m.flags.writeable = False
     return mats
@@ -89,18 +89,35 @@ def mixer_matrix(frame="x"):
     return _MIXERS[frame][0]
 
 
+def _apply(mat, cols, xp):
+    """``mat @ cols`` for a constant 4x4 ``mat`` and 4 (N,) columns, written
+    out (skipping zeros): no BLAS call, whose threads spin on a busy machine
+    and make a (N, 4) x (4, 4) product slower than this."""
+    rows = []
+    for j in range(4):
+        acc = None
+        for i in range(4):
+            c = float(mat[j, i])
+            if abs(c) < 1e-15:
+                continue
+            term = cols[i] if c == 1.0 else (-cols[i] if c == -1.0 else c * cols[i])
+            acc = term if acc is None else acc + term
+        rows.append(acc if acc is not None else 0.0 * cols[0])
+    return rows
+
+
 def rotors_to_wrench(f, arm_length, yaw_coeff, frame="x", xp=np):
     """Rotor thrusts (N, 4) -> (T, tau_x, tau_y, tau_z) (N, 4)."""
-    scale = xp.stack([xp.ones_like(arm_length), arm_length, arm_length, yaw_coeff], axis=-1)
-    mixer_matrix(frame)
-    return (f @ _MIXERS[frame][1]) * scale
+    b = mixer_matrix(frame)
+    t, sx, sy, sz = _apply(b, [f[:, i] for i in range(4)], xp)
+    return xp.stack([t, arm_length * sx, arm_length * sy, yaw_coeff * sz], axis=-1)
 
 
 def wrench_to_rotors(w, arm_length, yaw_coeff, frame="x", xp=np):
     """(T, tau_x, tau_y, tau_z) (N, 4) -> rotor thrusts (N, 4) (exact inverse)."""
-    scale = xp.stack([xp.ones_like(arm_length), arm_length, arm_length, yaw_coeff], axis=-1)
     mixer_matrix(frame)
-    return (w / scale) @ _MIXERS[frame][2]
+    cols = [w[:, 0], w[:, 1] / arm_length, w[:, 2] / arm_length, w[:, 3] / yaw_coeff]
+    return xp.stack(_apply(_MIXERS[frame][1], cols, xp), axis=-1)
 
 
 def quadrotor_rhs(vel, q, rates, thrust, torque, mass, inertia, gravity=9.81,

@@ -18,8 +18,19 @@ from .core.errors import (
 
 __version__ = "0.1.0"
 
+_LAZY = ("viz", "scenarios", "interfaces")
+
+
+def __getattr__(name):
+    # viz pulls in Matplotlib: import it (and the scenario loader) on first use
+    if name in _LAZY:
+        import importlib
+        return importlib.import_module(f"avblocks.{name}")
+    raise AttributeError(f"module 'avblocks' has no attribute '{name}'")
+
 __all__ = [
-    "blocks", "controllers", "core", "environment", "utility", "vehicles",
+    "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
+    "scenarios",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "AvError", "ParameterError", "WiringError", "ShapeError",
     "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",

@@ -77,8 +77,11 @@ def _load_python(path: Path, overrides):
 
 def load_any(target, overrides):
     """(diagram, simulate kwargs, name) from a built-in name, YAML/TOML or .py."""
-    from .scenarios import load_scenario
+    from .scenarios import builtin_scenarios, load_scenario
     p = Path(target)
+    builtin = builtin_scenarios()
+    if not p.exists() and target in builtin and builtin[target].suffix == ".py":
+        p = builtin[target]
     if p.suffix == ".py":
         if not p.exists():
             raise ScenarioError("no such file", file=target)
@@ -181,11 +184,20 @@ def cmd_list(args):
             doc = (cls.__doc__ or "").strip().splitlines()
             print(f"{k:40s} {doc[0] if doc else ''}")
         return 0
-    for name in builtin_scenarios():
-        sc = load_scenario(name)
-        desc = " ".join(sc.description.split())
-        params = ", ".join(f"{k}={v}" for k, v in (sc.data.get("parameters") or {}).items())
-        print(f"{name}\n    {desc}\n    parameters: {params}")
+    for name, path in builtin_scenarios().items():
+        if path.suffix == ".py":
+            import importlib
+            mod = importlib.import_module(f"avblocks.scenarios.{name}")
+            desc = (mod.__doc__ or "").strip().split("\n\n")[0]
+            import inspect
+            sig = inspect.signature(mod.make_diagram)
+            params = ", ".join(f"{k}={v.default}" for k, v in sig.parameters.items())
+        else:
+            sc = load_scenario(name)
+            desc = sc.description
+            params = ", ".join(f"{k}={v}" for k, v in
+                               (sc.data.get("parameters") or {}).items())
+        print(f"{name}\n    {' '.join(desc.split())}\n    parameters: {params}")
     return 0
 
 

@@ -347,8 +347,13 @@ def builtin_dir() -> Path:
 
 
 def builtin_scenarios() -> dict:
-    """``{name: path}`` of the scenarios shipped with avblocks."""
-    return {p.stem: p for p in sorted(builtin_dir().glob("*.yaml"))}
+    """``{name: path}`` of the scenarios shipped with avblocks: YAML files,
+    and Python modules (``make_diagram(**params)``) for the case studies
+    whose set-up is computed."""
+    files = list(builtin_dir().glob("*.yaml")) + [
+        p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
+        and p.stem not in ("loader",)]
+    return {p.stem: p for p in sorted(files)}
 
 
 def load_scenario(name_or_path) -> Scenario:
@@ -356,7 +361,7 @@ def load_scenario(name_or_path) -> Scenario:
     p = Path(str(name_or_path))
     if not p.exists():
         b = builtin_scenarios()
-        if str(name_or_path) in b:
+        if str(name_or_path) in b and b[str(name_or_path)].suffix != ".py":
             p = b[str(name_or_path)]
         else:
             raise ScenarioError("no such scenario file or built-in scenario",

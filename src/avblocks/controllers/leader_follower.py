@@ -163,11 +163,17 @@ class LeaderFollower(Block):
     cmd_in : in, (N, 2) — (v, omega) of the roots (followers' rows ignored).
     cmd : out, (N, 2) — (v, omega) of every agent.
     error : out, (N, 2) — ``(l_ref - l, wrap(alpha_ref - alpha))``; 0 for roots.
+    ref : in, (N, 2), only with ``references_input=True`` — ``(l_ref,
+        alpha_ref)`` per agent (roots' rows ignored), direct feedthrough; it
+        replaces the fixed ``l_ref``/``alpha_ref`` (formation switching: wire
+        a :class:`Supervisor` output table of reference arrays here).
 
     Parameters
     ----------
     leader : (N,) int — agent followed by agent i, -1 for roots.
-    l_ref, alpha_ref : float or (N,) — desired distance (m) and angle (rad).
+    l_ref, alpha_ref : float or (N,) — desired distance (m) and angle (rad);
+        ignored with ``references_input=True`` (default 0 there).
+    references_input : bool — read the references from the ``ref`` port.
     d : float > 0 — off-axis distance (m).
     k_l, k_alpha : float or (N,) > 0 — gains (1/s).
     l_min : float > 0 — lower clamp of ``l`` in the ``sin(alpha)/l`` term.
@@ -182,8 +188,8 @@ class LeaderFollower(Block):
     array([1., 1., 1.])
     """
 
-    def __init__(self, leader, l_ref, alpha_ref, *, d=0.1, k_l=1.0, k_alpha=1.0,
-                 l_min=1e-3):
+    def __init__(self, leader, l_ref=None, alpha_ref=None, *, d=0.1, k_l=1.0,
+                 k_alpha=1.0, l_min=1e-3, references_input=False):
         super().__init__()
         name = "LeaderFollower"
         try:
@@ -198,8 +204,16 @@ class LeaderFollower(Block):
         self.n = n = self.leader.shape[0]
         self.depth = tree_levels(self.leader, name)
         self.d = positive_scalar(d, name, "d")
-        self.l_ref = agent_array(l_ref, n, name, "l_ref", nonnegative=True)
-        self.alpha_ref = agent_array(alpha_ref, n, name, "alpha_ref")
+        self.references_input = bool(references_input)
+        if not self.references_input and (l_ref is None or alpha_ref is None):
+            raise ParameterError("l_ref and alpha_ref are needed (or "
+                                 "references_input=True and a 'ref' input)",
+                                 block=name, param="l_ref" if l_ref is None
+                                 else "alpha_ref", found=None)
+        self.l_ref = agent_array(0.0 if l_ref is None else l_ref, n, name, "l_ref",
+                                 nonnegative=True)
+        self.alpha_ref = agent_array(0.0 if alpha_ref is None else alpha_ref, n, name,
+                                     "alpha_ref")
         self.k_l = agent_array(k_l, n, name, "k_l", positive=True)
         self.k_alpha = agent_array(k_alpha, n, name, "k_alpha", positive=True)
         self.l_min = positive_scalar(l_min, name, "l_min")
@@ -219,13 +233,20 @@ class LeaderFollower(Block):
         self.declare_input("pose", (n, 3), unit="m, m, rad")
         self.declare_input("cmd_in", (n, 2), unit="m/s, rad/s", labels=("v", "omega"),
                            doc="roots' commands; followers' rows ignored")
+        if self.references_input:
+            self.declare_input("ref", (n, 2), unit="m, rad", labels=("l_ref", "alpha_ref"),
+                               doc="references (l_ref, alpha_ref); roots' rows ignored")
         self.declare_output("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"))
         self.declare_output("error", (n, 2), unit="m, rad", labels=("l", "alpha"))
 
     def output(self, t, x, u, xp):
         pose, cmd_in = u["pose"], u["cmd_in"]
+        if self.references_input:
+            l_ref, alpha_ref = u["ref"][:, 0], u["ref"][:, 1]
+        else:
+            l_ref, alpha_ref = self.l_ref, self.alpha_ref
         a, m, _, err = leader_follower_terms(
-            pose, pose[self._safe_leader], self.l_ref, self.alpha_ref, self.d,
+            pose, pose[self._safe_leader], l_ref, alpha_ref, self.d,
             self.k_l, self.k_alpha, self.l_min, xp)
         pieces = [cmd_in[self.levels[0]]]
         for k in range(1, len(self.levels)):

@@ -98,7 +98,7 @@ class Unicycle(Block):
 
     def output(self, t, x, u, xp):
         p = x["pose"]
-        y = {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1)}
+        y = {"pose": xp.stack([p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp)], axis=-1)}
         if self.saturation_output:
             lim = xp.stack([self.v_max, self.omega_max], axis=-1)
             y["saturated"] = xp.abs(u["cmd"]) > lim

@@ -28,6 +28,7 @@ import numpy as np
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import agent_array, positive_scalar
+from ..utility.arrays import columns
 
 
 def _per_agent_lists(w) -> bool:
@@ -97,7 +98,7 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     e2 = ex * ex + ey * ey
     k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
     wx, wy = k * ex, k * ey
-    cmd = xp.stack([c * wx + s * wy, (c * wy - s * wx) * (1.0 / d)], axis=-1)
+    cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
     if radius is None:
         return cmd
     return cmd, e2 <= radius * radius

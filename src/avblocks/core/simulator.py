@@ -161,13 +161,17 @@ class Simulator:
         except AvError:
             raise
         except Exception as e:  # noqa: BLE001 - add the block context
-            name = _blame(e, self.compiled)
-            hint = None
-            if isinstance(e, KeyError):
-                hint = ("output() only receives inputs declared with "
-                        "feedthrough=True; derivative() and update() receive all")
-            raise SimulationError(f"{type(e).__name__}: {e}", block=name,
-                                  time=t, hint=hint) from e
+            raise self._wrap(e, t) from e
+
+    def _wrap(self, e, t):
+        """A SimulationError naming the block whose code raised ``e``."""
+        name = _blame(e, self.compiled)
+        hint = None
+        if isinstance(e, KeyError):
+            hint = ("output() only receives inputs declared with "
+                    "feedthrough=True; derivative() and update() receive all")
+        return SimulationError(f"{type(e).__name__}: {e}", block=name, time=t,
+                               hint=hint)
 
     def _check(self, t):
         """Stop at the first non-finite value. Every step checks the float
@@ -191,7 +195,7 @@ class Simulator:
             return
         Y = self.Y
         for i, o in (self._fx if ports is None else ports):
-            if not math.isfinite(np.sum(Y[i][o])):
+            if not math.isfinite(np.asarray(Y[i][o]).sum()):
                 self._blame_nonfinite(t, None)
 
     def _blame_nonfinite(self, t, state):
@@ -216,11 +220,16 @@ class Simulator:
             self.init()
         eng, k, h = self.eng, self.k, self.dt
         t = self.t0 + k * h
-        X = self._guard(eng.update, t, self.X, self.Y, eng.hits(k))
-        X = self._guard(lambda tt, XX: self.solver.step(eng, tt, XX, self.Y, h), t, X)
         t1 = self.t0 + (k + 1) * h
-        self.Y = self._guard(eng.major_outputs, t1, X, self.Y, eng.hits(k + 1))
-        self.X = X
+        try:
+            X = eng.update(t, self.X, self.Y, eng.hits(k))
+            X = self.solver.step(eng, t, X, self.Y, h)
+            Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
+        except AvError:
+            raise
+        except Exception as e:  # noqa: BLE001 - add the block context
+            raise self._wrap(e, t) from e
+        self.X, self.Y = X, Y
         self.k = k + 1
         self._check(t1)
         if self._side:

@@ -1,6 +1,7 @@
 """Utilities: angle wrapping, SE(2) transforms, 3-D rotations, initial poses."""
 
 from .angles import angle_diff, wrap_angle
+from .arrays import columns
 from .poses import random_poses, random_positions
 from .se2 import (
     body_to_world,
@@ -26,7 +27,7 @@ from .se3 import (
 )
 
 __all__ = [
-    "wrap_angle", "angle_diff",
+    "wrap_angle", "angle_diff", "columns",
     "rotate", "se2_compose", "se2_inverse", "se2_relative", "body_to_world",
     "world_to_body", "velocity_body_to_world", "velocity_world_to_body",
     "se2_to_matrix", "se2_from_matrix",

@@ -20,13 +20,14 @@ import numpy as np
 from ..core.block import Block
 from ..core.params import agent_array, poses
 from ..utility.angles import wrap_angle
+from ..utility.arrays import columns
 
 
 def unicycle_rhs(pose, cmd, xp=np):
     """Pose derivative of N unicycles: ``pose`` (N, 3), ``cmd`` (N, 2) -> (N, 3)."""
     th = pose[:, 2]
     v = cmd[:, 0]
-    return xp.stack([v * xp.cos(th), v * xp.sin(th), cmd[:, 1]], axis=-1)
+    return columns(xp, v * xp.cos(th), v * xp.sin(th), cmd[:, 1])
 
 
 def clip_cmd(cmd, v_max, omega_max, xp=np):
@@ -98,7 +99,7 @@ class Unicycle(Block):
 
     def output(self, t, x, u, xp):
         p = x["pose"]
-        y = {"pose": xp.stack([p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp)], axis=-1)}
+        y = {"pose": columns(xp, p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp))}
         if self.saturation_output:
             lim = xp.stack([self.v_max, self.omega_max], axis=-1)
             y["saturated"] = xp.abs(u["cmd"]) > lim

@@ -4,21 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.errors import ParameterError, ShapeError
+from ..core.errors import ShapeError
+from ..core.params import finite_array
 from ..core.ports import Port
 
 
 def bounds(value, block, name):
     """A float array for a bound: NaN refused, +-inf allowed (one-sided)."""
-    try:
-        a = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ParameterError("must be numeric", block=block, param=name,
-                             expected="a number or array of numbers",
-                             found=repr(value)[:80]) from None
-    if np.any(np.isnan(a)):
-        raise ParameterError("must not be NaN", block=block, param=name, found=a)
-    return a
+    return finite_array(value, block, name, allow_inf=True)
 
 
 def broadcast_to_input(param, inp: Port, block, pname, port="u"):

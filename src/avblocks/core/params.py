@@ -22,20 +22,25 @@ def _as_float(value, block, name):
     return a
 
 
-def finite_array(value, block, name, shape=None, *, allow_nan=False):
-    """A float array of exactly ``shape`` (``None``: any), all finite."""
+def finite_array(value, block, name, shape=None, *, allow_nan=False,
+                 allow_inf=False):
+    """A float array of exactly ``shape`` (``None``: any), all finite
+    (``allow_inf``: +-inf accepted, e.g. one-sided bounds; NaN never unless
+    ``allow_nan``)."""
     a = _as_float(value, block, name)
     if shape is not None and a.shape != tuple(shape):
         raise ParameterError("wrong shape", block=block, param=name,
                              expected=tuple(shape), found=a.shape)
-    if not allow_nan and not np.all(np.isfinite(a)):
+    if not allow_nan and np.any(np.isnan(a)):
+        raise ParameterError("must not be NaN", block=block, param=name, found=a)
+    if not allow_inf and not allow_nan and not np.all(np.isfinite(a)):
         raise ParameterError("must be finite (no NaN or inf)", block=block,
                              param=name, found=a)
     return a
 
 
 def agent_array(value, n, block, name, comp=(), *, positive=False,
-                nonnegative=False):
+                nonnegative=False, allow_inf=False):
     """Broadcast a scalar, a per-agent vector or a full array to ``(n, *comp)``.
 
     ``value`` may be a scalar (same for all agents), an array of shape
@@ -50,9 +55,9 @@ def agent_array(value, n, block, name, comp=(), *, positive=False,
         raise ParameterError("wrong shape", block=block, param=name,
                              expected=f"a scalar, {tuple(comp) or '()'} or {full}",
                              found=a.shape)
-    if not np.all(np.isfinite(a)):
-        raise ParameterError("must be finite (no NaN or inf)", block=block,
-                             param=name, found=a)
+    if np.any(np.isnan(a)) or (not allow_inf and not np.all(np.isfinite(a))):
+        raise ParameterError("must be finite (no NaN or inf)" if not allow_inf else
+                             "must not be NaN", block=block, param=name, found=a)
     if positive and not np.all(a > 0):
         raise ParameterError("must be > 0", block=block, param=name,
                              expected="> 0", found=a.min())
@@ -60,6 +65,11 @@ def agent_array(value, n, block, name, comp=(), *, positive=False,
         raise ParameterError("must be >= 0", block=block, param=name,
                              expected=">= 0", found=a.min())
     return a
+
+
+def limit(value, n, block, name, comp=()):
+    """A per-agent limit broadcast to ``(n, *comp)``: ``>= 0``, ``inf`` for none."""
+    return agent_array(value, n, block, name, comp, nonnegative=True, allow_inf=True)
 
 
 def positive_scalar(value, block, name, *, allow_zero=False, allow_inf=False):

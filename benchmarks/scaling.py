@@ -129,7 +129,7 @@ def main():
           "| legacy/euler | RT factor (euler) | ns/agent-step (euler) |")
     print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     for n in ns:
-        def f(kind):
+        def f(kind, n=n):
             w, est = rows[(n, kind)]
             return f"{w:.3g}{'*' if est else ''}"
         e, npy, leg = rows[(n, "euler")][0], rows[(n, "numpy")][0], rows[(n, "legacy")][0]

@@ -178,5 +178,6 @@ class WrongShape(av.Block):
 def test_wrong_output_shape_is_caught_at_start():
     d = av.Diagram()
     d.add(WrongShape(), name="w")
-    with pytest.raises(av.ShapeError, match=r"block 'w', port 'y'.*expected \(3, 2\), found \(3,\)"):
+    with pytest.raises(av.ShapeError,
+                       match=r"block 'w', port 'y'.*expected \(3, 2\), found \(3,\)"):
         av.simulate(d, 1.0)

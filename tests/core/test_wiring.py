@@ -14,7 +14,7 @@ def test_unknown_port():
     d = av.Diagram()
     f = fleet(d)
     with pytest.raises(av.WiringError, match=r"block 'fleet', port 'posee'.*unknown port"):
-        f.posee
+        _ = f.posee
 
 
 def test_output_to_output_and_input_as_source():

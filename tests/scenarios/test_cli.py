@@ -80,16 +80,19 @@ wires = []
 
 @pytest.mark.parametrize("text,match", [
     (GOOD.replace("vehicles.Unicycle", "vehicles.Unicycel"),
-     r"blocks.fleet.type: unknown block type 'vehicles.Unicycel'. did you mean 'vehicles.Unicycle'"),
+     r"blocks.fleet.type: unknown block type 'vehicles.Unicycel'. "
+     r"did you mean 'vehicles.Unicycle'"),
     (GOOD.replace("pose0:", "posee:"), r"blocks.fleet.posee: unknown parameter 'posee'"),
     (GOOD.replace("{zeros: {shape: [$n, 3]}}", "hello"), r"blocks.fleet.*pose0.*numeric"),
     (GOOD.replace("  - [c.y, fleet.cmd]\n", ""), r"fleet.*cmd.*not connected"),
-    (GOOD.replace("[c.y, fleet.cmd]", "[c.y, flet.cmd]"), r"wires\[0\]: wire names unknown block 'flet'"),
+    (GOOD.replace("[c.y, fleet.cmd]", "[c.y, flet.cmd]"),
+     r"wires\[0\]: wire names unknown block 'flet'"),
     (GOOD.replace("$n, 3", "$m, 3"), r"unknown parameter reference '\$m'"),
     (GOOD + "extras: 1\n", r"unknown section"),
     (GOOD.replace("dt: 0.1", "dtt: 0.1"), r"unknown simulation setting"),
     ("blocks: [1, 2", r"cannot parse"),
-    (GOOD.replace("{zeros: {shape: [$n, 3]}}", "{zeros: {shap: [2, 3]}}"), r"bad arguments for 'zeros'"),
+    (GOOD.replace("{zeros: {shape: [$n, 3]}}", "{zeros: {shap: [2, 3]}}"),
+     r"bad arguments for 'zeros'"),
 ])
 def test_bad_scenarios_get_one_clear_error(tmp_path, text, match):
     path = write(tmp_path, text)

@@ -1,8 +1,8 @@
 """The engine: ports, blocks, diagrams, solvers, the simulator and results."""
 
 from . import check, rng
-from .check import check_block
 from .block import CONTINUOUS, Block, Continuous, Periodic
+from .check import check_block
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
                      AlgebraicLoopError,
@@ -19,7 +19,8 @@ from .simulator import Simulator, simulate
 from .solvers import RK4, Euler, Scipy, Solver, make_solver
 
 __all__ = [
-    "rng", "check", "check_block", "Block", "Continuous", "Periodic", "CONTINUOUS", "Diagram", "BlockHandle",
+    "rng", "check", "check_block", "Block", "Continuous", "Periodic", "CONTINUOUS",
+    "Diagram", "BlockHandle",
     "PortRef", "CompiledDiagram", "AvError", "ParameterError", "WiringError",
     "ShapeError", "AlgebraicLoopError", "SimulationError", "ScenarioError", "Port",
     "Results", "Simulator", "simulate", "Solver", "Euler", "RK4", "Scipy",

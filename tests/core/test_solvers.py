@@ -80,3 +80,31 @@ def test_unknown_solver_is_rejected():
     d.add(Oscillator(np.array([[1.0, 0.0]])), name="o")
     with pytest.raises(av.ParameterError, match="unknown solver"):
         av.simulate(d, 1.0, solver="rk5")
+
+
+def test_variable_step_restarts_at_sample_hits_only():
+    # a clock sampled every 0.25 s by a zero-order hold drives an integrator:
+    # x(t) = integral of the staircase floor(t / 0.25) * 0.25, exact
+    d = av.Diagram()
+    clk = d.add(av.blocks.Clock(), name="clk")
+    f = d.add(av.blocks.Function(lambda t, u: u.reshape(1, 1), inputs={"u": ()},
+                                 outputs={"y": (1, 1)}), name="f")
+    zoh = d.add(av.blocks.ZeroOrderHold(0.25), name="zoh")
+    i = d.add(av.blocks.Integrator(np.zeros((1, 1))), name="i")
+    d.connect(clk.y, f.u)
+    d.connect(f.y, zoh.u)
+    d.connect(zoh.y, i.u)
+    solver = av.core.Scipy("RK45", rtol=1e-10, atol=1e-12)
+    res = av.simulate(d, 2.0, dt=0.05, solver=solver, log=[i.y])
+    t = res.t
+    k = np.floor(t / 0.25 + 1e-9)
+    exact = 0.25 * (0.25 * k * (k - 1) / 2) + (t - 0.25 * k) * 0.25 * k
+    assert np.allclose(res[i.y][:, 0, 0], exact, atol=1e-9)
+    # one adaptive solve per 0.25 s segment, not per 0.05 s major step
+    per_step = av.core.Scipy("RK45", rtol=1e-10, atol=1e-12)
+    sim = av.Simulator(d, 0.05, per_step)   # stepping by hand: no span
+    sim.init()
+    for _ in range(40):
+        sim.step()
+    assert np.allclose(sim.value(i.y)[0, 0], exact[-1], atol=1e-9)
+    assert solver.nfev < per_step.nfev

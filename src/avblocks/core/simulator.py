@@ -104,6 +104,13 @@ class Simulator:
                            for nm, p in diagram.blocks[i]._dstates.items()
                            if np.issubdtype(np.dtype(p.dtype), np.inexact)]
         self._side = [i for i, b in enumerate(diagram.blocks) if b.side_effects]
+        # variable-step solvers may integrate across several major steps when
+        # only periodic blocks have discrete states and nothing has side effects
+        self._span = (not self.solver.fixed_step and hasattr(self.solver, "integrate")
+                      and all(self.eng.periodic[i] for i in self.eng.disc)
+                      and not self._side)
+        self.horizon = None     # last step index, set by simulate(); enables spans
+        self._queue = []
         self.k = 0
         self.X = None
         self.Y = None
@@ -125,6 +132,7 @@ class Simulator:
     def init(self):
         """Reset to ``t0``: initial states, initial outputs, side effects."""
         self.k = 0
+        self._queue = []
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
@@ -222,8 +230,18 @@ class Simulator:
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         try:
-            X = eng.update(t, self.X, self.Y, eng.hits(k))
-            X = self.solver.step(eng, t, X, self.Y, h)
+            if self._queue:                  # inside a span: no discrete event
+                X = self._queue.pop()
+            else:
+                X = eng.update(t, self.X, self.Y, eng.hits(k))
+                end = self._span_end(k)
+                if end > k + 1:
+                    times = [self.t0 + j * h for j in range(k + 1, end + 1)]
+                    states = self.solver.integrate(eng, t, X, self.Y, times)
+                    self._queue = states[::-1]
+                    X = self._queue.pop()
+                else:
+                    X = self.solver.step(eng, t, X, self.Y, h)
             Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
         except AvError:
             raise
@@ -234,6 +252,20 @@ class Simulator:
         self._check(t1)
         if self._side:
             self._side_effects()
+
+    def _span_end(self, k):
+        """Last step index up to which one adaptive solve may run from step k:
+        the next periodic sample hit (or the horizon)."""
+        if not self._span or self.horizon is None:
+            return k + 1
+        end = self.horizon
+        eng = self.eng
+        for i, p in enumerate(eng.periodic):
+            if p:
+                off, per = eng.off_k[i], eng.per_k[i]
+                nxt = off if k < off else off + ((k - off) // per + 1) * per
+                end = min(end, nxt)
+        return max(end, k + 1)
 
     def value(self, ref):
         """Current value of an output port (handle or ``"block.port"``)."""
@@ -390,6 +422,7 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
     pace = None if realtime is None else float(realtime)
     overruns, worst = 0, 0.0
     wall0 = _time.perf_counter()
+    sim.horizon = nsteps
     try:
         sim.init()
         record()

@@ -70,9 +70,11 @@ class RK4(Solver):
 class Scipy(Solver):
     """Variable-step integration with :func:`scipy.integrate.solve_ivp`.
 
-    Integrates adaptively inside each major step (restarting at every major
-    step, where discrete states may change) with the given method (``RK45``,
-    ``DOP853``, ``LSODA``, ``Radau``, ``BDF``...) and tolerances.
+    Integrates adaptively with the given method (``RK45``, ``DOP853``,
+    ``LSODA``, ``Radau``, ``BDF``...) and tolerances, restarting where
+    discrete states may change: at every major step when a continuous block
+    has discrete (mode) states, otherwise only at the sample hits of
+    periodic blocks, with the major-step grid as output times in between.
     """
 
     fixed_step = False
@@ -111,6 +113,30 @@ class Scipy(Solver):
             raise SimulationError(f"solve_ivp ({self.method}) failed: {sol.message}",
                                   time=t)
         return eng.unpack(sol.y[:, -1], X)
+
+
+    def integrate(self, eng, t, X, Y, t_evals):
+        """States at each of ``t_evals`` (increasing, after ``t``) in one
+        adaptive solve: used between discrete events, where nothing else can
+        change the derivatives."""
+        from scipy.integrate import solve_ivp
+
+        y0 = eng.pack(X)
+        if y0.size == 0:
+            return [X for _ in t_evals]
+
+        def f(tt, yy):
+            Xs = eng.unpack(yy, X)
+            return eng.pack_derivs(eng.derivs(tt, Xs, eng.minor_outputs(tt, Xs, Y)))
+
+        sol = solve_ivp(f, (t, t_evals[-1]), y0, method=self.method, rtol=self.rtol,
+                        atol=self.atol, max_step=self.max_step, t_eval=t_evals)
+        self.nfev += sol.nfev
+        if not sol.success:
+            from .errors import SimulationError
+            raise SimulationError(f"solve_ivp ({self.method}) failed: {sol.message}",
+                                  time=t)
+        return [eng.unpack(sol.y[:, j], X) for j in range(sol.y.shape[1])]
 
 
 _BY_NAME = {"euler": Euler, "rk4": RK4}

@@ -199,7 +199,7 @@ class Scenario:
             return {k: self._value(x, f"{where}.{k}") for k, x in v.items()}
         return v
 
-    def with_overrides(self, overrides: dict) -> "Scenario":
+    def with_overrides(self, overrides: dict) -> Scenario:
         """A copy with ``--set`` values applied: parameter names, or
         ``simulation.<key>``."""
         import copy

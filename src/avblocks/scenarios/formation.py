@@ -1,0 +1,124 @@
+"""Formation switching through a corridor (AVLib paper, case study IV.D): a
+leader drives through waypoints, followers keep a wedge by leader
+following, and a supervisor switches the formation to a column before a
+corridor between two walls and back to the wedge after it.
+
+Set-up
+------
+``followers + 1`` unicycles. Agent 0, the leader, runs
+``controllers.PointToPoint`` through :data:`WAYPOINTS` (only its row of the
+command is used); the others run ``controllers.LeaderFollower`` with
+``references_input=True`` on the leader tree of the wedge (each follower
+tracks the nearest agent ahead of it). A ``controllers.Supervisor`` with
+states ``wedge`` and ``column`` watches the leader's x position:
+
+- ``wedge -> column`` when ``X_SWITCH_IN <= x_leader < CORRIDOR[1]``
+  (the column forms before the corridor entrance at ``CORRIDOR[0]``);
+- ``column -> wedge`` when ``x_leader >= X_SWITCH_OUT`` (the whole column
+  has left the corridor);
+
+and outputs ``ref`` (N, 2), the precomputed ``(l_ref, alpha_ref)`` of the
+current formation (``controllers.references`` of each shape on the same
+leader tree), wired to the followers' ``ref`` input. The corridor's walls
+are two ``environment.World`` rectangles (:data:`WORLD`);
+``environment.Collision`` (disc footprints of radius ``body_radius``)
+reports ``hit_obstacle`` and ``hit_agent``.
+
+Logged: ``fleet.pose``, ``lf.error`` ((l, alpha) errors, 0 for the leader),
+``supervisor.mode`` (0 wedge, 1 column), ``collision.hit_obstacle``,
+``collision.hit_agent``. A movie with the walls drawn:
+``save_movie(res, "formation.mp4", obstacles=WORLD.geoms, trail=8.0)``
+(:data:`MOVIE`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from avblocks.blocks import RateLimiter
+from avblocks.controllers import (
+    LeaderFollower,
+    PointToPoint,
+    Supervisor,
+    formation_offsets,
+    leader_tree,
+    references,
+)
+from avblocks.core.diagram import Diagram
+from avblocks.environment import Collision, Disc, World, rectangle
+from avblocks.vehicles import Unicycle
+
+#: Corridor: x from CORRIDOR[0] to CORRIDOR[1], free width CORRIDOR[2] around y = 0.
+CORRIDOR = (24.0, 32.0, 2.0)
+#: Leader waypoints (x, y).
+WAYPOINTS = np.array([[12.0, 0.0], [42.0, 0.0], [48.0, 1.0], [53.0, 3.0], [58.0, 6.0]])
+#: The two walls of the corridor.
+WORLD = World([rectangle(CORRIDOR[0], CORRIDOR[2] / 2, CORRIDOR[1], CORRIDOR[2] / 2 + 4.0),
+               rectangle(CORRIDOR[0], -CORRIDOR[2] / 2 - 4.0, CORRIDOR[1], -CORRIDOR[2] / 2)])
+#: Options for ``viz.save_movie`` (``avblocks run formation --movie f.mp4``).
+MOVIE = {"obstacles": WORLD.geoms, "trail": 8.0}
+STATES = ("wedge", "column")
+
+
+def formation_references(n, spacing, d, tree="star"):
+    """``leader`` (N,) and the references ``{state: (N, 2)}`` of both shapes
+    on the wedge's leader tree."""
+    leader = leader_tree(formation_offsets("wedge", n, spacing), tree)
+    refs = {s: np.column_stack(references(formation_offsets(s, n, spacing), leader, d))
+            for s in STATES}
+    return leader, refs
+
+
+def switch_points(n, spacing, lead_in=10.0, margin=2.0):
+    """Leader x positions where the supervisor switches in and out."""
+    x_in = CORRIDOR[0] - lead_in
+    x_out = CORRIDOR[1] + (n - 1) * spacing + margin
+    return x_in, x_out
+
+
+def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radius=0.25,
+                 ref_rate=(0.3, 0.15), offset=0.6, seed=1, t_final=100.0, dt=0.02,
+                 log_every=5, tree="star"):
+    """The formation-switching diagram and its simulation settings."""
+    n = int(followers) + 1
+    spacing = float(spacing)
+    leader, refs = formation_references(n, spacing, float(d), tree)
+    x_in, x_out = switch_points(n, spacing)
+    rng = np.random.default_rng([int(seed), 5])
+    start = formation_offsets("wedge", n, spacing) + rng.uniform(-offset, offset, (n, 2))
+    start[0] = 0.0
+    pose0 = np.column_stack([start, rng.uniform(-0.3, 0.3, n)])
+    pose0[0, 2] = 0.0
+
+    dg = Diagram("formation")
+    fleet = dg.add(Unicycle(pose0=pose0), name="fleet")
+    drive = dg.add(PointToPoint(WAYPOINTS, n=n, d=float(d), gain=1.0, v_max=float(speed),
+                                radius=0.3), name="drive")
+    lf = dg.add(LeaderFollower(leader, d=float(d), k_l=float(gain), k_alpha=float(gain),
+                               references_input=True), name="lf")
+    sup = dg.add(Supervisor(
+        list(STATES),
+        [("wedge", "column",
+          lambda u, xp: (u["pose"][0, 0] >= x_in) & (u["pose"][0, 0] < x_out)),
+         ("column", "wedge", lambda u, xp: u["pose"][0, 0] >= x_out)],
+        initial="wedge", inputs={"pose": (n, 3)}, outputs={"ref": refs}),
+        name="supervisor")
+    col = dg.add(Collision(WORLD, n, footprint=Disc(float(body_radius)), period=float(dt)),
+                 name="collision")
+    dg.connect(fleet.pose, drive.pose)
+    dg.connect(fleet.pose, lf.pose)
+    dg.connect(drive.cmd, lf.cmd_in)
+    dg.connect(lf.cmd, fleet.cmd)
+    dg.connect(fleet.pose, sup.pose)
+    if ref_rate is not None:
+        morph = dg.add(RateLimiter(np.asarray(ref_rate, float), initial=refs["wedge"]),
+                       name="morph")
+        dg.connect(sup.ref, morph.u)
+        dg.connect(morph.y, lf.ref)
+    else:
+        dg.connect(sup.ref, lf.ref)
+    dg.connect(fleet.pose, col.pose)
+    sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4",
+           "log": [fleet.pose, lf.error, sup.mode, col.hit_obstacle, col.hit_agent],
+           "log_every": int(log_every), "seed": int(seed)}
+    return dg, sim

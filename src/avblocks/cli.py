@@ -34,13 +34,53 @@ def _parse_sets(items):
     return out
 
 
-def _load_python(path: Path, overrides):
-    """A Python file defines ``make_diagram(**params)`` (returning a Diagram or
-    ``(Diagram, simulate_kwargs)``) or a module-level ``diagram`` (and an
-    optional ``simulation`` dict)."""
-    import runpy
-
+def _from_namespace(ns, overrides, source):
+    """(diagram, simulate kwargs, movie options) from a scenario module's
+    names: ``make_diagram(**params)`` (returning a Diagram or ``(Diagram,
+    simulate_kwargs)``) or ``diagram``, optional ``simulation`` and ``MOVIE``
+    dicts. ``--set simulation.<key>=...`` goes to the simulate arguments."""
     from .core.diagram import Diagram
+    sim = dict(ns.get("simulation") or {})
+    sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
+                if k.startswith("simulation.")}
+    params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
+    if "make_diagram" in ns:
+        import inspect
+        sig = inspect.signature(ns["make_diagram"])
+        takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
+        unknown = [k for k in params if k not in sig.parameters and not takes_any]
+        if unknown:
+            raise ScenarioError(f"unknown parameter(s) {unknown}", file=source,
+                                entry="--set",
+                                hint=f"this scenario's parameters: {list(sig.parameters)} "
+                                     "(or simulation.t_final, simulation.dt, ...)")
+        try:
+            out = ns["make_diagram"](**params)
+        except AvError as e:
+            raise ScenarioError(str(e), file=source, entry="--set") from None
+        if isinstance(out, tuple):
+            d, extra = out
+            sim.update(extra)
+        else:
+            d = out
+    elif "diagram" in ns:
+        if params:
+            raise ScenarioError("this file defines `diagram`, so it takes no --set; "
+                                "define make_diagram(**params) instead", file=source)
+        d = ns["diagram"]
+    else:
+        raise ScenarioError("a Python scenario must define make_diagram(**params) or "
+                            "a variable `diagram`", file=source)
+    if not isinstance(d, Diagram):
+        raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
+                            file=source, hint=f"found {type(d).__name__}")
+    sim.update(sim_over)
+    return d, sim, dict(ns.get("MOVIE") or {})
+
+
+def _load_python(path: Path, overrides):
+    """Run a user's Python scenario file (it may import anything it likes)."""
+    import runpy
     try:
         ns = runpy.run_path(str(path), run_name="avblocks_scenario")
     except AvError:
@@ -48,50 +88,32 @@ def _load_python(path: Path, overrides):
     except Exception as e:  # noqa: BLE001 - the user's file failed
         raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
                             file=str(path)) from e
-    sim = dict(ns.get("simulation") or {})
-    if "make_diagram" in ns:
-        try:
-            out = ns["make_diagram"](**overrides)
-        except TypeError as e:
-            raise ScenarioError(f"make_diagram(): {e}", file=str(path),
-                                entry="--set") from None
-        if isinstance(out, tuple):
-            d, extra = out
-            sim.update(extra)
-        else:
-            d = out
-    elif "diagram" in ns:
-        if overrides:
-            raise ScenarioError("this file defines `diagram`, so it takes no --set; "
-                                "define make_diagram(**params) instead", file=str(path))
-        d = ns["diagram"]
-    else:
-        raise ScenarioError("a Python scenario must define make_diagram(**params) or "
-                            "a variable `diagram`", file=str(path))
-    if not isinstance(d, Diagram):
-        raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
-                            file=str(path), hint=f"found {type(d).__name__}")
-    name = path.stem
-    return d, sim, name
+    d, sim, movie = _from_namespace(ns, overrides, str(path))
+    return d, sim, path.stem, movie
 
 
 def load_any(target, overrides):
-    """(diagram, simulate kwargs, name) from a built-in name, YAML/TOML or .py."""
+    """(diagram, simulate kwargs, name, movie options) from a built-in name,
+    a YAML/TOML file or a .py file."""
+    import importlib
+
     from .scenarios import builtin_scenarios, load_scenario
     p = Path(target)
     builtin = builtin_scenarios()
-    if not p.exists() and target in builtin and builtin[target].suffix == ".py":
-        p = builtin[target]
+    if not p.is_file() and target in builtin and builtin[target].suffix == ".py":
+        mod = importlib.import_module(f"avblocks.scenarios.{target}")
+        d, sim, movie = _from_namespace(vars(mod), overrides, target)
+        return d, sim, target, movie
     if p.suffix == ".py":
-        if not p.exists():
+        if not p.is_file():
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build()
-    return d, sim, sc.name
+    return d, sim, sc.name, dict(sc.data.get("movie") or {})
 
 
-def _trajectory_png(res, path):
+def _trajectory_png(res, path, options=None):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -99,31 +121,34 @@ def _trajectory_png(res, path):
         from .viz import plot_trajectories
     except ImportError:
         plot_trajectories = None
+    options = options or {}
     poses = [k for k in res.keys() if k.endswith(".pose") or k.endswith(".position")]
+    if options.get("pose") in res:
+        poses.insert(0, options["pose"])
     if not poses:
         return None
     fig, ax = plt.subplots(figsize=(6.5, 6))
     if plot_trajectories is not None:
-        plot_trajectories(res, pose=poses[0], ax=ax)
+        plot_trajectories(res, pose=poses[0], ax=ax, obstacles=options.get("obstacles"))
     else:  # pragma: no cover - viz is part of the package
         P = res[poses[0]]
         ax.plot(P[:, :, 0], P[:, :, 1], lw=0.8)
         ax.set_aspect("equal")
-    ax.set_title(f"{poses[0]}: {P_shape(res[poses[0]])}, t = 0..{res.t[-1]:g} s")
+    ax.set_title(f"{poses[0]}: {_agents_label(res[poses[0]])}, t = 0..{res.t[-1]:g} s")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
-def P_shape(a):
+def _agents_label(a):
     return f"{a.shape[1]} agents" if a.ndim >= 2 else ""
 
 
 def cmd_run(args):
     from .core.simulator import simulate
     overrides = _parse_sets(args.set)
-    d, sim, name = load_any(args.target, overrides)
+    d, sim, name, movie = load_any(args.target, overrides)
     if args.realtime is not None:
         sim["realtime"] = args.realtime
     if args.t_final is not None:
@@ -144,12 +169,12 @@ def cmd_run(args):
     files = []
     if res is not None and len(res.t):
         files.append(res.save(out / "results.nc"))
-        png = _trajectory_png(res, out / "trajectories.png")
+        png = _trajectory_png(res, out / "trajectories.png", movie)
         if png:
             files.append(png)
         if args.movie:
             from .viz import save_movie
-            files.append(Path(save_movie(res, args.movie)))
+            files.append(Path(save_movie(res, args.movie, **movie)))
     summary = {
         "scenario": name,
         "agents": res.meta.get("agents") if res is not None else None,
@@ -203,7 +228,7 @@ def cmd_list(args):
 
 def cmd_diagram(args):
     from .viz.diagram import draw_diagram
-    d, _sim, name = load_any(args.target, _parse_sets(args.set))
+    d, _sim, name, _movie = load_any(args.target, _parse_sets(args.set))
     out = args.output or f"{name}-diagram.svg"
     path = draw_diagram(d, out)
     print(f"wrote {path}")

@@ -145,3 +145,20 @@ def test_version_and_list(capsys):
     assert "waypoints" in capsys.readouterr().out
     assert main(["list", "--blocks"]) == 0
     assert "vehicles.Unicycle" in capsys.readouterr().out
+
+
+def test_builtin_python_scenario_with_simulation_override_and_movie(tmp_path, monkeypatch):
+    pytest.importorskip("imageio_ffmpeg")
+    (tmp_path / "formation").mkdir()          # a folder named like the scenario
+    monkeypatch.chdir(tmp_path)
+    rc = main(["run", "formation", "--set", "simulation.t_final=3", "--set", "followers=2",
+               "--out", "o", "--movie", "o/f.gif", "--quiet"])
+    assert rc == 0
+    res = av.Results.load(tmp_path / "o" / "results.nc")
+    assert res.t[-1] == pytest.approx(3.0)
+    assert res["fleet.pose"].shape[1] == 3
+    from PIL import Image
+    assert Image.open(tmp_path / "o" / "f.gif").n_frames > 5
+    with pytest.raises(av.ScenarioError, match="unknown parameter"):
+        from avblocks.cli import load_any
+        load_any("formation", {"folowers": 2})

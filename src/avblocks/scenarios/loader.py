@@ -18,6 +18,7 @@ A scenario file has five sections::
       - [fleet.pose, drive.pose]
       - [drive.cmd, fleet.cmd]
     simulation: {t_final: 60, dt: 0.01, solver: rk4, log: [fleet.pose], seed: $seed}
+    movie: {trail: 5.0}    # optional: options for `avblocks run ... --movie`
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), or a one-key mapping naming one of
@@ -38,7 +39,7 @@ from ..core.errors import AvError, ScenarioError
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "plot"}
+             "movie"}
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 
 
@@ -233,6 +234,9 @@ class Scenario:
         if unknown:
             raise ScenarioError(f"unknown section(s) {sorted(unknown)}", file=self.source,
                                 hint=f"sections are {sorted(_SECTIONS)}")
+        if not isinstance(d.get("movie") or {}, dict):
+            raise ScenarioError("'movie' must be a mapping of movie options",
+                                file=self.source, entry="movie")
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")

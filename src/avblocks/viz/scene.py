@@ -84,6 +84,8 @@ def _geoms(obstacles):
         return []
     if hasattr(obstacles, "obstacles"):
         return _geoms(obstacles.obstacles)
+    if hasattr(obstacles, "geoms") and not hasattr(obstacles, "geom_type"):
+        return _geoms(list(obstacles.geoms))       # an environment.World
     if hasattr(obstacles, "geom_type"):
         if hasattr(obstacles, "geoms"):
             return [g for sub in obstacles.geoms for g in _geoms(sub)]

@@ -17,6 +17,13 @@ class Integrator(Block):
     State
     -----
     x : continuous, shape of ``x0``
+
+    Parameters
+    ----------
+    x0 : array_like
+        Initial value; fixes the shapes.
+    agents : bool
+        Whether the first axis of ``x0`` counts agents.
     """
 
     def __init__(self, x0, *, agents=True):

@@ -36,6 +36,9 @@ class UnitDelay(Block):
         Sample period (seconds).
     offset : float
         First hit, in ``[0, period)``.
+    dtype : str, optional
+        Dtype of the signal (default: that of ``initial``; bool and int
+        signals stay as they are).
 
     Equations
     ---------

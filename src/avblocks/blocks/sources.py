@@ -25,6 +25,8 @@ class Constant(Block):
         The value (its first axis is the agent axis when ``agents`` is true).
     agents : bool
         Whether the first axis of ``value`` counts agents.
+    unit : str
+        Unit of the signal, for plots and files.
     """
 
     def __init__(self, value, *, agents=True, unit=""):
@@ -63,6 +65,15 @@ class Step(Block):
     -----
     y : out, shape of ``after``
 
+    Parameters
+    ----------
+    time : float
+        Step time (s).
+    before, after : array_like
+        Values before and from the step on (``before`` broadcast to ``after``).
+    agents : bool
+        Whether the first axis counts agents.
+
     Equations
     ---------
     y(t) = before + (after - before) * [t >= time]
@@ -88,6 +99,13 @@ class Sine(Block):
     Ports
     -----
     y : out, broadcast shape of the parameters
+
+    Parameters
+    ----------
+    amplitude, frequency (Hz), phase (rad), bias : array_like
+        Broadcast against each other (per agent, per component).
+    agents : bool
+        Whether the first axis counts agents.
     """
 
     def __init__(self, amplitude=1.0, frequency=1.0, phase=0.0, bias=0.0, *,

@@ -279,7 +279,21 @@ class Gossip(Block):
 
 
 class Broadcast(Gossip):
-    """:class:`Gossip` that also spreads a value (``value_dim`` defaults to 1)."""
+    """:class:`Gossip` that also spreads a value (``value_dim`` defaults to 1).
+
+    Ports
+    -----
+    As :class:`Gossip` with ``value_dim`` set: ``flag`` (N,) bool and
+    ``value`` (N, value_dim) in; ``informed`` (N,) bool and ``value``
+    (N, value_dim) out.
+
+    Parameters
+    ----------
+    n, radius, value_dim
+        As :class:`Gossip`.
+    kw
+        Any other keyword of :class:`Gossip` (loss, period, input...).
+    """
 
     def __init__(self, n, *, radius, value_dim=1, **kw):
         super().__init__(n, radius=radius, value_dim=value_dim, **kw)

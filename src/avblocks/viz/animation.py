@@ -224,6 +224,19 @@ def animate(results, pose=None, **options) -> Animation:
     return Animation(results, pose, **options)
 
 
+def _check_options(options, target, block):
+    """Unknown drawing options fail at construction, not at the first frame."""
+    import inspect
+
+    from ..core.errors import ParameterError
+    known = set(inspect.signature(target).parameters)
+    bad = sorted(set(options) - known)
+    if bad:
+        raise TypeError(str(ParameterError(
+            f"unknown option(s) {bad}", block=block,
+            expected=f"one of {sorted(known - {'self', 'n'})}")))
+
+
 def save_movie(results, path, pose=None, fps=None, every=1, *, progress=None,
                **options) -> Path:
     """Write a movie of a run to ``path`` (``.mp4`` or ``.gif``).
@@ -274,6 +287,8 @@ class Animation2D(_Frames, Block):
     keep_frames : bool, optional
         Keep rendered frames in memory (default: when offscreen without a
         movie file).
+    progress : bool, optional
+        Progress bar while the movie file is encoded (default: on a terminal).
     extent, world, obstacles, **scene_options
         As for :func:`animate`; without ``extent`` the view fits the first
         poses and the obstacles and grows when agents leave it.
@@ -307,6 +322,7 @@ class Animation2D(_Frames, Block):
         self.keep_frames = keep_frames
         self.extent = extent
         self.obstacles = obstacles if obstacles is not None else world
+        _check_options(scene_options, Scene2D, "Animation2D")
         self.scene_options = scene_options
         self.declare_input("pose", (self.n, 3), unit="m, m, rad", feedthrough=False)
         self.inputs_used = ["pose"]

@@ -253,6 +253,8 @@ class Scope(Block):
         self.path = path
         self.live = live
         self.refresh = max(1, int(refresh))
+        from .animation import _check_options
+        _check_options(plot_options, plot_signals, "Scope")
         self.plot_options = plot_options
         self._t, self._data = [], {nm: [] for nm in self.names}
         self.fig = None

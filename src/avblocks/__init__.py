@@ -18,7 +18,7 @@ from .core.errors import (
 
 __version__ = "0.1.0"
 
-_LAZY = ("viz", "scenarios", "interfaces")
+_LAZY = ("viz", "scenarios")
 
 
 def __getattr__(name):

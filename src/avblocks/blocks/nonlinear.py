@@ -28,7 +28,23 @@ def _ordered(lower, upper, block):
     return lo, hi
 
 
-class Saturation(Block):
+class _Bounded(Block):
+    """Shared set-up of the elementwise blocks with a ``[lower, upper]`` band:
+    one input ``u``, one output ``y`` of the same shape."""
+
+    def __init__(self, lower, upper):
+        super().__init__()
+        self.lower, self.upper = _ordered(lower, upper, type(self).__name__)
+        self.declare_input("u")
+        self.declare_output("y")
+
+    def configure(self, inputs):
+        for p in ("lower", "upper"):
+            broadcast_to_input(getattr(self, p), inputs["u"], type(self).__name__, p)
+        set_output(self, "y", inputs["u"].shape, "float64", inputs["u"].agents)
+
+
+class Saturation(_Bounded):
     """Clip a signal to ``[lower, upper]``.
 
     Ports
@@ -54,21 +70,13 @@ class Saturation(Block):
     """
 
     def __init__(self, lower=-1.0, upper=1.0):
-        super().__init__()
-        self.lower, self.upper = _ordered(lower, upper, "Saturation")
-        self.declare_input("u")
-        self.declare_output("y")
-
-    def configure(self, inputs):
-        for p in ("lower", "upper"):
-            broadcast_to_input(getattr(self, p), inputs["u"], "Saturation", p)
-        set_output(self, "y", inputs["u"].shape, "float64", inputs["u"].agents)
+        super().__init__(lower, upper)
 
     def output(self, t, x, u, xp):
         return {"y": xp.clip(u["u"], self.lower, self.upper)}
 
 
-class DeadZone(Block):
+class DeadZone(_Bounded):
     """Zero output inside ``[lower, upper]``, shifted input outside it.
 
     Ports
@@ -94,15 +102,7 @@ class DeadZone(Block):
     """
 
     def __init__(self, lower=-0.5, upper=0.5):
-        super().__init__()
-        self.lower, self.upper = _ordered(lower, upper, "DeadZone")
-        self.declare_input("u")
-        self.declare_output("y")
-
-    def configure(self, inputs):
-        for p in ("lower", "upper"):
-            broadcast_to_input(getattr(self, p), inputs["u"], "DeadZone", p)
-        set_output(self, "y", inputs["u"].shape, "float64", inputs["u"].agents)
+        super().__init__(lower, upper)
 
     def output(self, t, x, u, xp):
         v = u["u"]

@@ -91,3 +91,35 @@ def test_periodic_output_held_between_hits_while_input_moves():
     res = av.simulate(d, 1.0, dt=0.05, log=[h.y])
     expect = np.floor(res.t / 0.25 + 1e-9) * 0.25
     assert np.allclose(res[h.y][:, 0, 0], expect)
+
+
+def test_inherited_sample_time_follows_the_drivers():
+    d = av.Diagram()
+    c = d.add(av.blocks.Clock(), name="c")
+    f = d.add(av.blocks.Function(lambda t, u: u.reshape(1, 1), inputs={"u": ()},
+                                 outputs={"y": (1, 1)}), name="f")
+    z = d.add(av.blocks.ZeroOrderHold(0.25), name="z")
+    g = d.add(av.blocks.Gain(2.0), name="g")          # after a ZOH: discrete
+    g2 = d.add(av.blocks.Gain(3.0), name="g2")        # after g: discrete too
+    h = d.add(av.blocks.Gain(1.0), name="h")          # after the clock: continuous
+    d.connect(c.y, f.u)
+    d.connect(f.y, z.u)
+    d.connect(z.y, g.u)
+    d.connect(g.y, g2.u)
+    d.connect(f.y, h.u)
+    d.build()
+    assert g.block.sample_time == av.Periodic(0.25)
+    assert g2.block.sample_time == av.Periodic(0.25)
+    assert h.block.sample_time == av.Continuous()
+    res = av.simulate(d, 1.0, dt=0.05, log=[g2.y, h.y])
+    assert np.allclose(res[g2.y][:, 0, 0], 6 * np.floor(res.t / 0.25 + 1e-9) * 0.25)
+    assert np.allclose(res[h.y][:, 0, 0], res.t)
+    # mixed rates: continuous
+    d2 = av.Diagram()
+    a = d2.add(Sampler(0.1), name="a")
+    b = d2.add(Sampler(0.25), name="b")
+    s = d2.add(av.blocks.Sum("+-"), name="s")
+    d2.connect(a.y, s.u0)
+    d2.connect(b.y, s.u1)
+    d2.build()
+    assert s.block.sample_time == av.Continuous()

@@ -23,6 +23,7 @@ class Gain(Block):
 
     def __init__(self, k=1.0):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self.k = finite_array(k, "Gain", "k")
         self.declare_input("u")
         self.declare_output("y")
@@ -57,6 +58,7 @@ class Sum(Block):
 
     def __init__(self, signs="++"):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         if not signs or any(c not in "+-" for c in signs):
             raise ParameterError("signs must be a string of '+' and '-'",
                                  block="Sum", param="signs", found=signs)
@@ -91,6 +93,7 @@ class Product(Block):
 
     def __init__(self, ops="**"):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         if not ops or any(c not in "*/" for c in ops):
             raise ParameterError("ops must be a string of '*' and '/'",
                                  block="Product", param="ops", found=ops)

@@ -34,6 +34,7 @@ class _Bounded(Block):
 
     def __init__(self, lower, upper):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self.lower, self.upper = _ordered(lower, upper, type(self).__name__)
         self.declare_input("u")
         self.declare_output("y")

@@ -79,6 +79,7 @@ class Select(Block):
 
     def __init__(self, indices):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self._given = _index_array(indices, "Select", "indices")
         self.indices = self._given
         self.declare_input("u")
@@ -124,6 +125,7 @@ class Gather(Block):
 
     def __init__(self, index=None, *, m=None):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self.dynamic = index is None
         if self.dynamic:
             self._given = None
@@ -208,6 +210,7 @@ class Concatenate(Block):
 
     def __init__(self, inputs=2):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self.names = _port_names(inputs, "Concatenate", "inputs", "u")
         for nm in self.names:
             self.declare_input(nm)
@@ -273,6 +276,7 @@ class Mux(Block):
 
     def __init__(self, inputs=2):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         self.names = _port_names(inputs, "Mux", "inputs", "u")
         self._expand = [False] * len(self.names)
         for nm in self.names:
@@ -328,6 +332,7 @@ class Demux(Block):
 
     def __init__(self, sizes=2, names=None):
         super().__init__()
+        self.declare_inherited()   # sample time of its drivers
         if isinstance(sizes, (int, np.integer)) and not isinstance(sizes, bool):
             if sizes < 1:
                 raise ParameterError("need at least one output", block="Demux",

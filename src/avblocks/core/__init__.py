@@ -1,7 +1,7 @@
 """The engine: ports, blocks, diagrams, solvers, the simulator and results."""
 
 from . import check, rng
-from .block import CONTINUOUS, Block, Continuous, Periodic
+from .block import CONTINUOUS, INHERITED, Block, Continuous, Inherited, Periodic
 from .check import check_block
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
@@ -19,7 +19,8 @@ from .simulator import Simulator, simulate
 from .solvers import RK4, Euler, Scipy, Solver, make_solver
 
 __all__ = [
-    "rng", "check", "check_block", "Block", "Continuous", "Periodic", "CONTINUOUS",
+    "rng", "check", "check_block", "Block", "Continuous", "Periodic", "Inherited",
+    "CONTINUOUS", "INHERITED",
     "Diagram", "BlockHandle",
     "PortRef", "CompiledDiagram", "AvError", "ParameterError", "WiringError",
     "ShapeError", "AlgebraicLoopError", "SimulationError", "ScenarioError", "Port",

@@ -81,7 +81,20 @@ class Periodic:
                                  found=self.offset)
 
 
+@dataclass(frozen=True)
+class Inherited:
+    """Sample time taken from the blocks that drive this one, when the
+    diagram is built: ``Periodic(p, o)`` if every driver is periodic with the
+    same ``(p, o)``, else continuous. For stateless elementwise blocks (gains,
+    sums, saturations, routing) placed after a discrete block: they then
+    compute once per hit instead of at every solver stage."""
+
+    def __repr__(self):
+        return "Inherited()"
+
+
 CONTINUOUS = Continuous()
+INHERITED = Inherited()
 
 
 class Block:
@@ -189,6 +202,10 @@ class Block:
     def declare_periodic(self, period, offset=0.0):
         """Make the block discrete with sample hits at ``offset + k*period``."""
         self.sample_time = Periodic(float(period), float(offset))
+
+    def declare_inherited(self):
+        """Take the sample time of the driving blocks (see :class:`Inherited`)."""
+        self.sample_time = INHERITED
 
     # ------------------------------------------------------------ introspection
     @property

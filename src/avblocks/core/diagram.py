@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .block import Block, Periodic
+from .block import CONTINUOUS, Block, Inherited, Periodic
 from .errors import AlgebraicLoopError, ParameterError, ShapeError, WiringError
 from .ports import Port, check_compatible
 
@@ -275,6 +275,7 @@ class CompiledDiagram:
                                            f"{names[i].rsplit('.', 1)[-1]}.{inp})")
         order = _sort(names, blocks, srcs)
         _resolve_shapes(names, blocks, srcs)
+        _resolve_sample_times(blocks, srcs, order)
         remap = {old: new for new, old in enumerate(order)}
         self.names = [names[i] for i in order]
         self.blocks = [blocks[i] for i in order]
@@ -421,6 +422,25 @@ def _resolve_shapes(names, blocks, srcs):
         for inp, (s, o) in srcs[i].items():
             check_compatible(_outputs_of(blocks[s])[o], _inputs_of(b)[inp],
                              src_name=f"{names[s]}.{o}", dst_name=f"{names[i]}.{inp}")
+
+
+def _resolve_sample_times(blocks, srcs, order):
+    """Give each block declared :class:`Inherited` its drivers' sample time,
+    in evaluation order (so chains of inherited blocks resolve too). A block
+    remembers it was inherited, so a later build resolves it afresh."""
+    for b in blocks:
+        if isinstance(b.sample_time, Inherited) or getattr(b, "_inherits", False):
+            b._inherits = True
+            b.sample_time = Inherited()
+    for i in order:
+        b = blocks[i]
+        if not getattr(b, "_inherits", False):
+            continue
+        times = {blocks[s].sample_time for (s, _o) in srcs[i].values()}
+        if len(times) == 1 and isinstance(next(iter(times)), Periodic) and not b._cstates:
+            b.sample_time = next(iter(times))
+        else:
+            b.sample_time = CONTINUOUS
 
 
 def _sort(names, blocks, srcs) -> list[int]:

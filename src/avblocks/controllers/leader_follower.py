@@ -51,8 +51,8 @@ bounded as ``l -> 0`` and is used as printed.
 **Leader velocities.** ``(v_0, omega_0)`` are the leader's *commanded*
 velocities (exact for first-order unicycles without saturation).
 
-Reference: Miklic et al., "A modular control architecture for multi-vehicle
-systems" (AVLib), Section III.B, eqs. (2)-(5); A. K. Das et al., "A
+Reference: "AVLib: A Simulink Library for Multi-Agent Systems Research"
+(the AVLib paper), Section III.B, eqs. (2)-(5); A. K. Das et al., "A
 vision-based formation control framework", IEEE TRA 18(5), 2002 (l-psi
 control).
 """

@@ -8,8 +8,8 @@ Equations
 
 with (v, omega) optionally clipped to ``|v| <= v_max``, ``|omega| <= omega_max``.
 
-Reference: Miklic et al., "A modular control architecture for multi-vehicle
-systems" (AVLib), Section III.A, eq. (1); Siegwart & Nourbakhsh,
+Reference: "AVLib: A Simulink Library for Multi-Agent Systems Research"
+(the AVLib paper), Section III.A, eq. (1); Siegwart & Nourbakhsh,
 *Introduction to Autonomous Mobile Robots*, ch. 3.
 """
 

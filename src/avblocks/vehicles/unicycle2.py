@@ -11,8 +11,8 @@ Equations
 with (f, tau) optionally clipped to ``|f| <= f_max``, ``|tau| <= tau_max``
 and linear damping ``b_v``, ``b_omega >= 0`` (default 0: the paper's model).
 
-Reference: Miklic et al., "A modular control architecture for multi-vehicle
-systems" (AVLib), Section III.A (second-order unicycle); the damping terms
+Reference: "AVLib: A Simulink Library for Multi-Agent Systems Research"
+(the AVLib paper), Section III.A (second-order unicycle); the damping terms
 are the usual viscous friction of e.g. Siciliano & Khatib (eds.), *Springer
 Handbook of Robotics*, ch. 49 (wheeled robots).
 """

@@ -16,9 +16,9 @@ an invertible map for d != 0. Commanding ``dp/dt = w`` with
 and p converges exponentially to g with rate K (until the saturation).
 
 Reference: AVLib paper, Section III.B (point-to-point by feedback
-linearization); J. Cortes, *Distributed control of robotic networks*
-(2009) and Lawton, Beard & Young (2003), "A decentralized approach to
-formation maneuvers", IEEE TRA 19(6) for the off-axis point.
+linearization); Lawton, Beard & Young (2003), "A decentralized approach to
+formation maneuvers", IEEE Trans. Robotics and Automation 19(6), for the
+off-axis point.
 """
 
 from __future__ import annotations

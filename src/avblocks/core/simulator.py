@@ -16,8 +16,15 @@ With major step ``h`` and ``t_k = t0 + k h``, the simulator does::
                of continuous blocks; periodic blocks hold theirs.
         3. Y <- outputs at t_k+1 in sorted order; a periodic block recomputes
                its outputs only at a hit and holds them otherwise.
-        4. check X and Y are finite; side effects (on_major_step) at t_k+1;
-           log every ``log_every`` steps; pace to the wall clock.
+        4. check the float states are finite (if not, blame the first
+           non-finite output in evaluation order, else the state); side
+           effects (on_major_step) at t_k+1; log every ``log_every`` steps
+           (logged outputs are checked too); pace to the wall clock.
+
+With a variable-step solver, step 2 may run one adaptive solve across
+several major steps when no discrete state can change in between (only
+periodic blocks have discrete states and none hits); steps 3-4 still
+happen at every major step, from the solver's states on the grid.
 
 So a discrete block's output at a hit uses its state before that hit's
 update (outputs, then updates), its value is held until its next hit, and

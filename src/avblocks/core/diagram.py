@@ -478,6 +478,3 @@ def _sort(names, blocks, srcs) -> list[int]:
         visit(i, [])
     return order
 
-
-def is_periodic(block) -> bool:
-    return isinstance(block.sample_time, Periodic)

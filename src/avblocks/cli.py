@@ -203,6 +203,9 @@ def cmd_run(args):
 
 
 def cmd_list(args):
+    import importlib
+    import inspect
+
     from .scenarios import block_registry, builtin_scenarios, load_scenario
     if args.blocks:
         for k, cls in sorted(block_registry().items()):
@@ -211,10 +214,8 @@ def cmd_list(args):
         return 0
     for name, path in builtin_scenarios().items():
         if path.suffix == ".py":
-            import importlib
             mod = importlib.import_module(f"avblocks.scenarios.{name}")
             desc = (mod.__doc__ or "").strip().split("\n\n")[0]
-            import inspect
             sig = inspect.signature(mod.make_diagram)
             params = ", ".join(f"{k}={v.default}" for k, v in sig.parameters.items())
         else:

@@ -71,9 +71,13 @@ def test_read_only_inputs_and_state(name):
     x = b.initial_state()
     for a in (*u.values(), *x.values()):
         a.flags.writeable = False
-    b.output(0.0, x, {k: v for k, v in u.items() if k in b.feedthrough}, np)
+    y = b.output(0.0, x, {k: v for k, v in u.items() if k in b.feedthrough}, np)
+    for k, p in b.output_ports.items():
+        assert np.shape(y[k]) == p.shape
     if b.continuous_states:
-        b.derivative(0.0, x, u, np)
+        dx = b.derivative(0.0, x, u, np)
+        assert {k: np.shape(v) for k, v in dx.items()} == \
+            {k: p.shape for k, p in b.continuous_states.items()}
 
 
 @pytest.mark.parametrize("name", ["unicycle", "unicycle2", "diffdrive", "ackermann_lag",

@@ -163,6 +163,7 @@ class PointToPoint(Block):
         self.radius = positive_scalar(radius, "PointToPoint", "radius")
         m = self.wps.shape[1]
         self._single = m == 1
+        self._goal0 = np.ascontiguousarray(self.wps[:, 0])
         self._flat = self.wps.reshape(n * m, 2)
         self._base = np.arange(n) * m
         self._last = self.counts - 1
@@ -176,7 +177,7 @@ class PointToPoint(Block):
 
     def _goal(self, wp, xp):
         if self._single:
-            return xp.asarray(self.wps[:, 0])
+            return xp.asarray(self._goal0)
         return xp.take(xp.asarray(self._flat), self._base + wp, axis=0)
 
     def output(self, t, x, u, xp):

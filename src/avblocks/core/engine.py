@@ -88,6 +88,7 @@ class Engine:
                 self.layout.append((i, nm, shape, off, off + size))
                 off += size
         self.size = off
+        self._kpos = {i: j for j, i in enumerate(self.cont)}
 
     # ----------------------------------------------------------------- pieces
     def hits(self, k):
@@ -200,7 +201,7 @@ class Engine:
         return np.concatenate([np.ravel(X[i][nm]) for i, nm, *_ in self.layout])
 
     def pack_derivs(self, K):
-        pos = {i: j for j, i in enumerate(self.cont)}
+        pos = self._kpos
         return np.concatenate([np.ravel(K[pos[i]][nm]) for i, nm, *_ in self.layout])
 
     def unpack(self, y, X):

@@ -371,9 +371,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
     if realtime is not None and not (float(realtime) > 0):
         raise ParameterError("realtime factor must be > 0", param="realtime",
                              expected="> 0", found=realtime)
-    refs = default_log(sim.compiled) if log is None else list(log)
-    if isinstance(log, (str, PortRef)):
+    if log is None:
+        refs = default_log(sim.compiled)
+    elif isinstance(log, (str, PortRef)):
         refs = [log]
+    else:
+        refs = list(log)
     idx, names, specs, aliases = [], [], [], {}
     for r in refs:
         i, o = sim.compiled.resolve(r)

@@ -94,48 +94,37 @@ class Scipy(Solver):
     def __repr__(self):
         return f"Scipy({self.method!r}, rtol={self.rtol}, atol={self.atol})"
 
-    def step(self, eng, t, X, Y, h):
+    def _solve(self, eng, t, X, Y, t_end, max_step, t_eval=None):
+        """One ``solve_ivp`` of the packed continuous states from ``t``;
+        discrete blocks hold their outputs ``Y`` throughout."""
         from scipy.integrate import solve_ivp
-
-        y0 = eng.pack(X)
-        if y0.size == 0:
-            return X
 
         def f(tt, yy):
             Xs = eng.unpack(yy, X)
             return eng.pack_derivs(eng.derivs(tt, Xs, eng.minor_outputs(tt, Xs, Y)))
 
-        sol = solve_ivp(f, (t, t + h), y0, method=self.method, rtol=self.rtol,
-                        atol=self.atol, max_step=min(self.max_step, h))
+        sol = solve_ivp(f, (t, t_end), eng.pack(X), method=self.method, rtol=self.rtol,
+                        atol=self.atol, max_step=max_step, t_eval=t_eval)
         self.nfev += sol.nfev
         if not sol.success:
             from .errors import SimulationError
             raise SimulationError(f"solve_ivp ({self.method}) failed: {sol.message}",
                                   time=t)
-        return eng.unpack(sol.y[:, -1], X)
+        return sol
 
+    def step(self, eng, t, X, Y, h):
+        if eng.size == 0:
+            return X
+        sol = self._solve(eng, t, X, Y, t + h, min(self.max_step, h))
+        return eng.unpack(sol.y[:, -1], X)
 
     def integrate(self, eng, t, X, Y, t_evals):
         """States at each of ``t_evals`` (increasing, after ``t``) in one
         adaptive solve: used between discrete events, where nothing else can
         change the derivatives."""
-        from scipy.integrate import solve_ivp
-
-        y0 = eng.pack(X)
-        if y0.size == 0:
+        if eng.size == 0:
             return [X for _ in t_evals]
-
-        def f(tt, yy):
-            Xs = eng.unpack(yy, X)
-            return eng.pack_derivs(eng.derivs(tt, Xs, eng.minor_outputs(tt, Xs, Y)))
-
-        sol = solve_ivp(f, (t, t_evals[-1]), y0, method=self.method, rtol=self.rtol,
-                        atol=self.atol, max_step=self.max_step, t_eval=t_evals)
-        self.nfev += sol.nfev
-        if not sol.success:
-            from .errors import SimulationError
-            raise SimulationError(f"solve_ivp ({self.method}) failed: {sol.message}",
-                                  time=t)
+        sol = self._solve(eng, t, X, Y, t_evals[-1], self.max_step, t_eval=t_evals)
         return [eng.unpack(sol.y[:, j], X) for j in range(sol.y.shape[1])]
 
 

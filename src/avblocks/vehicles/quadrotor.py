@@ -138,6 +138,25 @@ def quadrotor_rhs(vel, q, rates, thrust, torque, mass, inertia, gravity=9.81,
     return vel, acc, dq, dw
 
 
+def _set_airframe(blk, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff):
+    """Validate and set the physical parameters both quadrotor blocks share."""
+    blk.mass = agent_array(mass, n, name, "mass", positive=True)
+    blk.inertia = agent_array(inertia, n, name, "inertia", (3,), positive=True)
+    blk.drag = agent_array(drag, n, name, "drag", (3,), nonnegative=True)
+    mixer_matrix(frame)                       # raises for an unknown frame
+    blk.frame = frame
+    blk.arm_length = agent_array(arm_length, n, name, "arm_length", positive=True)
+    blk.yaw_coeff = agent_array(yaw_coeff, n, name, "yaw_coeff", positive=True)
+
+
+def _kind(value, name, param):
+    """``'wrench'`` or ``'rotors'``, else a ParameterError."""
+    if value not in ("wrench", "rotors"):
+        raise ParameterError(f"unknown {param} kind", block=name, param=param,
+                             expected="'wrench' or 'rotors'", found=value)
+    return value
+
+
 class Quadrotor(Block):
     """N quadrotors (6-DoF rigid bodies) in one block.
 
@@ -223,21 +242,12 @@ class Quadrotor(Block):
             raise ParameterError("attitude quaternion must be nonzero", block=name,
                                  param="attitude0", found="a zero quaternion")
         q0 = q0 / nq[:, None]
-        self.mass = agent_array(mass, n, name, "mass", positive=True)
-        self.inertia = agent_array(inertia, n, name, "inertia", (3,), positive=True)
+        _set_airframe(self, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff)
         self.gravity = positive_scalar(gravity, name, "gravity", allow_zero=True)
-        if input not in ("wrench", "rotors"):
-            raise ParameterError("unknown input kind", block=name, param="input",
-                                 expected="'wrench' or 'rotors'", found=input)
-        self.input = input
-        mixer_matrix(frame)
-        self.frame = frame
-        self.arm_length = agent_array(arm_length, n, name, "arm_length", positive=True)
-        self.yaw_coeff = agent_array(yaw_coeff, n, name, "yaw_coeff", positive=True)
+        self.input = _kind(input, name, "input")
         self.rotor_max = limit(rotor_max, n, name, "rotor_max")
         self.thrust_max = limit(thrust_max, n, name, "thrust_max")
         self.torque_max = limit(torque_max, n, name, "torque_max", (3,))
-        self.drag = agent_array(drag, n, name, "drag", (3,), nonnegative=True)
         self._drag = bool(np.any(self.drag > 0))
         self.quat_gain = positive_scalar(quat_gain, name, "quat_gain", allow_zero=True)
         self._tlim = any_finite(self.thrust_max, self.torque_max)
@@ -362,18 +372,9 @@ class QuadrotorVelocityControl(Block):
         super().__init__()
         name = "QuadrotorVelocityControl"
         self.n = n = int(n)
-        self.mass = agent_array(mass, n, name, "mass", positive=True)
-        self.inertia = agent_array(inertia, n, name, "inertia", (3,), positive=True)
+        _set_airframe(self, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff)
         self.gravity = positive_scalar(gravity, name, "gravity")
-        self.drag = agent_array(drag, n, name, "drag", (3,), nonnegative=True)
-        if output not in ("wrench", "rotors"):
-            raise ParameterError("unknown output kind", block=name, param="output",
-                                 expected="'wrench' or 'rotors'", found=output)
-        self.out_kind = output
-        mixer_matrix(frame)
-        self.frame = frame
-        self.arm_length = agent_array(arm_length, n, name, "arm_length", positive=True)
-        self.yaw_coeff = agent_array(yaw_coeff, n, name, "yaw_coeff", positive=True)
+        self.out_kind = _kind(output, name, "output")
         self.kv = positive_scalar(kv, name, "kv")
         self.k_att = positive_scalar(k_att, name, "k_att")
         self.k_rate = positive_scalar(k_rate, name, "k_rate")

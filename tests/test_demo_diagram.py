@@ -28,9 +28,7 @@ def test_unicycle_closed_form_circle():
 
 def demo(n=12, seed=0):
     rng = np.random.default_rng(seed)
-    p0 = av.utility.random_poses(n, area=(20, 20), seed=seed) \
-        if hasattr(av.utility, "random_poses") else \
-        np.column_stack([rng.uniform(0, 20, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
+    p0 = av.utility.random_poses(n, area=(20, 20), seed=seed)
     counts = rng.integers(1, 4, n)
     wps = [rng.uniform(0, 20, (k, 2)) for k in counts]
     d = av.Diagram()

@@ -81,10 +81,7 @@ def test_periodic_output_held_between_hits_while_input_moves():
     d = av.Diagram()
     c = d.add(av.blocks.Clock(), name="c")
     g = d.add(av.blocks.Function(lambda t, u: u.reshape(1, 1), inputs={"u": ()},
-                                 outputs={"y": (1, 1)}), name="g") \
-        if hasattr(av.blocks, "Function") else None
-    if g is None:
-        pytest.skip("Function block not available")
+                                 outputs={"y": (1, 1)}), name="g")
     h = d.add(Hold(0.25), name="h")
     d.connect(c.y, g.u)
     d.connect(g.y, h.u)

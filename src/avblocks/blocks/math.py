@@ -19,12 +19,18 @@ class Gain(Block):
     -----
     u : in, any shape
     y : out, same shape as ``u``
+
+    Parameters
+    ----------
+    k : float or array
+        The gain; a numeric parameter (``"name.k"``), changeable between and
+        during runs without a rebuild.
     """
 
     def __init__(self, k=1.0):
         super().__init__()
         self.declare_inherited()   # sample time of its drivers
-        self.k = finite_array(k, "Gain", "k")
+        self.declare_parameter("k", finite_array(k, "Gain", "k"), doc="gain")
         self.declare_input("u")
         self.declare_output("y")
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .errors import ParameterError
+from .params import Param
 from .ports import Port
 
 
@@ -122,6 +123,7 @@ class Block:
         self._init: dict[str, np.ndarray] = {}
         self._random: set[str] = set()
         self._inherited: set[str] = set()
+        self._params: dict[str, Param] = {}
         self.sample_time = CONTINUOUS
 
     # ------------------------------------------------------------------ declare
@@ -198,6 +200,63 @@ class Block:
         p = self.declare_discrete_state(name, _rng.key(0), agents=False)
         self._random.add(name)
         return p
+
+    def declare_parameter(self, name, value, shape=None, *, bounds=(None, None),
+                          unit="", doc="", allow_inf=False) -> np.ndarray:
+        """Declare a numeric parameter and set ``self.<name>`` to its value.
+
+        ``value`` is validated into a float64 array of ``shape`` (default:
+        the value's own shape; a scalar is broadcast to ``shape``), finite
+        (``allow_inf`` for one-sided limits) and within ``bounds``
+        (inclusive, ``None`` = open). The block must read it only as
+        ``self.<name>`` inside its pure functions: it can then be changed
+        between runs or during a run (:meth:`set_parameter`,
+        ``Simulator.set_param("block.name", v)``), swept, vmapped and
+        differentiated by the compiled backend without a rebuild.
+        """
+        self._check_new(name)
+        if name in self._params:
+            raise ParameterError("parameter declared twice", block=type(self).__name__,
+                                 param=name)
+        if shape is None:
+            shape = np.shape(value)
+        spec = Param(name, shape, bounds, unit, doc, allow_inf)
+        a = spec.validate(value, type(self).__name__)
+        self._params[name] = spec
+        self.__dict__[name] = a
+        return a
+
+    @property
+    def parameters(self) -> dict[str, Param]:
+        """The declared numeric parameters by name."""
+        return dict(self._params)
+
+    def _param_spec(self, name, block=None):
+        try:
+            return self._params[name]
+        except KeyError:
+            import difflib
+            close = difflib.get_close_matches(str(name), list(self._params), n=1)
+            raise ParameterError("no such numeric parameter",
+                                 block=block or type(self).__name__, param=name,
+                                 expected=f"one of {sorted(self._params)}",
+                                 found=name,
+                                 hint=f"did you mean '{close[0]}'?" if close else None
+                                 ) from None
+
+    def get_parameter(self, name) -> np.ndarray:
+        """Current value of a numeric parameter (a copy)."""
+        self._param_spec(name)
+        return np.array(self.__dict__[name], dtype=float)
+
+    def set_parameter(self, name, value, *, block=None):
+        """Validate and set a numeric parameter (same shape, within bounds)."""
+        spec = self._param_spec(name, block)
+        self.__dict__[name] = spec.validate(value, block or type(self).__name__)
+
+    def parameter_values(self) -> dict[str, np.ndarray]:
+        """``{name: value}`` of every numeric parameter."""
+        return {k: self.__dict__[k] for k in self._params}
 
     def declare_periodic(self, period, offset=0.0):
         """Make the block discrete with sample hits at ``offset + k*period``."""

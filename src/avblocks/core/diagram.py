@@ -324,6 +324,45 @@ class CompiledDiagram:
         return i, name
 
 
+    # ------------------------------------------------- numeric parameters
+    def parameters(self) -> dict:
+        """Every numeric parameter of the diagram: ``{"block.path.name": Param}``
+        in evaluation order of the blocks."""
+        return {f"{n}.{k}": spec for n, b in zip(self.names, self.blocks)
+                for k, spec in b._params.items()}
+
+    def param_index(self, path) -> tuple[int, str]:
+        """(block index, parameter name) of ``"block.path.name"``."""
+        bpath, _, name = str(path).rpartition(".")
+        if not bpath or bpath not in self._index:
+            import difflib
+            close = difflib.get_close_matches(str(path), list(self.parameters()), n=3)
+            raise ParameterError(
+                "no such numeric parameter", param=str(path),
+                expected="'<block path>.<parameter>'",
+                found=str(path),
+                hint=(f"did you mean {close}?" if close else
+                      f"the diagram's parameters: {sorted(self.parameters())[:20]}"))
+        i = self._index[bpath]
+        self.blocks[i]._param_spec(name, bpath)
+        return i, name
+
+    def get_param(self, path):
+        """Current value of ``"block.name"`` (a copy)."""
+        i, name = self.param_index(path)
+        return self.blocks[i].get_parameter(name)
+
+    def set_param(self, path, value):
+        """Validate and set ``"block.name"`` on its block."""
+        i, name = self.param_index(path)
+        self.blocks[i].set_parameter(name, value, block=self.names[i])
+
+    def param_values(self) -> dict:
+        """``{"block.name": value}`` of every numeric parameter (no copies)."""
+        return {f"{n}.{k}": v for n, b in zip(self.names, self.blocks)
+                for k, v in b.parameter_values().items()}
+
+
 def _find_handle(d: Diagram, path: str):
     parts = path.split(".")
     cur = d

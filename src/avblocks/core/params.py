@@ -98,3 +98,92 @@ def poses(value, block, name="pose0", dim=3):
         raise ParameterError("must be finite (no NaN or inf)", block=block,
                              param=name, found="non-finite entries")
     return a
+
+
+# ------------------------------------------------------ numeric parameters
+class Param:
+    """Specification of a block's numeric parameter (a value, not structure).
+
+    Numeric parameters are the values a run may change without rebuilding
+    the diagram: gains, limits, radii, waypoints. A block declares each one
+    with :meth:`Block.declare_parameter`; it then reads it as ``self.<name>``
+    inside ``output``/``derivative``/``update`` only (never caches anything
+    derived from it in ``__init__``), so the same code runs with a NumPy
+    array, a new value set between steps, or a traced JAX value handed to
+    a compiled step as an argument.
+
+    Attributes
+    ----------
+    name : str
+    shape : tuple of int
+        Fixed when declared; a new value must broadcast to it.
+    bounds : (low, high)
+        Inclusive; ``None`` for no bound.
+    unit, doc : str
+    """
+
+    __slots__ = ("name", "shape", "bounds", "unit", "doc", "allow_inf")
+
+    def __init__(self, name, shape, bounds=(None, None), unit="", doc="",
+                 allow_inf=False):
+        self.name = name
+        self.shape = tuple(shape)
+        self.bounds = (bounds[0], bounds[1])
+        self.unit = unit
+        self.doc = doc
+        self.allow_inf = bool(allow_inf)
+
+    def validate(self, value, block="?"):
+        """``value`` as a float64 array of this shape, or ParameterError."""
+        a = _as_float(value, block, self.name)
+        if a.shape != self.shape:
+            try:
+                a = np.broadcast_to(a, self.shape).copy()
+            except ValueError:
+                raise ParameterError("wrong shape", block=block, param=self.name,
+                                     expected=f"{self.shape} (or broadcastable to it)",
+                                     found=a.shape) from None
+        if np.any(np.isnan(a)):
+            raise ParameterError("must not be NaN", block=block, param=self.name)
+        if not self.allow_inf and not np.all(np.isfinite(a)):
+            raise ParameterError("must be finite", block=block, param=self.name,
+                                 found="inf")
+        lo, hi = self.bounds
+        if lo is not None and np.any(a < lo):
+            raise ParameterError("below its lower bound", block=block, param=self.name,
+                                 expected=f">= {lo}", found=float(a.min()))
+        if hi is not None and np.any(a > hi):
+            raise ParameterError("above its upper bound", block=block, param=self.name,
+                                 expected=f"<= {hi}", found=float(a.max()))
+        return a
+
+    def __repr__(self):
+        b = "" if self.bounds == (None, None) else f", bounds={self.bounds}"
+        return f"Param({self.name!r}, shape={self.shape}{b})"
+
+
+class bound_parameters:
+    """Context manager: temporarily give blocks other parameter values.
+
+    ``values`` is ``[(block, {name: value})]``. Used by the compiled backend
+    to hand traced values to blocks for the duration of a trace, and by
+    :func:`simulate` for ``params=``; the old values are restored on exit.
+    No validation here (traced values cannot be checked): validate first.
+    """
+
+    def __init__(self, values):
+        self.values = values
+        self.saved = []
+
+    def __enter__(self):
+        for blk, vals in self.values:
+            for k, v in vals.items():
+                self.saved.append((blk, k, blk.__dict__[k]))
+                blk.__dict__[k] = v
+        return self
+
+    def __exit__(self, *exc):
+        for blk, k, v in reversed(self.saved):
+            blk.__dict__[k] = v
+        self.saved = []
+        return False

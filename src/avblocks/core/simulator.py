@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import threading
 import time as _time
 
 import numpy as np
@@ -66,6 +67,14 @@ class Simulator:
         Start time.
     check_finite : bool
         Stop with :class:`SimulationError` at the first NaN or inf.
+    x0 : dict, optional
+        Initial values of states by ``"block.state"`` (default: the blocks'
+        declared initial values).
+
+    Numeric parameters (``"block.name"``, see :meth:`Block.declare_parameter`)
+    are read with :meth:`get_param` and changed with :meth:`set_param`,
+    also from another thread (a live view): a change takes effect at the
+    start of the next major step and is recorded in :attr:`param_changes`.
 
     Example
     -------
@@ -82,7 +91,7 @@ class Simulator:
     """
 
     def __init__(self, diagram, dt=0.01, solver="rk4", *, seed=0, t0=0.0,
-                 check_finite=True):
+                 check_finite=True, x0=None):
         if isinstance(diagram, Diagram):
             diagram = diagram.build()
         if not isinstance(diagram, CompiledDiagram):
@@ -117,6 +126,11 @@ class Simulator:
                       and all(self.eng.periodic[i] for i in self.eng.disc)
                       and not self._side)
         self.horizon = None     # last step index, set by simulate(); enables spans
+        self.x0 = self._check_x0(x0)
+        self._pending = []      # parameter changes waiting for the next major step
+        self._lock = threading.Lock()
+        #: ``[(t, "block.name", value as list)]``: changes made during the run.
+        self.param_changes = []
         self._queue = []
         self.k = 0
         self.X = None
@@ -127,10 +141,67 @@ class Simulator:
     def t(self) -> float:
         return self.t0 + self.k * self.dt
 
+    def _check_x0(self, x0):
+        out = {}
+        if x0 is None:
+            return out
+        if not isinstance(x0, dict):
+            raise ParameterError("x0 must be a dict {'block.state': value}", param="x0",
+                                 found=type(x0).__name__)
+        for path, v in x0.items():
+            bpath, _, nm = str(path).rpartition(".")
+            i = self.compiled.index(bpath) if bpath else self.compiled.index(str(path))
+            b = self.compiled.blocks[i]
+            if nm not in b._init or nm in b._random:
+                raise ParameterError("no such state", block=bpath, param=nm,
+                                     expected=sorted(set(b._init) - b._random), found=nm)
+            old = b._init[nm]
+            try:
+                a = np.array(v, dtype=old.dtype)
+            except (TypeError, ValueError):
+                raise ParameterError("initial value must be numeric", block=bpath,
+                                     param=nm, found=repr(v)[:60]) from None
+            if a.shape != old.shape:
+                raise ParameterError("initial value has the wrong shape", block=bpath,
+                                     param=nm, expected=old.shape, found=a.shape)
+            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+                raise ParameterError("initial value must be finite", block=bpath,
+                                     param=nm)
+            out[(i, nm)] = a
+        return out
+
+    # ---------------------------------------------------------- parameters
+    def get_param(self, path):
+        """Current value of the numeric parameter ``"block.name"``."""
+        return self.compiled.get_param(path)
+
+    def set_param(self, path, value):
+        """Change the numeric parameter ``"block.name"``: validated now,
+        applied at the start of the next major step (at once before
+        :meth:`init`). Thread-safe."""
+        i, name = self.compiled.param_index(path)
+        blk = self.compiled.blocks[i]
+        a = blk._params[name].validate(value, self.compiled.names[i])
+        if self.X is None:
+            blk.__dict__[name] = a
+            return
+        with self._lock:
+            self._pending.append((str(path), blk, name, a))
+
+    def _apply_pending(self):
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for path, blk, name, a in pending:
+            blk.__dict__[name] = a
+            self.param_changes.append((self.t, path, a.tolist()))
+
     def initial_states(self):
         X = []
-        for name, b in zip(self.compiled.names, self.compiled.blocks):
+        for j, (name, b) in enumerate(zip(self.compiled.names, self.compiled.blocks)):
             x = b.initial_state()
+            for (i, nm), v in self.x0.items():
+                if i == j:
+                    x[nm] = v.copy()
             for r in b._random:
                 x[r] = _rng.key(self.seed, f"{name}.{r}")
             X.append(x)
@@ -234,6 +305,12 @@ class Simulator:
         if self.X is None:
             self.init()
         eng, k, h = self.eng, self.k, self.dt
+        if self._pending:
+            # new values hold from t_k on: outputs at t_k are recomputed with
+            # them (periodic blocks only at a hit), and a span assumed the old
+            self._apply_pending()
+            self._queue = []
+            self.Y = self._guard(eng.major_outputs, self.t, self.X, self.Y, eng.hits(k))
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         try:
@@ -320,7 +397,7 @@ def _progress_wanted(progress):
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
-             max_log_bytes=2 * 1024**3):
+             max_log_bytes=2 * 1024**3, params=None, x0=None):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -348,6 +425,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         Stop at the first NaN/inf, naming the block and port.
     max_log_bytes : int
         Refuse a run whose log would exceed this much memory.
+    params : dict, optional
+        Numeric parameter values for this run, ``{"block.name": value}``
+        (validated; the blocks' own values are restored afterwards).
+    x0 : dict, optional
+        Initial state values, ``{"block.state": value}``.
 
     Returns
     -------
@@ -355,7 +437,32 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
-    sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite)
+    sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite,
+                    x0=x0)
+    binding = _param_binding(sim.compiled, params)
+    with binding:
+        return _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes,
+                    params)
+
+
+def _param_binding(compiled, params):
+    """A :class:`bound_parameters` for ``{"block.name": value}`` (validated)."""
+    from .params import bound_parameters
+    if params is None:
+        return bound_parameters([])
+    if not isinstance(params, dict):
+        raise ParameterError("params must be a dict {'block.name': value}",
+                             param="params", found=type(params).__name__)
+    per_block = {}
+    for path, v in params.items():
+        i, name = compiled.param_index(path)
+        blk = compiled.blocks[i]
+        per_block.setdefault(i, (blk, {}))[1][name] = \
+            blk._params[name].validate(v, compiled.names[i])
+    return bound_parameters(list(per_block.values()))
+
+
+def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params):
     try:
         span = float(t_final) - sim.t0
     except (TypeError, ValueError):
@@ -404,6 +511,9 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
             "log_every": log_every, "steps": nsteps,
             "agents": max([p.n or 0 for p in specs] + [0]),
             "blocks": len(sim.compiled.blocks)}
+    if params:
+        meta["params"] = {str(k): np.asarray(v, float).tolist() for k, v in params.items()}
+    meta["param_changes"] = sim.param_changes
     count = 0
 
     logged_float = [(i, o) for (i, o), p in zip(idx, specs)

@@ -109,6 +109,8 @@ class Coverage(Block):
     period : float, optional — make the block discrete (recompute cells at
         this period and hold), instead of at every solver stage.
 
+    ``gain`` is a numeric parameter; the polygon is structural.
+
     NumPy + shapely only. Equations, references: module docstring.
     """
 
@@ -119,7 +121,8 @@ class Coverage(Block):
             raise ParameterError("need n >= 1", block="Coverage", param="n", found=n)
         convex_halfplanes(polygon, "Coverage")          # validates convexity
         self.polygon = np.asarray(polygon, dtype=float)
-        self.gain = positive_scalar(gain, "Coverage", "gain")
+        self.declare_parameter("gain", positive_scalar(gain, "Coverage", "gain"),
+                               bounds=(1e-12, None), unit="1/s")
         if period is not None:
             self.declare_periodic(period)
         self.declare_input("position", (n, 2), unit="m")

@@ -3,7 +3,7 @@
 from . import check, rng
 from .block import CONTINUOUS, INHERITED, Block, Continuous, Inherited, Periodic
 from .check import check_block
-from .compiled import Runner, compile, grad  # noqa: A004
+from .compiled import Runner, compile, grad
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
                      AlgebraicLoopError,

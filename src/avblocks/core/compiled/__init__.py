@@ -12,7 +12,7 @@ diagram's structure. See docs/compiled.md.
 """
 
 from .program import cache_info, clear_cache, enable_persistent_cache
-from .runner import Runner, compile, grad, simulate_compiled  # noqa: A004
+from .runner import Runner, compile, grad, simulate_compiled
 
 __all__ = ["compile", "grad", "Runner", "simulate_compiled", "cache_info", "clear_cache",
            "enable_persistent_cache"]

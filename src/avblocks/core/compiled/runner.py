@@ -65,7 +65,7 @@ def _solver_key(solver):
 
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
-            seed=0, backend="jax", dtype="float64", check_finite=True):  # noqa: A001
+            seed=0, backend="jax", dtype="float64", check_finite=True):
     """Compile ``diagram`` once for runs of ``t_final`` (JAX: ``jit`` of a
     nested ``lax.scan``) and return a :class:`Runner`.
 
@@ -182,7 +182,7 @@ class Runner:
         self.dtype = dtype
         self.check_finite = bool(check_finite)
         self.solver_name = solver_name
-        self.t = program.t0 + program.dt * program.log_every * np.arange(program.nlog)
+        self.t = program.t0 + (program.log_every * np.arange(program.nlog)) * program.dt
 
     @property
     def compilations(self) -> int:

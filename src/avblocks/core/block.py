@@ -108,6 +108,12 @@ class Block:
     #: True when ``on_major_step`` has side effects (I/O, drawing, hardware).
     side_effects = False
 
+    #: False for a block whose math is NumPy/SciPy/shapely code that JAX cannot
+    #: trace (spatial indexes, geometry): ``backend="jax"`` then refuses the
+    #: diagram at compile time naming the block. Blocks written with ``xp``
+    #: only keep the default.
+    traceable = True
+
     #: True when ``update`` needs this block's own outputs of the same major
     #: step (Simulink's and Drake's discrete updates may read them too). The
     #: simulator then calls ``update(t, x, u, xp, y=outputs)``, so work done in

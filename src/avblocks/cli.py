@@ -2,7 +2,7 @@
 
     avblocks run waypoints --set agents=300 --out out/
     avblocks run my_scenario.yaml
-    avblocks run my_diagram.py --set n=50
+    avblocks run my_diagram.py --set n=50 --set drive.gain=2.0
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
     avblocks --version
@@ -43,6 +43,8 @@ def _from_namespace(ns, overrides, source):
     sim = dict(ns.get("simulation") or {})
     sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
                 if k.startswith("simulation.")}
+    from .scenarios._numeric import resolve, split_overrides
+    overrides, numeric = split_overrides(overrides)     # block.param keys
     params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
     if "make_diagram" in ns:
         import inspect
@@ -75,6 +77,8 @@ def _from_namespace(ns, overrides, source):
         raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
                             file=source, hint=f"found {type(d).__name__}")
     sim.update(sim_over)
+    if numeric:
+        sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
@@ -246,7 +250,8 @@ def build_parser():
     r = sub.add_parser("run", help="run a built-in scenario, a YAML/TOML file or a .py file")
     r.add_argument("target", help="built-in name (see `avblocks list`) or a file")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a parameter (repeatable), e.g. --set agents=300")
+                   help="override a parameter (repeatable), e.g. --set agents=300, "
+                        "or a block's numeric parameter: --set drive.gain=2.0")
     r.add_argument("--out", help="output folder (default avblocks-out/<name>)")
     r.add_argument("--movie", help="also write a movie (.mp4 or .gif)")
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")

@@ -425,3 +425,20 @@ def test_leader_follower_gain_gradients_match_finite_differences():
         rel = np.max(np.abs(g[path] - fd)) / np.max(np.abs(fd))
         assert rel < 1e-5, (path, rel, g[path], fd)
         assert np.all(g[path][followers] < 0)          # larger gains: smaller errors
+
+
+def test_cli_backend_option(tmp_path, capsys):
+    from avblocks.cli import main
+    args = ["run", "waypoints", "--set", "agents=4", "--t-final", "3", "--quiet"]
+    assert main(args + ["--out", str(tmp_path / "np")]) == 0
+    assert main(args + ["--out", str(tmp_path / "jax"), "--backend", "jax"]) == 0
+    a = av.Results.load(tmp_path / "np" / "results.nc")
+    b = av.Results.load(tmp_path / "jax" / "results.nc")
+    assert b.meta["backend"] == "jax" and b["fleet.pose"].shape == a["fleet.pose"].shape
+    assert np.max(np.abs(a["fleet.pose"] - b["fleet.pose"])) < 1e-9
+    capsys.readouterr()
+    # a scenario with NumPy-only environment blocks: one clear line, exit code 2
+    assert main(["run", "nest", "--set", "agents=20", "--t-final", "1", "--quiet",
+                 "--out", str(tmp_path / "nest"), "--backend", "jax"]) == 2
+    err = capsys.readouterr().err
+    assert "cannot be compiled" in err and "backend='numpy'" in err

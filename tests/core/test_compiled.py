@@ -442,3 +442,17 @@ def test_cli_backend_option(tmp_path, capsys):
                  "--out", str(tmp_path / "nest"), "--backend", "jax"]) == 2
     err = capsys.readouterr().err
     assert "cannot be compiled" in err and "backend='numpy'" in err
+
+
+def test_cached_program_never_traces_blocks_changed_since():
+    d1, _ = goto(seed=7)
+    kw = dict(t_final=1.0, dt=0.05, solver="euler", log=["fleet.pose"])
+    r1 = av.compile(d1, **kw)
+    r1()
+    d1.build().blocks[d1.build().index("law")].goal += 5.0     # structural change to d1
+    d2, _ = goto(seed=7)                        # the original structure, new objects
+    r2 = av.compile(d2, **kw)
+    assert r2.program is r1.program             # cache hit on the original key
+    ens = r2.ensemble(runs=2)                   # a new trace: must use d2's blocks
+    ref = av.simulate(goto(seed=7)[0], **kw)
+    assert np.max(np.abs(ens["fleet.pose"][1] - ref["fleet.pose"])) < 1e-9

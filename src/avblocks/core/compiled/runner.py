@@ -316,7 +316,8 @@ class Runner:
         x0vals, _ = self._x0_values(x0)
         X0 = self._states(x0vals, [seed])
         prog = self.program
-        exe, compile_s = prog.executable("run", lambda: prog.run, (theta, X0))
+        exe, compile_s = prog.executable("run", lambda: prog.run, (theta, X0),
+                                         self.compiled)
         t = time.perf_counter()
         with jax.enable_x64(prog.x64):
             logs, XF = exe(theta, X0)
@@ -393,7 +394,7 @@ class Runner:
             return part
 
         def build():
-            return jax.vmap(prog.run, in_axes=(t_axes, x_axes))
+            return jax.vmap(prog.run, in_axes=(t_axes, x_axes), axis_size=chunk)
 
         exe, compile_s, wall = None, 0.0, 0.0
         for c in range(nchunks):
@@ -403,7 +404,8 @@ class Runner:
                   for i, x in enumerate(X0)]
             if exe is None:
                 exe, compile_s = prog.executable(("ensemble", chunk, _axes_key(t_axes),
-                                                  _axes_key(x_axes)), build, (th, xs))
+                                                  _axes_key(x_axes)), build, (th, xs),
+                                                 self.compiled)
             t = time.perf_counter()
             with jax.enable_x64(prog.x64):
                 logs, XF = exe(th, xs)
@@ -465,6 +467,9 @@ class Runner:
         (``"fleet.pose@x0"``). ``checkpoint`` recomputes the steps between
         log samples on the backward pass instead of storing them (memory
         ~ one log interval of states instead of the whole run).
+
+        The compiled gradient is cached per ``cost`` object: pass the same
+        function (not a new ``lambda`` each call) to avoid recompiling.
         """
         jax = _jax.jax()
         seed = self.seed if seed is None else int(seed)
@@ -493,7 +498,8 @@ class Runner:
             return jax.value_and_grad(f)
 
         exe, _ = prog.executable(("grad", cost, tuple(pw), tuple(w for w, *_ in sw),
-                                  bool(checkpoint)), build, (diff, theta, X0))
+                                  bool(checkpoint)), build, (diff, theta, X0),
+                                 self.compiled)
         with jax.enable_x64(prog.x64):
             val, g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}

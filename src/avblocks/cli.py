@@ -3,6 +3,7 @@
     avblocks run waypoints --set agents=300 --out out/
     avblocks run my_scenario.yaml
     avblocks run my_diagram.py --set n=50 --set drive.gain=2.0
+    avblocks run waypoints --backend jax
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
     avblocks --version
@@ -157,6 +158,8 @@ def cmd_run(args):
         sim["realtime"] = args.realtime
     if args.t_final is not None:
         sim["t_final"] = args.t_final
+    if args.backend is not None:        # compiled backend: see avblocks.core.compiled
+        sim["backend"] = args.backend
     sim.setdefault("t_final", 10.0)
     out = Path(args.out or Path("avblocks-out") / name)
     out.mkdir(parents=True, exist_ok=True)
@@ -257,6 +260,8 @@ def build_parser():
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--backend", choices=("numpy", "jax"),
+                   help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")

@@ -13,6 +13,7 @@ from .core.errors import (
                    ScenarioError,
                    ShapeError,
                    SimulationError,
+                   SimulationWarning,
                    WiringError,
 )
 
@@ -33,5 +34,6 @@ __all__ = [
     "scenarios",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "AvError", "ParameterError", "WiringError", "ShapeError",
-    "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
+    "AlgebraicLoopError", "SimulationError", "SimulationWarning", "ScenarioError",
+    "__version__",
 ]

@@ -106,3 +106,8 @@ class ScenarioError(AvError):
         if entry is not None:
             where += (": " if where else "") + f"{entry}"
         super().__init__((where + ": " if where else "") + cause, hint=hint)
+
+
+class SimulationWarning(UserWarning):
+    """Something went wrong that did not cost the results (a block's
+    ``on_stop`` failed after a complete run, for example)."""

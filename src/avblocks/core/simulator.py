@@ -361,8 +361,17 @@ class Simulator:
         return self.X[self.compiled.index(block)][name]
 
     def close(self):
+        """Run every side-effect block's ``on_stop`` (all of them, whatever
+        one raises) and return the failures as ``[(block name, exception)]``
+        (an interrupt while a block stops counts as one). Never raises: a
+        failing ``on_stop`` must not hide the results or the run's own error."""
+        failures = []
         for i in self._side:
-            self.compiled.blocks[i].on_stop()
+            try:
+                self.compiled.blocks[i].on_stop()
+            except BaseException as e:  # noqa: BLE001 - collected, reported by caller
+                failures.append((self.compiled.names[i], e))
+        return failures
 
 
 def _blame(exc, compiled):
@@ -543,49 +552,72 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
     overruns, worst = 0, 0.0
     wall0 = _time.perf_counter()
     sim.horizon = nsteps
+    failure = interrupt = None
     try:
-        sim.init()
-        record()
-        tick = max(1, nsteps // 100)
-        for k in range(nsteps):
-            sim.step()
-            if (k + 1) % log_every == 0:
-                record()
-            if pace is not None:
-                target = wall0 + (k + 1) * sim.dt / pace
-                now = _time.perf_counter()
-                if now < target:
-                    _time.sleep(target - now)
-                else:
-                    late = now - target
-                    worst = max(worst, late)
-                    if late > sim.dt / pace:
-                        overruns += 1
-            if bar is not None and (k + 1) % tick == 0:
-                bar.update(tick)
-    except SimulationError as e:
-        meta["wall_time"] = _time.perf_counter() - wall0
-        meta["error"] = str(e)
-        e.results = partial()
-        raise
-    except KeyboardInterrupt:
-        meta["interrupted_at"] = sim.t
-        meta["wall_time"] = _time.perf_counter() - wall0
-        res = partial()
-        res.meta["interrupted"] = True
-        return res
-    finally:
-        if bar is not None:
-            bar.close()
-        sim.close()
+        try:
+            sim.init()
+            record()
+            tick = max(1, nsteps // 100)
+            for k in range(nsteps):
+                sim.step()
+                if (k + 1) % log_every == 0:
+                    record()
+                if pace is not None:
+                    target = wall0 + (k + 1) * sim.dt / pace
+                    now = _time.perf_counter()
+                    if now < target:
+                        _time.sleep(target - now)
+                    else:
+                        late = now - target
+                        worst = max(worst, late)
+                        if late > sim.dt / pace:
+                            overruns += 1
+                if bar is not None and (k + 1) % tick == 0:
+                    bar.update(tick)
+        except SimulationError as e:
+            failure = e
+        except KeyboardInterrupt as e:
+            interrupt = e
+        finally:
+            if bar is not None:
+                bar.close()
+        stop_failures = sim.close()
+    except KeyboardInterrupt as e:   # landed between the loop and close()
+        interrupt = interrupt or e
+        stop_failures = []
+    for _name, e in stop_failures:
+        if isinstance(e, KeyboardInterrupt) and interrupt is None:
+            interrupt = e
+    stop_errors = [f"block '{n}' on_stop: {type(e).__name__}: {e}"
+                   for n, e in stop_failures if not isinstance(e, KeyboardInterrupt)]
     wall = _time.perf_counter() - wall0
     meta["wall_time"] = wall
-    meta["realtime_factor"] = (nsteps * sim.dt / wall) if wall > 0 else math.inf
+    if stop_errors:
+        meta["on_stop_errors"] = stop_errors
+    if failure is not None:
+        meta["error"] = str(failure)
+        failure.results = partial()
+        failure.on_stop_errors = stop_errors
+        if stop_errors:
+            failure.add_note("also, while stopping: " + "; ".join(stop_errors))
+        raise failure
+    if interrupt is not None:
+        meta["interrupted_at"] = sim.t
+        meta["interrupted"] = True
+        meta["interrupted_by"] = getattr(interrupt, "signal_name", "SIGINT")
+    else:
+        meta["realtime_factor"] = (nsteps * sim.dt / wall) if wall > 0 else math.inf
     if pace is not None:
         meta["overruns"] = overruns
         meta["max_lateness"] = worst
     if hasattr(sim.solver, "nfev"):
         meta["nfev"] = sim.solver.nfev
+    if stop_errors:
+        import warnings
+
+        from .errors import SimulationWarning
+        warnings.warn("the run finished and its results are returned, but "
+                      + "; ".join(stop_errors), SimulationWarning, stacklevel=3)
     if count < nlog:
         return partial()
     return Results(tlog, dict(zip(names, bufs)), dict(zip(names, specs)), meta,

@@ -156,12 +156,12 @@ def inside(path, folder, *, what, source=None, must_exist=False) -> Path:
     p = Path(os.path.expanduser(str(path))) if str(path).startswith("~") else Path(str(path))
     full = (folder / p).resolve()
     if full != folder and folder not in full.parents:
-        raise ScenarioError(f"{what} '{path}' is outside the folder '{folder}'",
+        raise ScenarioError(f"'{path}' is outside the folder '{folder}'",
                             file=source, entry=what,
                             hint="a scenario file may only write inside the output "
                                  "folder and read files under its own folder")
     if must_exist and not full.is_file():
-        raise ScenarioError(f"{what} '{path}' is not a file", file=source, entry=what)
+        raise ScenarioError(f"'{path}' is not a file", file=source, entry=what)
     return full
 
 
@@ -201,7 +201,7 @@ def _guarded_run(args, guard, load_any, trajectory_png):
     from .core.errors import SimulationError
     from .core.simulator import simulate
     overrides = _parse_sets(args.set)
-    d, sim, name, movie = load_any(args.target, overrides)
+    d, sim, name, movie = load_any(args.target, overrides, args.out)
     if args.realtime is not None:
         sim["realtime"] = args.realtime
     if args.t_final is not None:

@@ -90,9 +90,10 @@ def _load_python(path: Path, overrides):
     return d, sim, path.stem, movie
 
 
-def load_any(target, overrides):
+def load_any(target, overrides, out=None):
     """(diagram, simulate kwargs, name, movie options) from a built-in name,
-    a YAML/TOML file or a .py file."""
+    a YAML/TOML file or a .py file (``out``: the output folder a scenario
+    file's blocks may write to)."""
     import importlib
 
     from .scenarios import builtin_scenarios, load_scenario
@@ -107,8 +108,8 @@ def load_any(target, overrides):
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
-    d, sim = sc.build()
-    return d, sim, sc.name, dict(sc.data.get("movie") or {})
+    d, sim = sc.build(output_dir=sc.output_dir(out))
+    return d, sim, sc.name, sc.movie_options()
 
 
 def _trajectory_png(res, path, options=None):

@@ -124,3 +124,8 @@ class PortAttributeError(WiringError, AttributeError):
 class OutputShapeError(SimulationError, ShapeError):
     """A block returned an output of another shape than its port declares,
     during a run (both a :class:`SimulationError` and a :class:`ShapeError`)."""
+
+
+class CompileError(AvError):
+    """A diagram cannot be compiled (a block that cannot be traced by JAX, a
+    side-effect block, a variable-step solver): names the block and the fix."""

@@ -211,14 +211,16 @@ class Simulator:
         """Reset to ``t0``: initial states, initial outputs, side effects."""
         self.k = 0
         self._queue = []
+        # on_start first: an interface block (robots) connects there and may
+        # set its initial state from what it receives (the robots' poses)
+        for i in self._side:
+            self.compiled.blocks[i].on_start()
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
         self._check_declared()
         self._check(self.t0)
         self.check_outputs(self.t0)
-        for i in self._side:
-            self.compiled.blocks[i].on_start()
         self._side_effects()
         return self
 

@@ -153,6 +153,9 @@ def cmd_run(args):
         sim["realtime"] = args.realtime
     if args.t_final is not None:
         sim["t_final"] = args.t_final
+    if getattr(args, "robots", None):  # on ROS 2 robots (extra [ros2])
+        from .interfaces.ros2.cli import apply as _robots
+        _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
     out = Path(args.out or Path("avblocks-out") / name)
     out.mkdir(parents=True, exist_ok=True)
@@ -187,6 +190,7 @@ def cmd_run(args):
         summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
     if res is not None and "overruns" in res.meta:
         summary["overruns"] = res.meta["overruns"]
+        summary["max_lateness_s"] = res.meta["max_lateness"]
     (out / "summary.json").write_text(json.dumps(summary, indent=2))
     print(f"scenario      {name}")
     print(f"agents        {summary['agents']}")
@@ -194,6 +198,12 @@ def cmd_run(args):
     print(f"wall time     {wall:.3g} s")
     if summary["realtime_factor"] is not None:
         print(f"real-time x   {summary['realtime_factor']}")
+    if res is not None and "overruns" in res.meta:
+        from .interfaces.ros2.cli import report as _pace_report
+        print(_pace_report(res))
+    if res is not None and res.meta.get("interrupted"):
+        print(f"interrupted   at t = {res.meta.get('interrupted_at', 0.0):.3g} s "
+              "(results so far saved)")
     for f in files:
         print(f"wrote         {f}")
     if failed is not None:
@@ -253,6 +263,9 @@ def build_parser():
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
     r.set_defaults(fn=cmd_run)
+    from .interfaces.ros2.cli import add_commands, add_run_options
+    add_run_options(r)
+    add_commands(sub)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")
     li.set_defaults(fn=cmd_list)

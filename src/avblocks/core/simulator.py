@@ -548,13 +548,15 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
     try:
         sim.init()
         record()
+        # pace from the end of init: on_start may connect to robots first
+        pace0 = _time.perf_counter()
         tick = max(1, nsteps // 100)
         for k in range(nsteps):
             sim.step()
             if (k + 1) % log_every == 0:
                 record()
             if pace is not None:
-                target = wall0 + (k + 1) * sim.dt / pace
+                target = pace0 + (k + 1) * sim.dt / pace
                 now = _time.perf_counter()
                 if now < target:
                     _time.sleep(target - now)

@@ -34,7 +34,7 @@ def _pose0():
 def _cli(router, out, t_final, *extra):
     return [sys.executable, "-m", "avblocks", "run", "formation", "--robots", "tb1,tb2,tb3",
             "--router", router, *SETS, "--t-final", str(t_final), "--realtime", str(SCALE),
-            "--out", str(out), "--quiet", *extra]
+            "--out", str(out), "--quiet", *map(str, extra)]
 
 
 def _run(router, tmp_path, t_final, emu=(), extra=()):

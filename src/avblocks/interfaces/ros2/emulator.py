@@ -15,7 +15,8 @@ Like a real base it stops (zero velocity) when no command came for
 either direction dropped with this probability), ``latency`` + ``jitter``
 (uniform extra delay, both directions), ``noise`` (Gaussian on x, y, yaw of
 published poses) and ``drops`` (``{name: t}``: the robot stops publishing
-at its time ``t``, still receiving and logging commands).
+``t`` seconds of its time after the first command reached the fleet, i.e.
+into the run; it still receives and logs commands).
 
 ``time_scale`` runs the emulated world that many times faster than the
 wall clock (all its times, rates and delays are in its own seconds): pair
@@ -107,6 +108,7 @@ class Emulator:
         self._stop = threading.Event()
         self.wall0 = time.monotonic()
         self.dropped = set()
+        self.t_first_cmd = None
         self.write({"ev": "start", "robots": self.names, "time_scale": self.scale})
 
     # ------------------------------------------------------------------ helpers
@@ -126,6 +128,8 @@ class Emulator:
 
     def _on_cmd(self, i, data):
         lin, ang = _msgs.decode_twist(data, self.distro)
+        if self.t_first_cmd is None:
+            self.t_first_cmd = self.now()
         lost = bool(self.loss and self.rng.random() < self.loss)
         self.write({"ev": "cmd", "robot": self.names[i], "v": lin[0], "vy": lin[1],
                     "vz": lin[2], "w": ang[2], "lost": lost})
@@ -175,7 +179,8 @@ class Emulator:
         p = self.state + (self.rng.normal(0, self.noise, (n, 4)) * [1, 1, 0, 1]
                           if self.noise else 0.0)
         for i, nm in enumerate(self.names):
-            if nm in self.drops and t >= self.drops[nm]:
+            if (nm in self.drops and self.t_first_cmd is not None
+                    and t - self.t_first_cmd >= self.drops[nm]):
                 if nm not in self.dropped:
                     self.dropped.add(nm)
                     self.write({"ev": "drop", "robot": nm})
@@ -276,7 +281,7 @@ def add_parser(sub):
     e.add_argument("--jitter", type=float, default=0.0, help="extra uniform delay [s]")
     e.add_argument("--noise", type=float, default=0.0, help="pose noise std [m, rad]")
     e.add_argument("--drop", action="append", metavar="NAME@T",
-                   help="robot NAME goes silent at its time T, e.g. tb2@10s")
+                   help="robot NAME goes silent T s after the first command, e.g. tb2@10s")
     e.add_argument("--time-scale", type=float, default=1.0, dest="time_scale",
                    help="emulated seconds per wall second")
     e.add_argument("--cmd-timeout", type=float, default=0.5, dest="cmd_timeout",

@@ -352,7 +352,7 @@ class Robots(Block):
         if missing:
             raise PreflightError(
                 f"no pose received within {self.wait:g} s from robot(s) {missing} "
-                f"(topic '{self.pose_topic}', transport '{self.transport}', "
+                f"(topic '{self.pose_topic.format(name=missing[0])}', transport '{self.transport}', "
                 f"router {self.router})",
                 block="Robots", hint="check that the robots (or the emulator) run, "
                 "the names and the router address")

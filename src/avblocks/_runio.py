@@ -208,6 +208,9 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         sim["t_final"] = args.t_final
     if getattr(args, "backend", None) is not None:   # compiled: avblocks.core.compiled
         sim["backend"] = args.backend
+    if getattr(args, "robots", None):  # on ROS 2 robots (extra [ros2])
+        from .interfaces.ros2.cli import apply as _robots
+        _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
     out = prepare_output(args.out or Path("avblocks-out") / safe_name(name))
     movie_path = None
@@ -287,6 +290,7 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
     if res is not None and "overruns" in res.meta:
         summary["overruns"] = res.meta["overruns"]
+        summary["max_lateness_s"] = res.meta.get("max_lateness")
     try:
         write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
     except AvError as e:
@@ -299,6 +303,9 @@ def _guarded_run(args, guard, load_any, trajectory_png):
     print(f"wall time     {wall:.3g} s")
     if summary["realtime_factor"] is not None:
         print(f"real-time x   {summary['realtime_factor']}")
+    if res is not None and "overruns" in res.meta:
+        from .interfaces.ros2.cli import report as _pace_report
+        print(_pace_report(res))
     for f in files:
         print(f"wrote         {f}")
     sys.stdout.flush()

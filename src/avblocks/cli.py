@@ -209,6 +209,9 @@ def build_parser():
     r.add_argument("--backend", choices=("numpy", "jax"),
                    help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)
+    from .interfaces.ros2.cli import add_commands, add_run_options
+    add_run_options(r)
+    add_commands(sub)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")
     li.set_defaults(fn=cmd_list)

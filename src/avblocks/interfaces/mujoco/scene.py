@@ -497,7 +497,7 @@ class Scene:
 
     @property
     def dynamic_groups(self):
-        self.model
+        _ = self.model          # compiles, fills the index arrays
         return [g for g in self.groups.values() if not g.kinematic]
 
     def camera_names(self):

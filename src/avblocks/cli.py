@@ -158,6 +158,7 @@ def cmd_run(args):
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     failed = None
+    outcome = None
     try:
         res = simulate(d, progress=None if not args.quiet else False, **sim)
     except SimulationError as e:
@@ -175,6 +176,9 @@ def cmd_run(args):
         if args.movie:
             from .viz import save_movie
             files.append(Path(save_movie(res, args.movie, **movie)))
+        from .scenarios._hooks import run_report
+        extra_files, outcome = run_report(args.target, res, out)
+        files += extra_files
     summary = {
         "scenario": name,
         "agents": res.meta.get("agents") if res is not None else None,
@@ -196,6 +200,8 @@ def cmd_run(args):
         print(f"real-time x   {summary['realtime_factor']}")
     for f in files:
         print(f"wrote         {f}")
+    if res is not None and len(res.t) and outcome:
+        print(f"outcome       {outcome}")
     if failed is not None:
         print(f"avblocks: error: {failed} (results up to then were saved)", file=sys.stderr)
         return 3

@@ -64,7 +64,10 @@ class SceneCamera(Block):
         A group name (its per-agent cameras), a fixed camera's name, or a
         list of camera names (``scene.camera_names()``).
     width, height : int
-        Image size [px] (at most the scene's ``max_image``).
+        Image size [px] (at most the scene's ``max_image``; keep
+        ``max_image`` at the largest camera's size: with software GL each
+        render costs in proportion to the whole offscreen buffer, 3x for a
+        160x120 image in a 640x480 buffer).
     period, offset : float
         Camera sample time [s] (a multiple of the diagram's step).
     shadows, reflections : bool

@@ -145,6 +145,10 @@ class Scene:
         MuJoCo's step [s] (default 0.002).
     max_image : (width, height)
         Largest offscreen image the cameras may render (default 640x480).
+    shadows : bool
+        Let the sun cast shadows and the ground reflect (default False: a
+        flat-lit scene renders several times faster in software GL and is
+        easier to threshold; ``SceneCamera(shadows=True)`` then draws them).
 
     Example
     -------
@@ -158,7 +162,7 @@ class Scene:
 
     def __init__(self, world=None, *, ground=True, ground_size=None, texture="checker",
                  obstacle_height=1.0, obstacle_color=(0.55, 0.6, 0.7), timestep=0.002,
-                 max_image=(640, 480), gravity=9.81):
+                 max_image=(640, 480), gravity=9.81, shadows=False):
         self.world = world
         self.ground = bool(ground)
         if ground_size is None:
@@ -182,6 +186,7 @@ class Scene:
             raise ParameterError("max_image must be (width, height)", block=_NAME,
                                  param="max_image", found=max_image)
         self.max_image = mi
+        self.shadows = bool(shadows)
         self.groups: dict[str, Group] = {}
         self.fixed_cameras: dict[str, dict] = {}
         self._mjcf = None        # user MJCF text (from_mjcf)
@@ -413,7 +418,7 @@ class Scene:
                               'height="256"/>')
                 rep = _f((x1 - x0) / 2, (y1 - y0) / 2)
                 assets.append(f'<material name="groundmat" texture="groundtex" '
-                              f'texrepeat="{rep}" reflectance="0"/>')
+                              f'texrepeat="{rep}" reflectance="{0.2 if self.shadows else 0}"/>')
                 mat = 'material="groundmat"'
             elif self.texture is None:
                 mat = 'rgba="0.5 0.52 0.5 1"'
@@ -428,7 +433,7 @@ class Scene:
                          f'pos="{_f((x0 + x1) / 2, (y0 + y1) / 2, 0)}" {mat} '
                          'contype="2" conaffinity="2"/>')
         world.append('<light name="sun" directional="true" pos="0 0 20" dir="0.2 0.1 -1" '
-                     'diffuse="0.7 0.7 0.7" castshadow="false"/>')
+                     f'diffuse="0.7 0.7 0.7" castshadow="{str(self.shadows).lower()}"/>')
         self._obstacles_xml(assets, world)
         for g in self.groups.values():
             world += self._ground_robot_xml(g) if g.kind == "ground" else self._quad_xml(g)
@@ -441,7 +446,7 @@ class Scene:
             f'<option timestep="{_f(self.timestep)}" gravity="{_f(0, 0, -self.gravity)}"/>'
             f'<visual><global offwidth="{w}" offheight="{h}"/>'
             '<headlight ambient="0.35 0.35 0.35" diffuse="0.45 0.45 0.45" specular="0 0 0"/>'
-            '<quality shadowsize="0"/></visual>'
+            f'<quality shadowsize="{2048 if self.shadows else 0}"/></visual>'
             f'<asset>{"".join(assets)}</asset>'
             f'<worldbody>{"".join(world)}</worldbody></mujoco>')
 

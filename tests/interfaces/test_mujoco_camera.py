@@ -12,6 +12,8 @@ from avblocks.vehicles import Unicycle
 
 from ._mj import need
 
+pytestmark = pytest.mark.mujoco
+
 
 @pytest.fixture(scope="module")
 def mj():

@@ -22,6 +22,8 @@ from avblocks.vehicles import (
 
 from ._mj import need
 
+pytestmark = pytest.mark.mujoco
+
 
 @pytest.fixture(scope="module")
 def mj():

@@ -20,6 +20,8 @@ import avblocks as av
 
 from ._mj import need
 
+pytestmark = pytest.mark.mujoco
+
 BOUND = 2 * 0.8 * (1 / 2.5 + 0.1) + 0.2
 
 

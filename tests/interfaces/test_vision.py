@@ -19,6 +19,8 @@ from avblocks.interfaces.vision import (
 
 from ._mj import need
 
+pytestmark = pytest.mark.vision
+
 
 @pytest.fixture(scope="module")
 def cv2():

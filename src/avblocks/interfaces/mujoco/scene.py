@@ -332,8 +332,12 @@ class Scene:
             if convex:
                 pieces = [np.asarray(g.exterior.coords)[:-1]]
             else:
-                tri = shapely.constrained_delaunay_triangles(g)
-                pieces = [np.asarray(t.exterior.coords)[:-1] for t in tri.geoms
+                if hasattr(shapely, "constrained_delaunay_triangles"):   # shapely >= 2.1
+                    tris = shapely.constrained_delaunay_triangles(g).geoms
+                else:       # Delaunay of the vertices, keep the triangles inside
+                    tris = [t for t in shapely.delaunay_triangles(g).geoms
+                            if g.contains(t.representative_point())]
+                pieces = [np.asarray(t.exterior.coords)[:-1] for t in tris
                           if t.area > 1e-12]
             for k, pts in enumerate(pieces):
                 verts = np.concatenate([np.column_stack([pts, np.zeros(len(pts))]),

@@ -208,6 +208,12 @@ def test_bad_inputs_raise(mj):
         mj.PhysicsWorld(scene, period=0.003)
     with pytest.raises(av.AvError, match="tau_v"):
         mj.PhysicsWorld(scene, period=0.01, tau_v=0.001)
+    ok = mj.PhysicsWorld(scene, period=0.01)
+    assert set(ok.parameters) == {"tau_v", "tau_w"}
+    ok.set_parameter("tau_v", 0.05)
+    assert float(ok.tau_v) == 0.05
+    with pytest.raises(av.AvError, match="tau_v"):
+        ok.set_parameter("tau_v", 0.001)
     with pytest.raises(av.AvError, match="scene must be"):
         mj.PhysicsWorld("scene.xml")
     with pytest.raises(av.AvError, match="compiled already"):

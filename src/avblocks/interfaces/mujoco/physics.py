@@ -139,7 +139,9 @@ class PhysicsWorld(Block):
                 raise ParameterError("velocity-loop time constant too small for an "
                                      "explicit servo", block=_NAME, param=nm,
                                      expected=f">= {2 * m.opt.timestep:g} s", found=v)
-        self.tau_v, self.tau_w = float(tau_v), float(tau_w)
+            # numeric parameters: `--set`, Simulator.set_param("world.tau_v", ...)
+            self.declare_parameter(nm, float(v), (), bounds=(2 * m.opt.timestep, None),
+                                   unit="s", doc="ground-robot velocity servo time constant")
         self.groups = scene.dynamic_groups
         if not self.groups:
             raise ParameterError("the scene has no dynamic agent group", block=_NAME,

@@ -263,3 +263,17 @@ def test_no_backend_error_names_what_to_install():
                          env=env, timeout=120)
     assert "ERR" in out.stdout, out.stderr
     assert "libosmesa6" in out.stdout and "libegl1" in out.stdout
+
+
+def test_thrust_and_rotor_limits(mj):
+    """thrust_max caps the collective thrust: asking 2 m g with thrust_max =
+    1.5 m g accelerates up at 0.5 g (z = g t^2 / 4 after t)."""
+    scene = mj.Scene(ground=False)
+    scene.add_quadrotors("q", [[0.0, 0.0, 0.0]], thrust_max=1.5 * 9.81)
+    phys = mj.PhysicsWorld(scene, period=0.01)
+    assert np.all(phys.thrust_max == 1.5 * 9.81)
+    x = phys.initial_state()
+    for k in range(50):
+        x = phys.update(k * 0.01, x, {"wrench": np.array([[2 * 9.81, 0, 0, 0]])}, np)
+    z = phys.output(0.5, x, {}, np)["position"][0, 2]
+    assert z == pytest.approx(0.5 * 9.81 * 0.5 ** 2 / 2, rel=0.02)

@@ -140,7 +140,16 @@ class SceneCamera(Block):
         if self._renderer is None:
             mj = self.mj
             self._data = mj.MjData(self.model)
-            r = mj.Renderer(self.model, self.height, self.width)
+            try:
+                r = mj.Renderer(self.model, self.height, self.width)
+            except Exception as e:  # noqa: BLE001 - GL start failures vary by platform
+                from ._gl import INSTALL_HINT, MuJoCoUnavailable
+                raise MuJoCoUnavailable(
+                    f"MuJoCo cannot open an offscreen OpenGL context ({e})",
+                    block=_NAME,
+                    hint="if you imported mujoco before avblocks, set MUJOCO_GL=egl or "
+                         "MUJOCO_GL=osmesa before that import; else " + INSTALL_HINT
+                ) from None
             r.scene.flags[mj.mjtRndFlag.mjRND_SHADOW] = self.shadows
             r.scene.flags[mj.mjtRndFlag.mjRND_REFLECTION] = self.reflections
             self._renderer = r

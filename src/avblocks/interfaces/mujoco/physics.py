@@ -77,6 +77,8 @@ class PhysicsWorld(Block):
     Quadrotors (like :class:`~avblocks.vehicles.Quadrotor`):
 
     wrench : in, (N, 4) [N, N m, N m, N m] or rotors : in, (N, 4) [N]
+        (thrust clipped to [0, thrust_max], rotors to [0, rotor_max]; torque
+        limits of the model block are not applied)
     position : out, (N, 3); velocity : out, (N, 3), world frame;
     attitude : out, (N, 4) (w, x, y, z); rates : out, (N, 3), body frame;
     pose : out, (N, 3) (x, y, yaw)
@@ -167,8 +169,8 @@ class PhysicsWorld(Block):
             for k in ("mass", "inertia", "drag", "arm_length", "yaw_coeff", "frame", "input"):
                 setattr(self, k, g.params[k])
             self.gravity = float(-m.opt.gravity[2])
-            self.rotor_max = np.full(g.n, np.inf)
-            self.thrust_max = np.full(g.n, np.inf)
+            self.rotor_max = g.params["rotor_max"]
+            self.thrust_max = g.params["thrust_max"]
         elif len(self.groups) == 1:
             self.n = self.groups[0].n
         self.state_outputs = bool(state_outputs)
@@ -232,11 +234,11 @@ class PhysicsWorld(Block):
                 else:
                     c = np.asarray(u[p + "cmd"], float)
             elif prm["input"] == "rotors":
-                f = np.maximum(np.asarray(u[p + "rotors"], float), 0.0)
+                f = np.clip(np.asarray(u[p + "rotors"], float), 0.0, prm["rotor_max"][:, None])
                 c = rotors_to_wrench(f, prm["arm_length"], prm["yaw_coeff"], prm["frame"])
             else:
                 c = np.asarray(u[p + "wrench"], float).copy()
-                c[:, 0] = np.maximum(c[:, 0], 0.0)
+                c[:, 0] = np.clip(c[:, 0], 0.0, prm["thrust_max"])
             out.append(c)
         return out
 

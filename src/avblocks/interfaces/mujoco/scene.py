@@ -47,7 +47,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from ...core.errors import ParameterError
-from ...core.params import agent_array, poses, positive_scalar
+from ...core.params import agent_array, limit, poses, positive_scalar
 from ...vehicles.quadrotor import _ANGLES, mixer_matrix
 from ._gl import import_mujoco
 
@@ -232,10 +232,13 @@ class Scene:
     def add_quadrotors(self, name, position0, *, attitude0=(1.0, 0.0, 0.0, 0.0),
                        mass=1.0, inertia=(0.01, 0.01, 0.02), arm_length=0.2,
                        frame="x", yaw_coeff=0.016, drag=0.0, input="wrench",
+                       rotor_max=np.inf, thrust_max=np.inf,
                        color=(0.25, 0.25, 0.28), camera=None, kinematic=False):
         """N quadrotors with the airframe parameters of
         :class:`~avblocks.vehicles.Quadrotor`; ``camera`` a :class:`CameraMount`
-        (or True for the default downward camera). Returns the group."""
+        (or True for the default downward camera). ``rotor_max`` clips rotor
+        thrusts (``input="rotors"``), ``thrust_max`` the collective thrust
+        (``input="wrench"``), as in the model block. Returns the group."""
         self._new_group(name)
         p0 = poses(position0, _NAME, "position0", dim=3)
         n = p0.shape[0]
@@ -256,6 +259,8 @@ class Scene:
                "arm_length": agent_array(arm_length, n, _NAME, "arm_length", positive=True),
                "yaw_coeff": agent_array(yaw_coeff, n, _NAME, "yaw_coeff", positive=True),
                "drag": agent_array(drag, n, _NAME, "drag", (3,), nonnegative=True),
+               "rotor_max": limit(rotor_max, n, _NAME, "rotor_max"),
+               "thrust_max": limit(thrust_max, n, _NAME, "thrust_max"),
                "frame": frame, "input": input, "color": _rgba(color, "color")}
         g = Group(name, "quad", n, [f"{name}{i}" for i in range(n)], bool(kinematic),
                   prm, camera)
@@ -303,7 +308,8 @@ class Scene:
                        "inertia": m.body_inertia[ids].copy()}
                 if kind == "quad":
                     prm.update(arm_length=np.full(n, 0.2), yaw_coeff=np.full(n, 0.016),
-                               drag=np.zeros((n, 3)), frame="x", input="wrench")
+                               drag=np.zeros((n, 3)), frame="x", input="wrench",
+                               rotor_max=np.full(n, np.inf), thrust_max=np.full(n, np.inf))
                 else:
                     prm.update(kind="unicycle", wheel_radius=0.05, track_width=0.3)
                 s.groups[gname] = Group(gname, kind, n, list(bodies), kin, prm)

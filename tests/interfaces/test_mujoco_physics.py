@@ -277,3 +277,13 @@ def test_thrust_and_rotor_limits(mj):
         x = phys.update(k * 0.01, x, {"wrench": np.array([[2 * 9.81, 0, 0, 0]])}, np)
     z = phys.output(0.5, x, {}, np)["position"][0, 2]
     assert z == pytest.approx(0.5 * 9.81 * 0.5 ** 2 / 2, rel=0.02)
+
+
+@pytest.mark.jax
+def test_compiled_backend_refuses_by_name(mj):
+    pytest.importorskip("jax")
+    scene = mj.Scene()
+    scene.add_ground_robots("fleet", POSE0)
+    with pytest.raises(av.AvError, match="fleet"):
+        av.simulate(_p2p_diagram(mj.PhysicsWorld(scene)), 0.1, dt=0.01, backend="jax",
+                    progress=False)

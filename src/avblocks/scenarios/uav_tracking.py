@@ -89,6 +89,9 @@ class TrackingController(Block):
     ``v_z = k_z (altitude - x_z)``. (Kalata 1984, the alpha-beta tracker.)
     """
 
+    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
+    traceable = False
+
     update_uses_outputs = True
 
     def __init__(self, n, period, *, k_p=1.2, k_z=1.0, altitude=4.0, v_max=3.0,

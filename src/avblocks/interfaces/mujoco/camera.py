@@ -81,6 +81,9 @@ class SceneCamera(Block):
     K : (C, 3, 3) intrinsic matrices (:meth:`camera_matrix`).
     """
 
+    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
+    traceable = False
+
     def __init__(self, scene, cameras, *, width=320, height=240, period=0.1,
                  offset=0.0, shadows=False, reflections=False):
         super().__init__()

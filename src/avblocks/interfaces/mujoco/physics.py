@@ -120,6 +120,9 @@ class PhysicsWorld(Block):
     (1, 3)
     """
 
+    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
+    traceable = False
+
     def __init__(self, scene, period=0.01, *, tau_v=0.02, tau_w=0.02, prefix=None,
                  state_outputs=False):
         super().__init__()

@@ -59,6 +59,9 @@ class GroundPointEstimator(Block):
     The sample time is inherited (the tracker's, i.e. the camera's).
     """
 
+    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
+    traceable = False
+
     update_uses_outputs = True
 
     def __init__(self, n, K, mount_pos, mount_rot, *, z0=0.0, point0=(0.0, 0.0, 0.0)):

@@ -152,6 +152,9 @@ class ColorBlobTracker(Block):
     ([[12.5, 6.5]], [24.0], [True])
     """
 
+    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, height, width, *, lower=(170, 120, 70),
                  upper=(10, 255, 255), min_area=4, open_px=0):
         super().__init__()

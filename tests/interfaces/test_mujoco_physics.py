@@ -256,7 +256,9 @@ def test_no_backend_error_names_what_to_install():
         "import os; os.environ.pop('MUJOCO_GL', None)\n"
         "from avblocks.interfaces.mujoco import _gl\n"
         "_gl.BACKENDS = ('no-such-gl',)\n"
-        "try:\n    _gl.choose_backend()\nexcept _gl.MuJoCoUnavailable as e:\n"
+        "m = _gl.import_mujoco()      # physics alone: imports fine\n"
+        "m.MjModel.from_xml_string('<mujoco/>')\n"
+        "try:\n    _gl.import_mujoco(render=True)\nexcept _gl.MuJoCoUnavailable as e:\n"
         "    print('ERR', e)\n")
     env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,

@@ -9,7 +9,8 @@ display the default (GLFW) cannot render. :func:`import_mujoco` therefore
    context and renders one frame wins, and is written to ``MUJOCO_GL``
    (and ``PYOPENGL_PLATFORM``) of this process;
 3. raises :class:`MuJoCoUnavailable` naming what to install when neither
-   works, or when mujoco itself is missing.
+   works (only when something renders: physics alone needs no OpenGL), or
+   when mujoco itself is missing.
 
 The probe costs one short child process (~1 s) per Python process, once.
 """
@@ -47,6 +48,7 @@ class MuJoCoUnavailable(AvError, ImportError):
 
 
 _chosen = None
+_failed = None          # the MuJoCoUnavailable of a failed choice, if any
 
 
 def _env_for(backend):
@@ -92,8 +94,14 @@ def choose_backend():
                             f"(tried {', '.join(BACKENDS)})", hint=INSTALL_HINT)
 
 
-def import_mujoco():
-    """``import mujoco`` after choosing a headless backend; clear errors."""
+def import_mujoco(render=False):
+    """``import mujoco`` after choosing a headless backend; clear errors.
+
+    Physics alone needs no OpenGL: with ``render=False`` a missing backend
+    is remembered, not raised (MuJoCo still imports); ``render=True`` (the
+    camera block) raises :class:`MuJoCoUnavailable` then.
+    """
+    global _failed
     try:
         import importlib.util
         if importlib.util.find_spec("mujoco") is None:
@@ -101,6 +109,14 @@ def import_mujoco():
     except ImportError:
         raise MuJoCoUnavailable("the mujoco package is not installed",
                                 hint="pip install 'avblocks[mujoco]'") from None
-    choose_backend()
+    if _failed is not None and render:
+        raise _failed
+    if _failed is None:
+        try:
+            choose_backend()
+        except MuJoCoUnavailable as e:
+            _failed = e
+            if render:
+                raise
     import mujoco
     return mujoco

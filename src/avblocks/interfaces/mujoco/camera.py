@@ -90,7 +90,7 @@ class SceneCamera(Block):
         if not isinstance(scene, Scene):
             raise ParameterError("scene must be an avblocks.interfaces.mujoco.Scene",
                                  block=_NAME, param="scene", found=type(scene).__name__)
-        self.mj = import_mujoco()
+        self.mj = import_mujoco(render=True)
         self.scene = scene
         m = self.model = scene.model
         allc = scene.camera_names()

@@ -264,6 +264,11 @@ def _guarded_run(args, guard, load_any, trajectory_png):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
+    outcome = None
+    if has_samples and interrupted is None and failed is None:
+        from .scenarios._hooks import run_report
+        extra_files, outcome = run_report(args.target, res, out)
+        files += extra_files
     if interrupted is None and guard.signum is not None:
         interrupted = guard.signal_name
     summary = {
@@ -308,6 +313,8 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         print(_pace_report(res))
     for f in files:
         print(f"wrote         {f}")
+    if outcome:
+        print(f"outcome       {outcome}")
     sys.stdout.flush()
     for e in summary.get("on_stop_errors", []):
         say(f"avblocks: error while stopping: {e}")

@@ -5,6 +5,7 @@
     avblocks run my_diagram.py --set n=50
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
+    avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 """
 
@@ -261,6 +262,8 @@ def build_parser():
     dg.add_argument("-o", "--output")
     dg.add_argument("--set", action="append", metavar="KEY=VALUE")
     dg.set_defaults(fn=cmd_diagram)
+    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
+    add_sweep_parser(sub)
     return ap
 
 

@@ -122,9 +122,12 @@ def client_for(scheduler=None, workers=None, dashboard=False):
     n = int(workers) if workers is not None else (os.cpu_count() or 1)
     if n < 1:
         raise SweepError("workers must be >= 1", found=workers)
+    # the scheduler's HTTP server (health checks; the dashboard only when asked)
+    # on a free loopback port, never a fixed one other programs may hold
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host="127.0.0.1",
-                           dashboard_address="127.0.0.1:0" if dashboard else None,
+                           host="127.0.0.1", dashboard_address=None,
+                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0",
+                                             "dashboard": bool(dashboard)},
                            silence_logs=logging.ERROR)
     client = Client(cluster)
     try:

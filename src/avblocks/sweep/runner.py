@@ -94,6 +94,7 @@ def client_for(scheduler=None, workers=None, dashboard=False):
     (default: one per core); an address string connects to a running
     scheduler; a Client is used as it is."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster
     except ImportError as e:  # pragma: no cover - the extra is missing
         raise SweepError("sweeps need Dask: pip install 'avblocks[sweep]'") from e
@@ -124,11 +125,14 @@ def client_for(scheduler=None, workers=None, dashboard=False):
         raise SweepError("workers must be >= 1", found=workers)
     # the scheduler's HTTP server (health checks; the dashboard only when asked)
     # on a free loopback port, never a fixed one other programs may hold
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None,
-                           scheduler_kwargs={"dashboard_address": "127.0.0.1:0",
-                                             "dashboard": bool(dashboard)},
-                           silence_logs=logging.ERROR)
+    # a case is one long Python loop: the workers' statistical profiler (a
+    # stack sample every 10 ms) only costs CPU here
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               host="127.0.0.1", dashboard_address=None,
+                               scheduler_kwargs={"dashboard_address": "127.0.0.1:0",
+                                                 "dashboard": bool(dashboard)},
+                               silence_logs=logging.ERROR)
     client = Client(cluster)
     try:
         yield client

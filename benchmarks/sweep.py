@@ -13,8 +13,10 @@ Each measurement runs in a fresh Python process so its peak RSS
   (what makes batch runners run out of memory);
 - ``dask``: ``av.sweep`` on a LocalCluster of 2 worker processes, each case's
   metrics and decimated pose log written by the workers to the Zarr store;
-- ``jax``: every seed of a grid point as one vmapped ensemble (needs
-  ``avblocks.compile`` with ``ensemble``; reported as n/a when absent).
+- ``jax``: in this one process, the seeds of each grid point as one vmapped
+  ensemble (``avblocks.compile(...).ensemble``, float64, CPU), 4 ensembles;
+- ``dask-ensemble``: ``av.sweep(..., ensemble=True)`` on 2 worker processes
+  (one task per grid point).
 
 The client's figure includes the Dask scheduler, which a LocalCluster runs
 inside the client process.
@@ -62,13 +64,24 @@ def run_one(mode, n_cases, t_final, agents, workdir):
         av.sweep("waypoints", grid=grid, seeds=seeds, metrics=metrics, out=out,
                  fixed=fixed, workers=2, log=["fleet.pose"], log_every=10,
                  progress=False, summary=False, plot=False)
+    elif mode == "dask-ensemble":
+        out = os.path.join(workdir, "bench.zarr")
+        av.sweep("waypoints", grid=grid, seeds=seeds, metrics=metrics, out=out,
+                 fixed=fixed, workers=2, ensemble=True, progress=False, summary=False,
+                 plot=False)
     elif mode == "jax":
-        runner = getattr(av, "compile", None)
-        if runner is None:
+        if getattr(av, "compile", None) is None:
             return {"mode": mode, "cases": n_cases, "wall_s": None, "peak_mib": None,
                     "note": "avblocks.compile not available"}
-        from avblocks.sweep.ensemble import run_grid_point_ensembles
-        run_grid_point_ensembles("waypoints", grid, seeds, fixed, metrics)
+        from avblocks.sweep import make_spec
+        from avblocks.sweep.ensemble import compute_group
+        from avblocks.sweep.runner import task_groups
+        spec, _ = make_spec("waypoints", grid, seeds, metrics, fixed=fixed, ensemble=True)
+        for group in task_groups(spec, range(spec.n_cases)):   # one per grid point
+            out = compute_group(spec, group)
+            bad = [v for v in out.values() if isinstance(v, BaseException)]
+            if bad:
+                raise bad[0]
     wall = time.perf_counter() - t0
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"mode": mode, "cases": len(SPEEDS) * seeds, "wall_s": round(wall, 2),
@@ -113,7 +126,7 @@ def main():
         print(json.dumps(run_one(a.one, a.cases, a.t_final, a.agents, a.workdir)))
         return
     n, tf = (16, 5.0) if a.quick else (a.cases, a.t_final)
-    rows = [measure(m, n, tf, a.agents) for m in ("serial", "dask", "jax")]
+    rows = [measure(m, n, tf, a.agents) for m in ("serial", "dask", "jax", "dask-ensemble")]
     table(rows, f"{n} cases of waypoints ({a.agents} agents, {tf:g} s at dt = 10 ms, "
                 f"RK4), 2 worker processes")
     mem = []

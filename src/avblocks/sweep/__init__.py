@@ -73,17 +73,19 @@ def _check_first_case(spec: Spec):
     try:
         d, sim = spec.build(0)
         params = sim.get("params") or {}
-        if params:
-            compiled = d.build()
-            for path in params:
-                compiled.param_index(path)
+        compiled = d.build()
+        for path in params:
+            compiled.param_index(path)
+        if spec.data.get("ensemble"):
+            from .ensemble import check_traceable
+            check_traceable(d)
     except AvError as e:
         raise SweepError(f"the first case ({spec.label(0)}) cannot be built: {e}") \
             from None
 
 
 def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=None,
-              log_every=1) -> tuple[Spec, dict]:
+              log_every=1, ensemble=False) -> tuple[Spec, dict]:
     """The :class:`Spec` of a sweep and its custom metric callables."""
     src = scenario_source(scenario)
     g = normalise_grid(grid)
@@ -105,7 +107,7 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
         raise SweepError("log_every must be >= 1", found=log_every)
     data = {"version": SPEC_VERSION, "scenario": src, "grid": g,
             "seeds": normalise_seeds(seeds), "fixed": fx, "metrics": names,
-            "log": log, "log_every": int(log_every)}
+            "log": log, "log_every": int(log_every), "ensemble": bool(ensemble)}
     data["token"] = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
     blob = pickle_callables(custom) if custom else ""
     data["metrics_pickle"] = blob
@@ -113,7 +115,7 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
 
 
 def _same_cases(a: dict, b: dict):
-    keys = ("scenario", "grid", "seeds", "fixed", "metrics", "log", "log_every")
+    keys = ("scenario", "grid", "seeds", "fixed", "metrics", "log", "log_every", "ensemble")
     diff = [k for k in keys if json.dumps(a.get(k), sort_keys=True) !=
             json.dumps(b.get(k), sort_keys=True)]
     return diff
@@ -122,7 +124,7 @@ def _same_cases(a: dict, b: dict):
 def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
               fixed=None, scheduler=None, workers=None, log=None, log_every=1,
               resume=False, overwrite=False, progress=None, plot=True, summary=True,
-              dashboard=False) -> Study:
+              dashboard=False, ensemble=False) -> Study:
     """Run ``scenario`` over ``grid`` x ``seeds`` on Dask; results in ``out``.
 
     Parameters
@@ -167,6 +169,12 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
     dashboard : bool
         Serve the Dask dashboard of the local cluster on 127.0.0.1 (a free
         port; ``client.dashboard_link``).
+    ensemble : bool
+        One task per grid point runs all its seeds as one vmapped JAX
+        ensemble (``avblocks.compile(...).ensemble``) instead of one NumPy
+        run per case. Needs a traceable diagram (extra ``[jax]``); metrics
+        then agree with the NumPy runs to round-off. See docs/sweeps.md for
+        when it pays.
 
     Returns
     -------
@@ -175,7 +183,7 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
     from . import store
     from .runner import client_for, execute
     spec, _custom = make_spec(scenario, grid, seeds, metrics, fixed=fixed, log=log,
-                              log_every=log_every)
+                              log_every=log_every, ensemble=ensemble)
     exists = store.store_exists(out)
     if exists and resume:
         root = store.open_store(out)

@@ -72,6 +72,9 @@ def add_parser(sub):
                     help="also store this logged port per case (repeatable; 'all')")
     sw.add_argument("--log-every", type=int, default=1, dest="log_every",
                     help="decimation of the stored logs")
+    sw.add_argument("--ensemble", action="store_true",
+                    help="run the seeds of each grid point as one vmapped JAX ensemble "
+                         "(traceable scenarios, e.g. waypoints)")
     sw.add_argument("--resume", metavar="STORE", help="finish the sweep in STORE")
     sw.add_argument("--retry-failed", action="store_true", dest="retry_failed",
                     help="with --resume: also rerun the failed cases")
@@ -109,6 +112,7 @@ def cmd_sweep(args):
             study = run_sweep(args.target, grid=parse_grid(args.grid), seeds=args.seeds,
                               metrics=args.metric, out=out, fixed=_parse_sets(args.set),
                               log=log, log_every=args.log_every, overwrite=args.overwrite,
+                              ensemble=args.ensemble,
                               **common)
     except KeyboardInterrupt:
         print(f"avblocks: interrupted; finished cases are in {out}: "

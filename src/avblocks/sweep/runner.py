@@ -86,6 +86,28 @@ def run_case(spec_data: dict, case_id: int, out: str) -> dict:
             "error": error.splitlines()[0][:200] if error else ""}
 
 
+def run_cases(spec_data: dict, case_ids, out: str) -> list:
+    """The Dask task: one case (NumPy) or the seeds of one grid point
+    (``ensemble``: one vmapped JAX run). Returns their records."""
+    if spec_data.get("ensemble"):
+        from .ensemble import run_group
+        return run_group(spec_data, list(case_ids), out)
+    return [run_case(spec_data, cid, out) for cid in case_ids]
+
+
+def task_groups(spec: Spec, todo) -> list:
+    """Case ids per task: one each, or the cases of a grid point together
+    when the sweep runs seeds as ensembles."""
+    todo = [int(c) for c in todo]
+    if not spec.data.get("ensemble"):
+        return [[c] for c in todo]
+    groups: dict = {}
+    nseeds = len(spec.seeds)
+    for c in todo:
+        groups.setdefault(c // nseeds, []).append(c)
+    return list(groups.values())
+
+
 # ------------------------------------------------------------------ clients
 @contextlib.contextmanager
 def client_for(scheduler=None, workers=None, dashboard=False):
@@ -175,11 +197,12 @@ class _Progress:
 def execute(spec: Spec, todo, out, client, progress=None, on_result=None) -> dict:
     """Run the cases ``todo`` on ``client``; returns counts and wall time."""
     from dask.distributed import as_completed
-    todo = list(todo)
+    groups = task_groups(spec, todo)
+    total = sum(len(g) for g in groups)
     t0 = time.perf_counter()
-    bar = _Progress(len(todo), progress)
-    counts = {"done": 0, "failed": 0, "ran": len(todo)}
-    if not todo:
+    bar = _Progress(total, progress)
+    counts = {"done": 0, "failed": 0, "ran": total}
+    if not groups:
         bar.close()
         counts["wall_s"] = 0.0
         return counts
@@ -187,40 +210,44 @@ def execute(spec: Spec, todo, out, client, progress=None, on_result=None) -> dic
     threads = sum(client.nthreads().values()) or 1
     window = max(4, 3 * threads)
     inflight = {}
-    it = iter(todo)
+    it = iter(groups)
 
-    def submit(cid):
-        fut = client.submit(run_case, spec_f, int(cid), str(out), pure=False,
-                            key=f"avblocks-case-{spec.data['token']}-{int(cid)}-"
+    def submit(group):
+        fut = client.submit(run_cases, spec_f, group, str(out), pure=False,
+                            key=f"avblocks-cases-{spec.data['token']}-{group[0]}-"
                                 f"{time.monotonic_ns()}")
-        inflight[fut.key] = int(cid)
+        inflight[fut.key] = group
         return fut
 
-    ac = as_completed([submit(c) for c in islice(it, window)])
+    ac = as_completed([submit(g) for g in islice(it, window)])
     try:
         for fut in ac:
-            cid = inflight.pop(fut.key)
+            group = inflight.pop(fut.key)
             try:
-                rec = fut.result()
+                recs = fut.result()
             except Exception as e:  # noqa: BLE001 - KilledWorker and the like
                 text = store.failure_text(e)
-                values, seed = spec.case(cid)
-                store.write_case(out, cid, {
-                    "status": "failed", "error": text, "wall_s": math.nan,
-                    "seed": int(seed), "values": {k: values[k] for k in spec.grid},
-                    "worker": "client"})
-                rec = {"case": cid, "status": "failed", "error": text.splitlines()[0]}
+                recs = []
+                for cid in group:
+                    values, seed = spec.case(cid)
+                    store.write_case(out, cid, {
+                        "status": "failed", "error": text, "wall_s": math.nan,
+                        "seed": int(seed), "values": {k: values[k] for k in spec.grid},
+                        "worker": "client"})
+                    recs.append({"case": cid, "status": "failed",
+                                 "error": text.splitlines()[0]})
             fut.release()
-            counts[rec["status"]] += 1
-            bar.update(rec["status"])
-            if on_result is not None:
-                on_result(rec)
+            for rec in recs:
+                counts[rec["status"]] += 1
+                bar.update(rec["status"])
+                if on_result is not None:
+                    on_result(rec)
             nxt = next(it, None)
             if nxt is not None:
                 ac.add(submit(nxt))
     finally:
         bar.close()
-        for f in ac.futures if hasattr(ac, "futures") else ():
+        for f in list(getattr(ac, "futures", ())):
             f.cancel()
     counts["wall_s"] = time.perf_counter() - t0
     return counts

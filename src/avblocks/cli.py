@@ -6,6 +6,7 @@
     avblocks run waypoints --backend jax
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
+    avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 """
 
@@ -220,6 +221,8 @@ def build_parser():
     dg.add_argument("-o", "--output")
     dg.add_argument("--set", action="append", metavar="KEY=VALUE")
     dg.set_defaults(fn=cmd_diagram)
+    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
+    add_sweep_parser(sub)
     return ap
 
 

@@ -312,7 +312,7 @@ def _fd(fun, x, h):
 def test_gradients_match_central_differences_of_the_numpy_engine():
     d, p0 = goto(n=3)
     goal = d.build().blocks[d.build().index("law")].goal
-    kw = dict(t_final=2.0, dt=0.01, solver="rk4", log=["fleet.pose"], log_every=10)
+    kw = dict(t_final=1.0, dt=0.01, solver="rk4", log=["fleet.pose"], log_every=10)
 
     def cost_np(res):
         P = res["fleet.pose"]

@@ -200,9 +200,9 @@ def jax_main(args):
         p = time_it(plain_numpy, n, psteps, 1 if n > 10000 else 2) * STEPS / psteps
         rows.append((n, j, m, e, p, jsteps < STEPS, esteps < STEPS))
     # ensemble: 256 runs x 100 agents x 3000 steps, each run its own start poses
-    R, n = 256, 100
-    d, fleet = diagram(n)
-    p0s = np.stack([setup(n, seed=s)[0] for s in range(R)])
+    R, na = 256, 100
+    d, fleet = diagram(na)
+    p0s = np.stack([setup(na, seed=s)[0] for s in range(R)])
     runner = av.compile(d, T_FINAL, dt=DT, solver="euler", log=[fleet.pose],
                         log_every=log_every)
     runner.ensemble(x0={"fleet.pose": p0s[:8]})                  # compile (R = 8)
@@ -233,7 +233,7 @@ def jax_main(args):
         print(f"| {n} | {j:.3g}{'*' if jest else ''} | {m:.3g} | {j / m:.2f} | "
               f"{e:.3g}{'*' if eest else ''} | {p:.3g}{'*' if eest else ''} | {e / j:.1f} "
               f"| {T_FINAL / j:.0f} |")
-    print(f"\nensemble {R} runs x {n} agents x {STEPS} steps: {ens_wall:.2f} s "
+    print(f"\nensemble {R} runs x {na} agents x {STEPS} steps: {ens_wall:.2f} s "
           f"(first call {ens_first:.2f} s, {ens.meta['chunks']} chunk(s)); "
           f"{R} sequential NumPy runs: {seq:.1f} s* ({seq_runs} timed, scaled); "
           f"speed-up {seq / ens_wall:.0f}x; run {seq_runs - 1} agrees to {ens_agree:.1e}")

@@ -114,6 +114,9 @@ class Coverage(Block):
     NumPy + shapely only. Equations, references: module docstring.
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, polygon, *, gain=1.0, period=None):
         super().__init__()
         self.n = n = int(n)

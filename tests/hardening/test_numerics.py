@@ -79,3 +79,33 @@ def test_random_qps_against_quadprog_and_cvxopt(dim):
         np.testing.assert_allclose(x, xq, atol=1e-8, err_msg=f"trial {trial}")
         if trial % 10 == 0:
             np.testing.assert_allclose(x, qp_cvxopt(u0, a, b), atol=1e-6)
+
+
+# rotor positions (unit arm, body x forward, y left) and spin (+1: counter-
+# clockwise seen from above) typed from the airframes' own documentation
+_AIRFRAMES = {
+    "x": ([(1, 1), (-1, 1), (-1, -1), (1, -1)], [+1, -1, +1, -1]),
+    "crazyflie": ([(1, -1), (-1, -1), (-1, 1), (1, 1)], [+1, -1, +1, -1]),
+    "px4": ([(1, -1), (-1, 1), (1, 1), (-1, -1)], [+1, +1, -1, -1]),
+}
+
+
+@pytest.mark.parametrize("frame", sorted(_AIRFRAMES))
+def test_named_airframes_match_their_motor_layout(frame):
+    from avblocks.vehicles.quadrotor import rotors_to_wrench, wrench_to_rotors
+    pos, ccw = _AIRFRAMES[frame]
+    pos = np.array(pos, float) / np.sqrt(2)
+    arm, km = 0.046, 0.006
+    f = np.random.default_rng(3).uniform(0, 1, (5, 4))
+    # truth: r x F for each rotor, plus the drag reaction -ccw * km * f about z
+    tau = np.zeros((5, 3))
+    for i in range(4):
+        r = np.array([*(arm * pos[i]), 0.0])
+        F = np.zeros((5, 3))
+        F[:, 2] = f[:, i]
+        tau += np.cross(r, F)
+        tau[:, 2] -= ccw[i] * km * f[:, i]
+    w = rotors_to_wrench(f, arm, km, frame)
+    np.testing.assert_allclose(w[:, 0], f.sum(1), atol=1e-12)
+    np.testing.assert_allclose(w[:, 1:], tau, atol=1e-12)
+    np.testing.assert_allclose(wrench_to_rotors(w, arm, km, frame), f, atol=1e-12)

@@ -181,7 +181,12 @@ def _simulate_property(data):
             y = res["i.y"][:, :, 0]
             np.testing.assert_allclose(y, np.broadcast_to((res.t - t0)[:, None], y.shape),
                                        atol=1e-6)
-        assert res.t[-1] == pytest.approx(float(kw["t_final"]))
+        # the run reaches t_final exactly; the log holds every log_every-th step
+        assert res.meta["t_final"] == pytest.approx(float(kw["t_final"]))
+        every = res.meta["log_every"]
+        assert len(res.t) == res.meta["steps"] // every + 1
+        assert res.t[-1] == pytest.approx(t0 + (res.meta["steps"] // every) * every
+                                          * res.meta["dt"])
 
 
 @FAST

@@ -32,7 +32,7 @@ from .core.errors import (
 
 __version__ = "0.1.0"
 
-_LAZY = ("viz", "scenarios")
+_LAZY = ("viz", "scenarios", "sweep")
 
 
 def __getattr__(name):
@@ -44,7 +44,7 @@ def __getattr__(name):
 
 __all__ = [
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
-    "scenarios",
+    "scenarios", "sweep",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
     "WiringError", "ShapeError",

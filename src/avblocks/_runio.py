@@ -249,6 +249,11 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         sim["realtime"] = args.realtime
     if args.t_final is not None:
         sim["t_final"] = args.t_final
+    if getattr(args, "backend", None) is not None:   # compiled: avblocks.core.compiled
+        sim["backend"] = args.backend
+    if getattr(args, "robots", None):  # on ROS 2 robots (extra [ros2])
+        from .interfaces.ros2.cli import apply as _robots
+        _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
     out = prepare_output(args.out or Path("avblocks-out") / safe_name(name))
     movie_path = None
@@ -303,6 +308,11 @@ def _guarded_run(args, guard, load_any, trajectory_png):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
+    outcome = None
+    if has_samples and interrupted is None and failed is None:
+        from .scenarios._hooks import run_report
+        extra_files, outcome = run_report(args.target, res, out)
+        files += extra_files
     if interrupted is None and guard.signum is not None:
         interrupted = guard.signal_name
     summary = {
@@ -329,6 +339,7 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
     if res is not None and "overruns" in res.meta:
         summary["overruns"] = res.meta["overruns"]
+        summary["max_lateness_s"] = res.meta.get("max_lateness")
     try:
         write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
     except AvError as e:
@@ -341,8 +352,13 @@ def _guarded_run(args, guard, load_any, trajectory_png):
     print(f"wall time     {wall:.3g} s")
     if summary["realtime_factor"] is not None:
         print(f"real-time x   {summary['realtime_factor']}")
+    if res is not None and "overruns" in res.meta:
+        from .interfaces.ros2.cli import report as _pace_report
+        print(_pace_report(res))
     for f in files:
         print(f"wrote         {f}")
+    if outcome:
+        print(f"outcome       {outcome}")
     sys.stdout.flush()
     for e in summary.get("on_stop_errors", []):
         say(f"avblocks: error while stopping: {e}")

@@ -2,9 +2,11 @@
 
     avblocks run waypoints --set agents=300 --out out/
     avblocks run my_scenario.yaml
-    avblocks run my_diagram.py --set n=50
+    avblocks run my_diagram.py --set n=50 --set drive.gain=2.0
+    avblocks run waypoints --backend jax
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
+    avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 """
 
@@ -41,6 +43,8 @@ def _from_namespace(ns, overrides, source):
     sim = dict(ns.get("simulation") or {})
     sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
                 if k.startswith("simulation.")}
+    from .scenarios._numeric import resolve, split_overrides
+    overrides, numeric = split_overrides(overrides)     # block.param keys
     params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
     if "make_diagram" in ns:
         import inspect
@@ -73,6 +77,8 @@ def _from_namespace(ns, overrides, source):
         raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
                             file=source, hint=f"found {type(d).__name__}")
     sim.update(sim_over)
+    if numeric:
+        sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
@@ -194,13 +200,19 @@ def build_parser():
     r = sub.add_parser("run", help="run a built-in scenario, a YAML/TOML file or a .py file")
     r.add_argument("target", help="built-in name (see `avblocks list`) or a file")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a parameter (repeatable), e.g. --set agents=300")
+                   help="override a parameter (repeatable), e.g. --set agents=300, "
+                        "or a block's numeric parameter: --set drive.gain=2.0")
     r.add_argument("--out", help="output folder (default avblocks-out/<name>)")
     r.add_argument("--movie", help="also write a movie (.mp4 or .gif)")
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--backend", choices=("numpy", "jax"),
+                   help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)
+    from .interfaces.ros2.cli import add_commands, add_run_options
+    add_run_options(r)
+    add_commands(sub)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")
     li.set_defaults(fn=cmd_list)
@@ -209,6 +221,8 @@ def build_parser():
     dg.add_argument("-o", "--output")
     dg.add_argument("--set", action="append", metavar="KEY=VALUE")
     dg.set_defaults(fn=cmd_diagram)
+    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
+    add_sweep_parser(sub)
     return ap
 
 

@@ -216,14 +216,16 @@ class Simulator:
         self.k = 0
         self._queue = []
         self._Yprev = None
+        # on_start first: an interface block (robots) connects there and may
+        # set its initial state from what it receives (the robots' poses)
+        for i in self._side:
+            self.compiled.blocks[i].on_start()
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
         self._check_declared()
         self._check(self.t0)
         self.check_outputs(self.t0)
-        for i in self._side:
-            self.compiled.blocks[i].on_start()
         self._side_effects()
         return self
 
@@ -686,13 +688,15 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
         try:
             sim.init()
             record()
+            # pace from the end of init: on_start may connect to robots first
+            pace0 = _time.perf_counter()
             tick = max(1, nsteps // 100)
             for k in range(nsteps):
                 sim.step()
                 if (k + 1) % log_every == 0:
                     record()
                 if pace is not None:
-                    target = wall0 + (k + 1) * sim.dt / pace
+                    target = pace0 + (k + 1) * sim.dt / pace
                     now = _time.perf_counter()
                     if now < target:
                         _time.sleep(target - now)

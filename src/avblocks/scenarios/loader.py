@@ -18,11 +18,15 @@ A scenario file has five sections::
       - [fleet.pose, drive.pose]
       - [drive.cmd, fleet.cmd]
     simulation: {t_final: 60, dt: 0.01, solver: rk4, log: [fleet.pose], seed: $seed}
+    params: {drive.gain: 2.0}   # optional: numeric block parameters (block.param)
     movie: {trail: 5.0}    # optional: options for `avblocks run ... --movie`
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), or a one-key mapping naming one of
 the generators in :data:`GENERATORS`. Nothing in the file is executed.
+
+``params`` sets numeric parameters of the built blocks by dotted path (see
+:mod:`avblocks.scenarios._numeric`); ``--set drive.gain=3`` overrides them.
 """
 
 from __future__ import annotations
@@ -38,10 +42,11 @@ from ..core.diagram import Diagram
 from ..core.errors import AvError, ParameterError, ScenarioError
 from ..core.params import count as _count
 from ..core.params import integer as _integer
+from ._numeric import is_numeric_key, resolve
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie"}
+             "movie", "params"}
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: Block arguments (and movie options) naming files a scenario writes: they
 #: must stay inside the output folder.
@@ -389,13 +394,15 @@ class Scenario:
                                         file=self.source, entry=f"--set {key}",
                                         hint=f"known: {sorted(_SIM_KEYS)}")
                 data.setdefault("simulation", {})[sub] = val
+            elif is_numeric_key(key):          # block.param: checked on build
+                data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
             else:
                 raise ScenarioError(f"unknown parameter '{key}'", file=self.source,
                                     entry=f"--set {key}",
                                     hint=f"this scenario's parameters: {sorted(params)} "
-                                         "(or simulation.t_final, simulation.dt, ...)")
+                                         "(or simulation.t_final, block.param, ...)")
         data["parameters"] = params
         return Scenario(data, self.source)
 
@@ -427,6 +434,9 @@ class Scenario:
         if not isinstance(sim, dict):
             raise ScenarioError("'simulation' must be a mapping", file=self.source,
                                 entry="simulation")
+        if not isinstance(d.get("params") or {}, dict):
+            raise ScenarioError("'params' must map 'block.param' to values",
+                                file=self.source, entry="params")
         bad = set(sim) - _SIM_KEYS
         if bad:
             raise ScenarioError(f"unknown simulation setting(s) {sorted(bad)}",
@@ -554,6 +564,10 @@ class Scenario:
                                 file=self.source, entry="blocks") from None
         sim = {k: self._value(v, f"simulation.{k}")
                for k, v in (self.data.get("simulation") or {}).items()}
+        numeric = {k: self._value(v, f"params.{k}")
+                   for k, v in (self.data.get("params") or {}).items()}
+        if numeric:
+            sim["params"] = resolve(d, numeric, self.source, "params")
         return d, sim
 
 

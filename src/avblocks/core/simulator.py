@@ -562,6 +562,10 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+#: Most major steps one run may take (beyond it: refused, not hung).
+MAX_STEPS = 10**10
+
+
 def _seed(seed):
     from .params import integer
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
@@ -591,6 +595,11 @@ def whole_steps(t0, t_final, dt):
         raise ParameterError("t_final must be >= t0", param="t_final",
                              expected=f">= {t0:g}", found=t_final)
     steps = span / dt
+    if not steps <= MAX_STEPS:
+        raise ParameterError(f"the run would take {steps:.3g} major steps",
+                             param="dt", expected=f"<= {MAX_STEPS:.0e} steps",
+                             found=f"(t_final - t0) / dt = {steps:.3g}",
+                             hint="a larger dt or a shorter run")
     n = int(round(steps))
     if abs(steps - n) > 1e-9 * max(1.0, steps):
         lo, hi = math.floor(steps), math.ceil(steps)
@@ -654,8 +663,13 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
             expected=f"<= {max_log_bytes / 1e9:.2f} GB",
             found=f"{len(specs)} signals x {nlog} samples",
             hint="log fewer signals or decimate with log_every")
-    bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
-    tlog = np.empty(nlog)
+    try:
+        bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
+        tlog = np.empty(nlog)
+    except (MemoryError, ValueError):
+        raise ParameterError(f"the log ({need / 1e9:.3g} GB) does not fit in memory",
+                             param="log", hint="log fewer signals or decimate with "
+                                                "log_every") from None
     meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": sim.seed,
             "t0": sim.t0, "t_final": sim.t0 + nsteps * sim.dt,
             "log_every": log_every, "steps": nsteps,

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import heapq
 import json
-import math
 import threading
 import time
 

@@ -336,3 +336,13 @@ def test_ensemble_sweep_matches_numpy_runs(client, serial, tmp_path):
     with pytest.raises(SweepError, match="traceable"):
         av.sweep("formation", grid={"gain": [1.0]}, fixed={"followers": 1},
                  out=str(tmp_path / "no.zarr"), scheduler=client, ensemble=True)
+
+
+def test_progress_is_silent_off_a_terminal(capsys):
+    from avblocks.sweep.runner import _Progress
+    bar = _Progress(5, None)              # pytest's stderr is not a terminal
+    for s in ("done", "failed", "done"):
+        bar.update(s)
+    bar.close()
+    assert bar.bar is None and (bar.done, bar.failed) == (2, 1)
+    assert capsys.readouterr().err == ""

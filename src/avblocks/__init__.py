@@ -26,6 +26,7 @@ from .core.errors import (
                    ScenarioError,
                    ShapeError,
                    SimulationError,
+                   SimulationWarning,
                    WiringError,
 )
 
@@ -47,5 +48,6 @@ __all__ = [
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
     "WiringError", "ShapeError",
-    "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
+    "AlgebraicLoopError", "SimulationError", "SimulationWarning", "ScenarioError",
+    "__version__",
 ]

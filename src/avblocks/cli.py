@@ -78,6 +78,11 @@ def _from_namespace(ns, overrides, source):
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
+def _hooks(ns, overrides):
+    from .scenarios.report import hooks_from_namespace
+    return hooks_from_namespace(ns, overrides)
+
+
 def _load_python(path: Path, overrides):
     """Run a user's Python scenario file (it may import anything it likes)."""
     import runpy
@@ -89,12 +94,13 @@ def _load_python(path: Path, overrides):
         raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
                             file=str(path)) from e
     d, sim, movie = _from_namespace(ns, overrides, str(path))
-    return d, sim, path.stem, movie
+    return d, sim, path.stem, movie, _hooks(ns, overrides)
 
 
 def load_any(target, overrides):
-    """(diagram, simulate kwargs, name, movie options) from a built-in name,
-    a YAML/TOML file or a .py file."""
+    """(diagram, simulate kwargs, name, movie options, hooks) from a built-in
+    name, a YAML/TOML file or a .py file; ``hooks`` holds the scenario's
+    ``outcome`` and ``figures`` (see :mod:`avblocks.scenarios.report`)."""
     import importlib
 
     from .scenarios import builtin_scenarios, load_scenario
@@ -103,58 +109,36 @@ def load_any(target, overrides):
     if not p.is_file() and target in builtin and builtin[target].suffix == ".py":
         mod = importlib.import_module(f"avblocks.scenarios.{target}")
         d, sim, movie = _from_namespace(vars(mod), overrides, target)
-        return d, sim, target, movie
+        return d, sim, target, movie, _hooks(vars(mod), overrides)
     if p.suffix == ".py":
         if not p.is_file():
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build()
-    return d, sim, sc.name, dict(sc.data.get("movie") or {})
-
-
-def _trajectory_png(res, path, options=None):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    try:
-        from .viz import plot_trajectories
-    except ImportError:
-        plot_trajectories = None
-    options = options or {}
-    poses = [k for k in res.keys() if k.endswith(".pose") or k.endswith(".position")]
-    if options.get("pose") in res:
-        poses.insert(0, options["pose"])
-    if not poses:
-        return None
-    fig, ax = plt.subplots(figsize=(6.5, 6))
-    if plot_trajectories is not None:
-        plot_trajectories(res, pose=poses[0], ax=ax, obstacles=options.get("obstacles"))
-    else:  # pragma: no cover - viz is part of the package
-        P = res[poses[0]]
-        ax.plot(P[:, :, 0], P[:, :, 1], lw=0.8)
-        ax.set_aspect("equal")
-    ax.set_title(f"{poses[0]}: {_agents_label(res[poses[0]])}, t = 0..{res.t[-1]:g} s")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _agents_label(a):
-    return f"{a.shape[1]} agents" if a.ndim >= 2 else ""
+    from .scenarios.report import hooks_from_data
+    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
+    return d, sim, sc.name, dict(sc.data.get("movie") or {}), hooks
 
 
 def cmd_run(args):
     from .core.simulator import simulate
+    from .scenarios.report import run_report
     overrides = _parse_sets(args.set)
-    d, sim, name, movie = load_any(args.target, overrides)
+    d, sim, name, movie, hooks = load_any(args.target, overrides)
     if args.realtime is not None:
         sim["realtime"] = args.realtime
     if args.t_final is not None:
         sim["t_final"] = args.t_final
     sim.setdefault("t_final", 10.0)
     out = Path(args.out or Path("avblocks-out") / name)
+    movie_path = None
+    if args.movie:
+        from .viz.movie import check_movie_path
+        movie_path = Path(args.movie)
+        if not movie_path.is_absolute() and movie_path.parts[:len(out.parts)] != out.parts:
+            movie_path = out / movie_path      # movies land under --out
+        check_movie_path(movie_path)           # suffix and extra, before simulating
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     failed = None
@@ -166,35 +150,17 @@ def cmd_run(args):
     except TypeError as e:
         raise ScenarioError(f"bad simulation settings: {e}", entry="simulation") from None
     wall = time.perf_counter() - t0
-    files = []
-    if res is not None and len(res.t):
-        files.append(res.save(out / "results.nc"))
-        png = _trajectory_png(res, out / "trajectories.png", movie)
-        if png:
-            files.append(png)
-        if args.movie:
-            from .viz import save_movie
-            files.append(Path(save_movie(res, args.movie, **movie)))
-    summary = {
-        "scenario": name,
-        "agents": res.meta.get("agents") if res is not None else None,
-        "simulated_s": float(res.t[-1] - res.t[0]) if res is not None and len(res.t) else 0.0,
-        "wall_s": round(wall, 3),
-        "realtime_factor": None,
-        "files": [str(f) for f in files],
-    }
-    if summary["simulated_s"] and wall > 0:
-        summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
-    if res is not None and "overruns" in res.meta:
-        summary["overruns"] = res.meta["overruns"]
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    summary = run_report(res, out, name, hooks, movie, movie_path, wall,
+                         ok=failed is None)
     print(f"scenario      {name}")
     print(f"agents        {summary['agents']}")
     print(f"simulated     {summary['simulated_s']:.3g} s")
     print(f"wall time     {wall:.3g} s")
     if summary["realtime_factor"] is not None:
         print(f"real-time x   {summary['realtime_factor']}")
-    for f in files:
+    if summary.get("outcome"):
+        print(f"outcome       {summary['outcome']}")
+    for f in summary["files"]:
         print(f"wrote         {f}")
     if failed is not None:
         print(f"avblocks: error: {failed} (results up to then were saved)", file=sys.stderr)
@@ -229,7 +195,7 @@ def cmd_list(args):
 
 def cmd_diagram(args):
     from .viz.diagram import draw_diagram
-    d, _sim, name, _movie = load_any(args.target, _parse_sets(args.set))
+    d, _sim, name, _movie, _hooks = load_any(args.target, _parse_sets(args.set))
     out = args.output or f"{name}-diagram.svg"
     path = draw_diagram(d, out)
     print(f"wrote {path}")

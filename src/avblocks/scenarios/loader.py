@@ -19,6 +19,11 @@ A scenario file has five sections::
       - [drive.cmd, fleet.cmd]
     simulation: {t_final: 60, dt: 0.01, solver: rk4, log: [fleet.pose], seed: $seed}
     movie: {trail: 5.0}    # optional: options for `avblocks run ... --movie`
+    outcome: [{metric: all_true, signal: drive.done, what: done}]   # optional
+    figures: [{plot: trajectories, file: paths.png, waypoints: drive}]  # optional
+
+(``outcome`` and ``figures`` name built-in metrics and plots, see
+:mod:`avblocks.scenarios.report`.)
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), or a one-key mapping naming one of
@@ -39,7 +44,7 @@ from ..core.errors import AvError, ScenarioError
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie"}
+             "movie", "outcome", "figures"}
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 
 
@@ -356,7 +361,7 @@ def builtin_scenarios() -> dict:
     whose set-up is computed."""
     files = list(builtin_dir().glob("*.yaml")) + [
         p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
-        and p.stem not in ("loader",)]
+        and p.stem not in ("loader", "report")]
     return {p.stem: p for p in sorted(files)}
 
 

@@ -167,15 +167,21 @@ def cmd_run(args):
     return 0
 
 
+def _summary(cls) -> str:
+    """A class's one-line summary: its docstring's first sentence."""
+    para = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
+    cut = para.find(". ")
+    return para[:cut + 1] if cut >= 0 else para
+
+
 def cmd_list(args):
     import importlib
     import inspect
 
     from .scenarios import block_registry, builtin_scenarios, load_scenario
     if args.blocks:
-        for k, cls in sorted(block_registry().items()):
-            doc = (cls.__doc__ or "").strip().splitlines()
-            print(f"{k:40s} {doc[0] if doc else ''}")
+        for k, cls in sorted(block_registry(code_blocks=True).items()):
+            print(f"{k:40s} {_summary(cls)}")
         return 0
     for name, path in builtin_scenarios().items():
         if path.suffix == ".py":

@@ -113,8 +113,10 @@ GENERATORS = {
 
 
 # ------------------------------------------------------------------ registry
-def block_registry() -> dict:
-    """``{"vehicles.Unicycle": class, ...}`` for every public block class."""
+def block_registry(code_blocks=False) -> dict:
+    """``{"vehicles.Unicycle": class, ...}`` for every public block class
+    that a scenario file can name (``code_blocks=True``: also those that
+    take Python code, such as ``blocks.Function``)."""
     import importlib
 
     from ..core.block import Block
@@ -128,7 +130,7 @@ def block_registry() -> dict:
         for name in getattr(mod, "__all__", dir(mod)):
             obj = getattr(mod, name, None)
             if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
-                if name == "Function":   # takes Python code: not from files
+                if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
     return reg

@@ -5,10 +5,23 @@
 """
 
 from . import blocks, controllers, core, environment, utility, vehicles
-from .core import Block, Continuous, Diagram, Periodic, Port, Results, Simulator, simulate
+from .core import (
+    Block,
+    Continuous,
+    Diagram,
+    Periodic,
+    Port,
+    Results,
+    Runner,
+    Simulator,
+    compile,
+    grad,
+    simulate,
+)
 from .core.errors import (
                    AlgebraicLoopError,
                    AvError,
+                   CompileError,
                    ParameterError,
                    ScenarioError,
                    ShapeError,
@@ -32,6 +45,7 @@ __all__ = [
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
     "scenarios",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
-    "simulate", "AvError", "ParameterError", "WiringError", "ShapeError",
+    "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
+    "WiringError", "ShapeError",
     "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
 ]

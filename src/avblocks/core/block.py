@@ -108,6 +108,12 @@ class Block:
     #: True when ``on_major_step`` has side effects (I/O, drawing, hardware).
     side_effects = False
 
+    #: False for a block whose math is NumPy/SciPy/shapely code that JAX cannot
+    #: trace (spatial indexes, geometry): ``backend="jax"`` then refuses the
+    #: diagram at compile time naming the block. Blocks written with ``xp``
+    #: only keep the default.
+    traceable = True
+
     #: True when ``update`` needs this block's own outputs of the same major
     #: step (Simulink's and Drake's discrete updates may read them too). The
     #: simulator then calls ``update(t, x, u, xp, y=outputs)``, so work done in
@@ -225,6 +231,27 @@ class Block:
         self._params[name] = spec
         self.__dict__[name] = a
         return a
+
+    def param_flag(self, key, xp, test, *names) -> bool:
+        """A Python bool ``test(*values)`` of the current values of the named
+        parameters, for skipping work that a value makes a no-op (a clip
+        to an infinite limit, a zero drag term) on the NumPy path.
+
+        Cached until one of the parameters is given a new value (every set
+        replaces the array). Under any other array namespace (a traced
+        JAX value) it is ``True``: the general computation is done.
+        """
+        if xp is not np:
+            return True
+        d = self.__dict__
+        vals = tuple(d[n] for n in names)
+        cache = d.setdefault("_flag_cache", {})
+        hit = cache.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], vals)):
+            return hit[1]
+        r = bool(test(*vals))
+        cache[key] = (vals, r)
+        return r
 
     @property
     def parameters(self) -> dict[str, Param]:

@@ -106,3 +106,8 @@ class ScenarioError(AvError):
         if entry is not None:
             where += (": " if where else "") + f"{entry}"
         super().__init__((where + ": " if where else "") + cause, hint=hint)
+
+
+class CompileError(AvError):
+    """A diagram cannot be compiled (a block that cannot be traced by JAX, a
+    side-effect block, a variable-step solver): names the block and the fix."""

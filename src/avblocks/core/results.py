@@ -33,15 +33,24 @@ class Results:
         factor, overruns (when paced), error (when it failed).
     """
 
-    def __init__(self, t, data, ports=None, meta=None, aliases=None):
+    def __init__(self, t, data, ports=None, meta=None, aliases=None, *, runs=None):
         self.t = np.asarray(t)
         self.data = dict(data)
         self.ports = dict(ports or {})
         self.meta = dict(meta or {})
         self.aliases = dict(aliases or {})
+        #: number of runs of an ensemble (signals then have a leading run
+        #: axis: ``(runs, T, ...)``), ``None`` for a single run.
+        self.runs = None if runs is None else int(runs)
+        #: ``{"block.state": array}`` at the end of the run, when the backend
+        #: returns it (``(runs, ...)`` for an ensemble), else ``None``.
+        self.final_state = None
         for k, v in self.data.items():
-            if len(v) != len(self.t):
-                raise AvError(f"signal '{k}' has {len(v)} samples but there are "
+            nt = len(v) if self.runs is None else (v.shape[1] if v.ndim > 1 else -1)
+            if self.runs is not None and len(v) != self.runs:
+                raise AvError(f"signal '{k}' has {len(v)} runs but runs={self.runs}")
+            if nt != len(self.t):
+                raise AvError(f"signal '{k}' has {nt} samples but there are "
                               f"{len(self.t)} times")
 
     def _key(self, ref) -> str:
@@ -66,12 +75,27 @@ class Results:
         return self.data.keys()
 
     def final(self, ref) -> np.ndarray:
-        """Last logged value of a signal."""
-        return self[ref][-1]
+        """Last logged value of a signal (of every run for an ensemble)."""
+        return self[ref][-1] if self.runs is None else self[ref][:, -1]
+
+    def run(self, r) -> Results:
+        """Run ``r`` of an ensemble as single-run Results."""
+        if self.runs is None:
+            raise AvError("these results hold a single run (no run axis)")
+        meta = dict(self.meta)
+        if "seeds" in meta:
+            meta["seed"] = meta["seeds"][r]
+        out = Results(self.t, {k: v[r] for k, v in self.data.items()}, self.ports, meta,
+                      self.aliases)
+        if self.final_state is not None:
+            out.final_state = {k: v[r] for k, v in self.final_state.items()}
+        return out
 
     def __repr__(self):
-        sigs = ", ".join(f"{k} {v.shape[1:]}" for k, v in self.data.items())
-        return (f"Results({len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
+        lead = 1 if self.runs is None else 2
+        sigs = ", ".join(f"{k} {v.shape[lead:]}" for k, v in self.data.items())
+        runs = "" if self.runs is None else f"{self.runs} runs x "
+        return (f"Results({runs}{len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
                 f", {self.t[-1] if len(self.t) else 0}]: {sigs})")
 
     # ---------------------------------------------------------------- plots
@@ -101,17 +125,25 @@ class Results:
         Each signal is a variable with dimensions ``time``, then ``agent``
         for per-agent signals (``<signal>.agent`` when the agent counts of
         the logged signals differ), then ``<signal>.comp...`` with component
-        labels as coordinates when the port declares them.
+        labels as coordinates when the port declares them. An ensemble's
+        results (``runs`` set) put a ``run`` dimension first, with the runs'
+        seeds as a ``seed`` coordinate.
         """
         import xarray as xr
 
         counts = {p.n for k, p in self.ports.items() if p.n is not None}
         shared_agent = len(counts) == 1
         variables, coords = {}, {"time": ("time", self.t)}
+        lead = ["time"] if self.runs is None else ["run", "time"]
+        if self.runs is not None:
+            coords["run"] = ("run", np.arange(self.runs))
+            if len(self.meta.get("seeds") or ()) == self.runs:
+                coords["seed"] = ("run", np.asarray(self.meta["seeds"]))
         for k, v in self.data.items():
-            p = self.ports.get(k, Port(k.replace(".", "_"), v.shape[1:], v.dtype.name))
-            dims = ["time"]
-            rest = list(v.shape[1:])
+            p = self.ports.get(k, Port(k.replace(".", "_"), v.shape[len(lead):],
+                                       v.dtype.name))
+            dims = list(lead)
+            rest = list(v.shape[len(lead):])
             if p.agents and rest:
                 dims.append("agent" if shared_agent else f"{k}.agent")
                 rest = rest[1:]
@@ -153,19 +185,21 @@ class Results:
     @classmethod
     def from_xarray(cls, ds) -> Results:
         data, ports = {}, {}
+        runs = ds.sizes["run"] if "run" in ds.dims else None
         for k, var in ds.data_vars.items():
             v = np.asarray(var.values)
             data[k] = v
+            lead = 1 if runs is None else 2
             labels = ()
             last = var.dims[-1]
             if last in ds.coords and last != "time" and not last.endswith("agent"):
                 labels = tuple(str(s) for s in ds.coords[last].values)
-            ports[k] = Port(k.rsplit(".", 1)[-1], v.shape[1:], v.dtype.name,
+            ports[k] = Port(k.rsplit(".", 1)[-1], v.shape[lead:], v.dtype.name,
                             str(var.attrs.get("unit", "")), labels,
                             str(var.attrs.get("doc", "")),
                             bool(var.attrs.get("agents", 1)))
         meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
-        return cls(np.asarray(ds["time"].values), data, ports, meta)
+        return cls(np.asarray(ds["time"].values), data, ports, meta, runs=runs)
 
 
 def _jsonable(o):

@@ -397,7 +397,8 @@ def _progress_wanted(progress):
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
-             max_log_bytes=2 * 1024**3, params=None, x0=None):
+             max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
+             **backend_options):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -430,6 +431,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         (validated; the blocks' own values are restored afterwards).
     x0 : dict, optional
         Initial state values, ``{"block.state": value}``.
+    backend : ``"numpy"`` (default) or ``"jax"``
+        ``"jax"`` compiles the whole run (:mod:`avblocks.core.compiled`):
+        same arguments and Results (plus ``res.final_state``), fixed-step
+        solvers and traceable blocks only, no ``realtime``; it takes the
+        option ``dtype="float32"`` (default ``"float64"``). A second run of
+        the same structure with other numeric values does not recompile.
 
     Returns
     -------
@@ -437,12 +444,29 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
+    if backend != "numpy":
+        if backend != "jax":
+            raise ParameterError("unknown backend", param="backend",
+                                 expected="'numpy' or 'jax'", found=backend)
+        from .compiled import simulate_compiled
+        return simulate_compiled(diagram, t_final, dt, solver, log=log,
+                                 log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                                 progress=progress, check_finite=check_finite,
+                                 max_log_bytes=max_log_bytes, params=params, x0=x0,
+                                 backend=backend, **backend_options)
+    if backend_options:
+        raise ParameterError("unknown keyword argument(s) for backend='numpy'",
+                             param=", ".join(sorted(backend_options)))
     sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite,
                     x0=x0)
     binding = _param_binding(sim.compiled, params)
     with binding:
-        return _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes,
-                    params)
+        res = _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes,
+                   params)
+    if sim.X is not None:       # the state at the end (as backend="jax" returns it)
+        res.final_state = {f"{n}.{k}": v for n, x in zip(sim.compiled.names, sim.X)
+                           for k, v in x.items()}
+    return res
 
 
 def _param_binding(compiled, params):

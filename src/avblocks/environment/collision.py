@@ -208,6 +208,9 @@ class Collision(Block):
     ([True, False], [0, -1])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, world, n, *, footprint=None, input="pose", margin=0.0,
                  agents=True, period=None):
         super().__init__()

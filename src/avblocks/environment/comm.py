@@ -86,6 +86,9 @@ class CommChannel(Block):
     ([[1], [0]], [7.0, 5.0])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, *, radius, msg_dim=1, k=None, p_loss=0.0, latency=1,
                  input="pose", period=None):
         super().__init__()
@@ -233,6 +236,9 @@ class Gossip(Block):
     >>> g.output(0.0, x, u, np)["informed"].tolist()
     [True, True, True]
     """
+
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
 
     def __init__(self, n, *, radius, p_loss=0.0, value_dim=None, input="pose",
                  period=None):

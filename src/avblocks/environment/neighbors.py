@@ -194,6 +194,9 @@ class Neighbors(Block):
     [[1, -1], [0, -1], [-1, -1]]
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None):
         super().__init__()
         self.n = n = agent_count(n, "Neighbors")

@@ -259,6 +259,9 @@ class RangeSensor(Block):
     array([[ 2., 10., 10., 10.]])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, world, n, *, n_rays=32, fov=2 * np.pi, max_range=10.0,
                  noise_std=0.0, agent_radius=None, angles=None, input="pose",
                  period=None):

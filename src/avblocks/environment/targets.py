@@ -90,6 +90,9 @@ class TargetDetection(Block):
     ([True, True], [0, 0], [True, False])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, targets, *, sensing_radius, target_radius=0.0,
                  pickup=False, input="pose", period=None):
         super().__init__()

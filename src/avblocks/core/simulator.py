@@ -395,7 +395,7 @@ def _progress_wanted(progress):
     return sys.stderr.isatty() and not os.environ.get("CI")
 
 
-def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
+def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
              max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
              **backend_options):
@@ -413,8 +413,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         or a :class:`~avblocks.core.solvers.Solver`.
     log : list of port handles or ``"block.port"`` strings, optional
         What to record. Default: every ``pose``/``position`` output (else all).
-    log_every : int
-        Record every ``log_every``-th major step (decimation).
+    log_every : int, optional
+        Record every ``log_every``-th major step (decimation). Default:
+        every step, unless the log would exceed ``max_log_bytes`` (e.g.
+        30,000 agents for 30 s at dt = 0.01): then the smallest decimation
+        that fits, with a warning and ``res.meta["log_every"]`` saying so.
     seed : int
         Seed for every random block.
     realtime : float, optional
@@ -450,7 +453,8 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
                                  expected="'numpy' or 'jax'", found=backend)
         from .compiled import simulate_compiled
         return simulate_compiled(diagram, t_final, dt, solver, log=log,
-                                 log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                                 log_every=1 if log_every is None else log_every,
+                                 seed=seed, t0=t0, realtime=realtime,
                                  progress=progress, check_finite=check_finite,
                                  max_log_bytes=max_log_bytes, params=params, x0=x0,
                                  backend=backend, **backend_options)
@@ -486,6 +490,15 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+def _log_every_that_fits(per_sample, nsteps, max_log_bytes):
+    """The smallest decimation whose log (``nsteps // k + 1`` samples of
+    ``per_sample`` bytes) fits in ``max_log_bytes``, or None."""
+    samples = int(max_log_bytes // max(int(per_sample), 1))
+    if samples < 2:
+        return None
+    return max(1, math.ceil(nsteps / (samples - 1)))
+
+
 def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params):
     try:
         span = float(t_final) - sim.t0
@@ -495,7 +508,8 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
         raise ParameterError("t_final must be a number >= t0", param="t_final",
                              expected=f">= {sim.t0}", found=t_final)
     nsteps = int(round(span / sim.dt))
-    log_every = int(log_every)
+    auto_log = log_every is None
+    log_every = 1 if auto_log else int(log_every)
     if log_every < 1:
         raise ParameterError("log_every must be >= 1", param="log_every",
                              expected=">= 1", found=log_every)
@@ -523,11 +537,23 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
     nlog = nsteps // log_every + 1
     need = sum(nlog * int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize for p in specs)
     if need > max_log_bytes:
-        raise ParameterError(
-            f"the log would take {need / 1e9:.2f} GB", param="log",
-            expected=f"<= {max_log_bytes / 1e9:.2f} GB",
-            found=f"{len(specs)} signals x {nlog} samples",
-            hint="log fewer signals or decimate with log_every")
+        fit = _log_every_that_fits(need // nlog, nsteps, max_log_bytes)
+        if auto_log and fit is not None:
+            import warnings
+            warnings.warn(f"logging every step would take {need / 1e9:.2f} GB (more than "
+                          f"max_log_bytes = {max_log_bytes / 1e9:.2f} GB): logging one step in "
+                          f"{fit} instead (log_every={fit}; pass log_every= or "
+                          "max_log_bytes= to choose)", stacklevel=3)
+            log_every = fit
+            nlog = nsteps // log_every + 1
+        else:
+            raise ParameterError(
+                f"the log would take {need / 1e9:.2f} GB", param="log",
+                expected=f"<= {max_log_bytes / 1e9:.2f} GB",
+                found=f"{len(specs)} signals x {nlog} samples",
+                hint=(f"log_every={fit} fits (or log fewer signals, or raise "
+                      "max_log_bytes)" if fit is not None else
+                      "log fewer signals: even two samples do not fit"))
     bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
     tlog = np.empty(nlog)
     meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": sim.seed,

@@ -49,10 +49,12 @@ def _from_namespace(ns, overrides, source):
         takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
         unknown = [k for k in params if k not in sig.parameters and not takes_any]
         if unknown:
+            from .core.errors import did_you_mean
             raise ScenarioError(f"unknown parameter(s) {unknown}", file=source,
                                 entry="--set",
-                                hint=f"this scenario's parameters: {list(sig.parameters)} "
-                                     "(or simulation.t_final, simulation.dt, ...)")
+                                hint=did_you_mean(unknown[0], sig.parameters)
+                                + f"this scenario's parameters: {list(sig.parameters)} "
+                                  "(or simulation.t_final, simulation.dt, ...)")
         try:
             out = ns["make_diagram"](**params)
         except AvError as e:

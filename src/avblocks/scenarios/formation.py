@@ -78,9 +78,15 @@ def switch_points(n, spacing, lead_in=10.0, margin=2.0):
 
 def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radius=0.25,
                  ref_rate=(0.3, 0.15), offset=0.6, seed=1, t_final=100.0, dt=0.02,
-                 log_every=5, tree="star"):
-    """The formation-switching diagram and its simulation settings."""
-    n = int(followers) + 1
+                 log_every=5, tree="star", agents=None):
+    """The formation-switching diagram and its simulation settings
+    (``agents``, when given, is ``followers + 1``: the name every scenario
+    shares)."""
+    n = int(followers) + 1 if agents is None else int(agents)
+    if n < 2:
+        from avblocks.core.errors import ParameterError
+        raise ParameterError("a formation needs a leader and a follower", param="agents",
+                             expected=">= 2", found=n)
     spacing = float(spacing)
     leader, refs = formation_references(n, spacing, float(d), tree)
     x_in, x_out = switch_points(n, spacing)

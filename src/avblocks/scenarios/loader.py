@@ -40,12 +40,15 @@ from pathlib import Path
 import numpy as np
 
 from ..core.diagram import Diagram
-from ..core.errors import AvError, ScenarioError
+from ..core.errors import AvError, ScenarioError, did_you_mean
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
              "movie", "outcome", "figures"}
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
+#: ``--set`` names that go to the simulation settings when the scenario has
+#: no parameter of that name (the same names as the Python scenarios').
+_SIM_SHORTCUTS = {"t_final", "dt", "log_every", "solver"}
 
 
 # ----------------------------------------------------------------- generators
@@ -178,7 +181,8 @@ class Scenario:
                 if key not in self.params:
                     raise ScenarioError(f"unknown parameter reference '${key}'",
                                         file=self.source, entry=where,
-                                        hint=f"known parameters: {sorted(self.params)}")
+                                        hint=did_you_mean(key, self.params)
+                                        + f"known parameters: {sorted(self.params)}")
                 return self.params[key]
             return v
         if isinstance(v, list):
@@ -219,15 +223,19 @@ class Scenario:
                 if sub not in _SIM_KEYS:
                     raise ScenarioError(f"unknown simulation setting '{sub}'",
                                         file=self.source, entry=f"--set {key}",
-                                        hint=f"known: {sorted(_SIM_KEYS)}")
+                                        hint=did_you_mean(sub, _SIM_KEYS)
+                                        + f"known: {sorted(_SIM_KEYS)}")
                 data.setdefault("simulation", {})[sub] = val
             elif key in params:
                 params[key] = val
+            elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
+                data.setdefault("simulation", {})[key] = val
             else:
                 raise ScenarioError(f"unknown parameter '{key}'", file=self.source,
                                     entry=f"--set {key}",
-                                    hint=f"this scenario's parameters: {sorted(params)} "
-                                         "(or simulation.t_final, simulation.dt, ...)")
+                                    hint=did_you_mean(key, params)
+                                    + f"this scenario's parameters: {sorted(params)} "
+                                         "(or t_final, dt, log_every, simulation.<setting>)")
         data["parameters"] = params
         return Scenario(data, self.source)
 
@@ -294,7 +302,8 @@ class Scenario:
                 if k not in accepted and not has_var:
                     raise ScenarioError(f"unknown parameter '{k}' for {typ}",
                                         file=self.source, entry=f"{where}.{k}",
-                                        hint=f"{typ} takes {accepted}")
+                                        hint=did_you_mean(k, accepted)
+                                        + f"{typ} takes {accepted}")
             try:
                 block = cls(**kwargs)
             except AvError as e:
@@ -319,7 +328,8 @@ class Scenario:
                 if b not in d.blocks:
                     raise ScenarioError(f"wire names unknown block '{b}'",
                                         file=self.source, entry=where,
-                                        hint=f"blocks: {sorted(d.blocks)}")
+                                        hint=did_you_mean(b, d.blocks)
+                                        + f"blocks: {sorted(d.blocks)}")
                 try:
                     refs.append(d[b].port(p))
                 except AvError as e:
@@ -377,7 +387,8 @@ def load_scenario(name_or_path) -> Scenario:
         else:
             raise ScenarioError("no such scenario file or built-in scenario",
                                 file=str(name_or_path),
-                                hint=f"built-in scenarios: {sorted(b)}")
+                                hint=did_you_mean(name_or_path, b)
+                                + f"built-in scenarios: {sorted(b)}")
     data = _read(p)
     sc = Scenario(data if data is not None else {}, str(p))
     sc.validate()

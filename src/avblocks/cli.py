@@ -117,8 +117,10 @@ def load_any(target, overrides):
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build()
-    from .scenarios.report import hooks_from_data
+    from .scenarios.report import hooks_from_data, hooks_from_report
     hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
+    if sc.data.get("report"):
+        hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
     return d, sim, sc.name, dict(sc.data.get("movie") or {}), hooks
 
 

@@ -133,4 +133,4 @@ def test_cli_runs_a_case_study(tmp_path):
     assert rc == 0
     assert (tmp_path / "swap.png").stat().st_size > 5000
     res = av.Results.load(tmp_path / "results.nc")
-    assert res["view.pose"].shape[1:] == (6, 3)
+    assert res["fleet.position"].shape[1:] == (6, 2)

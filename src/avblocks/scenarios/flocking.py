@@ -81,11 +81,18 @@ def _nearest(position):
     return dist[:, 1]
 
 
+def _order(res):
+    if "view.order" in res:
+        return np.asarray(res["view.order"]).reshape(len(res.t))
+    v = np.asarray(res["flock.velocity"])
+    return np.array([order_parameter(v[k], np) for k in range(len(v))], float)
+
+
 def outcome(res, params):
     """Order parameter at the end, nearest-neighbour spacing against ``d``,
     closest approach over the run."""
     from avblocks.scenarios.report import min_pairwise_distance
-    order = np.asarray(res["view.order"]).reshape(len(res.t))
+    order = _order(res)
     nn = _nearest(np.asarray(res["flock.position"])[-1])
     dmin, _ = min_pairwise_distance(res["flock.position"])
     d = float(params["d"])
@@ -104,10 +111,11 @@ def figures(res, out, params):
     from avblocks.viz import plot_trajectories
     fig, (a, b) = plt.subplots(1, 2, figsize=(11.0, 5.0),
                                gridspec_kw={"width_ratios": [1.2, 1]})
-    n = np.asarray(res["view.pose"]).shape[1]
-    plot_trajectories(res, "view.pose", ax=a,
+    key = "view.pose" if "view.pose" in res else "flock.position"
+    n = np.asarray(res[key]).shape[1]
+    plot_trajectories(res, key, ax=a,
                       title=f"{n} double integrators flocking after a moving target")
-    order = np.asarray(res["view.order"]).reshape(len(res.t))
+    order = _order(res)
     b.plot(res.t, order, color="tab:blue", lw=1.5)
     b.set_ylim(0, 1.05)
     b.set_xlabel("t [s]")

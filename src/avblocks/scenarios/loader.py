@@ -44,7 +44,10 @@ from ..core.errors import AvError, ScenarioError, did_you_mean
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie", "outcome", "figures"}
+             "movie", "outcome", "figures", "report"}
+#: Case studies whose outcome and figures a scenario file can ask for by name
+#: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -103,7 +106,56 @@ def _arange(n, dtype="int64"):
     return np.arange(int(n)).astype(dtype)
 
 
+def _multiply(a, b):
+    return np.asarray(a, float) * np.asarray(b, float) if np.ndim(a) or np.ndim(b) \
+        else float(a) * float(b)
+
+
+def _uniform(low, high, shape, seed=0, stream=0):
+    """Uniform draws from ``numpy.random.default_rng([seed, stream])``."""
+    rng = np.random.default_rng([int(seed), int(stream)])
+    return rng.uniform(float(low), float(high), tuple(int(s) for s in shape))
+
+
+def _first_true(n, k):
+    m = np.zeros(int(n), dtype=bool)
+    m[:min(int(k), int(n))] = True
+    return m
+
+
+def _nest_hexagon(agents, density):
+    from .nest import hexagon, hexagon_radius
+    return hexagon(hexagon_radius(int(agents), float(density)))
+
+
+def _nest_poses(agents, density, scouts, seed):
+    from .nest import hexagon_radius, nest_poses
+    return nest_poses(int(agents), hexagon_radius(int(agents), float(density)), scouts, seed)
+
+
+def _circle_swap(n, radius, jitter=0.0, seed=1, which="start"):
+    from .swap import circle_swap
+    start, goal = circle_swap(int(n), float(radius), float(jitter), seed)
+    if which == "start":
+        return start
+    if which == "goal":
+        return goal[:, None, :]
+    raise ValueError(f"which must be 'start' or 'goal', got {which!r}")
+
+
+def _speed_caps(n, v_max, spread, seed=1, stream=10):
+    rng = np.random.default_rng([int(seed), int(stream)])
+    return float(v_max) * (1.0 - float(spread) * rng.uniform(0.0, 1.0, int(n)))
+
+
 GENERATORS = {
+    "multiply": _multiply,
+    "uniform": _uniform,
+    "first_true": _first_true,
+    "nest_hexagon": _nest_hexagon,
+    "nest_poses": _nest_poses,
+    "circle_swap": _circle_swap,
+    "speed_caps": _speed_caps,
     "random_poses": _random_poses,
     "random_positions": _random_positions,
     "random_waypoints": _random_waypoints,
@@ -252,6 +304,11 @@ class Scenario:
         if not isinstance(d.get("movie") or {}, dict):
             raise ScenarioError("'movie' must be a mapping of movie options",
                                 file=self.source, entry="movie")
+        if d.get("report") is not None and d["report"] not in REPORTS:
+            raise ScenarioError(f"unknown report '{d['report']}'", file=self.source,
+                                entry="report",
+                                hint=did_you_mean(d["report"], REPORTS)
+                                + f"reports: {list(REPORTS)}")
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")
@@ -369,18 +426,20 @@ def builtin_dir() -> Path:
 
 def builtin_scenarios() -> dict:
     """``{name: path}`` of the scenarios shipped with avblocks: YAML files,
-    and Python modules (``make_diagram(**params)``) for the case studies
-    whose set-up is computed."""
-    files = list(builtin_dir().glob("*.yaml")) + [
-        p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
-        and p.stem not in ("loader", "report")]
-    return {p.stem: p for p in sorted(files)}
+    and Python modules (``make_diagram(**params)``) for those with no YAML
+    form. Where both exist the YAML file is the scenario (the module is its
+    Python-API twin)."""
+    py = [p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
+          and p.stem not in ("loader", "report")]
+    out = {p.stem: p for p in sorted(py)}
+    out.update({p.stem: p for p in sorted(builtin_dir().glob("*.yaml"))})
+    return dict(sorted(out.items()))
 
 
 def load_scenario(name_or_path) -> Scenario:
     """A built-in scenario by name, or a YAML/TOML file by path."""
     p = Path(str(name_or_path))
-    if not p.exists():
+    if not p.is_file():
         b = builtin_scenarios()
         if str(name_or_path) in b and b[str(name_or_path)].suffix != ".py":
             p = b[str(name_or_path)]

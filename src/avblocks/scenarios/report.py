@@ -229,6 +229,21 @@ def hooks_from_namespace(ns, overrides=None) -> Hooks:
     return Hooks(o, f)
 
 
+def hooks_from_report(name, params, base=None) -> Hooks:
+    """Hooks of the built-in case study ``name`` (``report: nest`` in a
+    scenario file) called with the file's parameters; the file's own
+    ``outcome``/``figures`` sections, if any, take precedence."""
+    import importlib
+    mod = importlib.import_module(f"avblocks.scenarios.{name}")
+    full = scenario_params(vars(mod), {})
+    full.update(params)
+    h = hooks_from_namespace(vars(mod), {})
+    o = (lambda res: mod.outcome(res, full)) if h.outcome else None
+    f = (lambda res, out: mod.figures(res, out, full)) if h.figures else None
+    base = base or Hooks()
+    return Hooks(base.outcome or o, base.figures or f)
+
+
 def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>"):
     """Hooks from a scenario file's ``outcome:`` and ``figures:`` sections
     (checked now, before any simulation)."""

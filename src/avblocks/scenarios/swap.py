@@ -116,7 +116,7 @@ def figures(res, out, params):
     fig, (a, b) = plt.subplots(1, 2, figsize=(11.0, 5.0),
                                gridspec_kw={"width_ratios": [1.1, 1]})
     p = np.asarray(res["fleet.position"])
-    plot_trajectories(res, "view.pose", ax=a,
+    plot_trajectories(res, "view.pose" if "view.pose" in res else "fleet.position", ax=a,
                       title=f"{p.shape[1]} agents swap sides through a safety filter")
     dmin = np.array([pdist(p[k]).min() for k in range(len(res.t))])
     safety = float(params["safety"])

@@ -56,6 +56,23 @@ def _per_agent(results, spec, shape_tn, name):
     return a
 
 
+def pose_from_positions(p):
+    """(T, N, 3) poses from (T, N, 2) positions: the heading is the
+    direction of motion (kept while an agent stands still; 0 before it
+    first moves)."""
+    p = np.asarray(p, float)
+    d = np.diff(p, axis=0, prepend=p[:1])
+    moving = np.hypot(d[..., 0], d[..., 1]) > 1e-9
+    th = np.where(moving, np.arctan2(d[..., 1], d[..., 0]), np.nan)
+    if th.shape[0] > 1:
+        th[0] = np.where(np.isnan(th[0]), th[1], th[0])
+    # forward-fill the heading through samples without motion
+    idx = np.where(~np.isnan(th), np.arange(th.shape[0])[:, None], 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    th = np.nan_to_num(np.take_along_axis(th, idx, axis=0))
+    return np.concatenate([p, th[..., None]], axis=2)
+
+
 def is_interactive_backend() -> bool:
     """True when Matplotlib's backend can open windows."""
     from matplotlib.backends import BackendFilter, backend_registry
@@ -120,8 +137,15 @@ class Animation(_Frames):
                  collision=None, steer=None, world=None, obstacles=None, extent=None,
                  **scene_options):
         self.results = results
-        self.key = find_pose(results, pose)
+        try:
+            self.key = find_pose(results, pose)
+        except ParameterError:
+            if pose is not None:
+                raise
+            self.key = find_pose(results, None, suffix=".position")
         self.pose = np.asarray(results[self.key], float)
+        if self.pose.ndim == 3 and self.pose.shape[2] == 2:
+            self.pose = pose_from_positions(self.pose)
         if self.pose.ndim != 3 or self.pose.shape[2] < 3:
             raise ParameterError("pose signal must have shape (T, N, 3)", param="pose",
                                  expected="(T, N, 3)", found=self.pose.shape)

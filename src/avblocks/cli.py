@@ -121,7 +121,8 @@ def load_any(target, overrides):
     hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
     if sc.data.get("report"):
         hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
-    return d, sim, sc.name, dict(sc.data.get("movie") or {}), hooks
+    movie = sc._value(dict(sc.data.get("movie") or {}), "movie")   # generators too
+    return d, sim, sc.name, movie, hooks
 
 
 def cmd_run(args):

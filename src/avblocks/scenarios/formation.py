@@ -52,9 +52,16 @@ from avblocks.vehicles import Unicycle
 CORRIDOR = (24.0, 32.0, 2.0)
 #: Leader waypoints (x, y).
 WAYPOINTS = np.array([[12.0, 0.0], [42.0, 0.0], [48.0, 1.0], [53.0, 3.0], [58.0, 6.0]])
+
+
+def corridor_world(x0=CORRIDOR[0], x1=CORRIDOR[1], width=CORRIDOR[2], wall=4.0):
+    """Two walls ``wall`` thick from x0 to x1, ``width`` apart around y = 0."""
+    return World([rectangle(x0, width / 2, x1, width / 2 + wall),
+                  rectangle(x0, -width / 2 - wall, x1, -width / 2)])
+
+
 #: The two walls of the corridor.
-WORLD = World([rectangle(CORRIDOR[0], CORRIDOR[2] / 2, CORRIDOR[1], CORRIDOR[2] / 2 + 4.0),
-               rectangle(CORRIDOR[0], -CORRIDOR[2] / 2 - 4.0, CORRIDOR[1], -CORRIDOR[2] / 2)])
+WORLD = corridor_world()
 #: Options for ``viz.save_movie`` (``avblocks run formation --movie f.mp4``).
 MOVIE = {"obstacles": WORLD.geoms, "trail": 8.0}
 STATES = ("wedge", "column")
@@ -76,6 +83,18 @@ def switch_points(n, spacing, lead_in=10.0, margin=2.0):
     return x_in, x_out
 
 
+def start_poses(n, spacing, offset, seed):
+    """The wedge's slots, followers perturbed by up to ``offset`` (and
+    +-0.3 rad); the leader at the origin heading along x."""
+    rng = np.random.default_rng([int(seed), 5])
+    start = formation_offsets("wedge", int(n), float(spacing)) + rng.uniform(
+        -float(offset), float(offset), (int(n), 2))
+    start[0] = 0.0
+    pose0 = np.column_stack([start, rng.uniform(-0.3, 0.3, int(n))])
+    pose0[0, 2] = 0.0
+    return pose0
+
+
 def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radius=0.25,
                  ref_rate=(0.3, 0.15), offset=0.6, seed=1, t_final=100.0, dt=0.02,
                  log_every=5, tree="star", agents=None):
@@ -90,11 +109,7 @@ def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radi
     spacing = float(spacing)
     leader, refs = formation_references(n, spacing, float(d), tree)
     x_in, x_out = switch_points(n, spacing)
-    rng = np.random.default_rng([int(seed), 5])
-    start = formation_offsets("wedge", n, spacing) + rng.uniform(-offset, offset, (n, 2))
-    start[0] = 0.0
-    pose0 = np.column_stack([start, rng.uniform(-0.3, 0.3, n)])
-    pose0[0, 2] = 0.0
+    pose0 = start_poses(n, spacing, offset, seed)
 
     dg = Diagram("formation")
     fleet = dg.add(Unicycle(pose0=pose0), name="fleet")

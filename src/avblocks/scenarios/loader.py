@@ -148,7 +148,74 @@ def _speed_caps(n, v_max, spread, seed=1, stream=10):
     return float(v_max) * (1.0 - float(spread) * rng.uniform(0.0, 1.0, int(n)))
 
 
+def _formation_start(n, spacing, offset, seed):
+    from .formation import start_poses
+    return start_poses(int(n), float(spacing), float(offset), seed)
+
+
+def _formation_refs(n, spacing, d, tree="star", state="wedge"):
+    from .formation import formation_references
+    leader, refs = formation_references(int(n), float(spacing), float(d), tree)
+    if state == "leader":
+        return leader
+    if state not in refs:
+        raise ValueError(f"state must be one of {sorted(refs)} or 'leader', got {state!r}")
+    return refs[state]
+
+
+def _formation_switch(n, spacing, which="in"):
+    from .formation import switch_points
+    x_in, x_out = switch_points(int(n), float(spacing))
+    return {"in": x_in, "out": x_out}[which]
+
+
+def _corridor(x0, x1, width, wall=4.0):
+    from .formation import corridor_world
+    return corridor_world(float(x0), float(x1), float(width), float(wall))
+
+
+def _disc(radius):
+    from ..environment import Disc
+    return Disc(float(radius))
+
+
+_OPS = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
+        "==": np.equal, "!=": np.not_equal}
+
+
+def _guard(input=None, index=(), op=">=", value=0.0, all=None):
+    """A transition guard from data: ``u[input][index] <op> value``, or the
+    conjunction of several (``all: [{input, index, op, value}, ...]``)."""
+    if all is not None:
+        parts = [_guard(**g) for g in all]
+
+        def both(u, xp):
+            out = parts[0](u, xp)
+            for g in parts[1:]:
+                out = out & g(u, xp)
+            return out
+        return both
+    if op not in _OPS:
+        raise ValueError(f"op must be one of {sorted(_OPS)}, got {op!r}")
+    if input is None:
+        raise ValueError("a guard names its 'input' (an input port of the block)")
+    idx = tuple(int(i) for i in np.atleast_1d(index)) if np.size(index) else ()
+    name, v, opname = str(input), float(value), op
+
+    def guard(u, xp):
+        x = u[name][idx] if idx else u[name]
+        return {"<": x < v, "<=": x <= v, ">": x > v, ">=": x >= v, "==": x == v,
+                "!=": x != v}[opname]
+    return guard
+
+
 GENERATORS = {
+    "formation_start": _formation_start,
+    "formation_references": _formation_refs,
+    "formation_switch": _formation_switch,
+    "corridor": _corridor,
+    "disc": _disc,
+    "guard": _guard,
     "multiply": _multiply,
     "uniform": _uniform,
     "first_true": _first_true,

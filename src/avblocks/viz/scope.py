@@ -295,8 +295,9 @@ def plot_trajectories(results, pose=None, world=None, ax=None, *, agents=None,
                              label="start"))
     if waypoints is not None:
         w = np.asarray(waypoints, float).reshape(-1, 2)
-        ax.scatter(w[:, 0], w[:, 1], marker="x", s=18 if len(w) <= 100 else 6,
-                   c="0.15", linewidths=0.8, zorder=3)
+        many = len(w) > 100
+        ax.scatter(w[:, 0], w[:, 1], marker="x", s=4 if many else 18, c="0.15",
+                   linewidths=0.5 if many else 0.8, alpha=0.5 if many else 1.0, zorder=3)
         handles.append(Line2D([], [], ls="", marker="x", color="0.15", label="waypoint"))
     span = np.ptp(p[..., :2].reshape(-1, 2), axis=0).max() if p.size else 1.0
     span = max(float(span), 1e-9)

@@ -26,12 +26,13 @@ from .core.errors import (
                    ScenarioError,
                    ShapeError,
                    SimulationError,
+                   SimulationWarning,
                    WiringError,
 )
 
 __version__ = "0.1.0"
 
-_LAZY = ("viz", "scenarios")
+_LAZY = ("viz", "scenarios", "sweep")
 
 
 def __getattr__(name):
@@ -43,9 +44,10 @@ def __getattr__(name):
 
 __all__ = [
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
-    "scenarios",
+    "scenarios", "sweep",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
     "WiringError", "ShapeError",
-    "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
+    "AlgebraicLoopError", "SimulationError", "SimulationWarning", "ScenarioError",
+    "__version__",
 ]

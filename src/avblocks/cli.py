@@ -2,9 +2,11 @@
 
     avblocks run waypoints --set agents=300 --out out/
     avblocks run my_scenario.yaml
-    avblocks run my_diagram.py --set n=50
+    avblocks run my_diagram.py --set n=50 --set drive.gain=2.0
+    avblocks run waypoints --backend jax
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
+    avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 """
 
@@ -13,10 +15,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import time
 from pathlib import Path
 
-from .core.errors import AvError, ScenarioError, SimulationError
+from .core.errors import AvError, ScenarioError
 
 
 def _parse_sets(items):
@@ -42,6 +43,8 @@ def _from_namespace(ns, overrides, source):
     sim = dict(ns.get("simulation") or {})
     sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
                 if k.startswith("simulation.")}
+    from .scenarios._numeric import resolve, split_overrides
+    overrides, numeric = split_overrides(overrides)     # block.param keys
     params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
     if "make_diagram" in ns:
         import inspect
@@ -76,6 +79,8 @@ def _from_namespace(ns, overrides, source):
         raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
                             file=source, hint=f"found {type(d).__name__}")
     sim.update(sim_over)
+    if numeric:
+        sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
@@ -98,9 +103,10 @@ def _load_python(path: Path, overrides):
     return d, sim, path.stem, movie, _hooks(ns, overrides)
 
 
-def load_any(target, overrides):
+def load_any(target, overrides, out=None):
     """(diagram, simulate kwargs, name, movie options, hooks) from a built-in
-    name, a YAML/TOML file or a .py file; ``hooks`` holds the scenario's
+    name, a YAML/TOML file or a .py file (``out``: the output folder a
+    scenario file's blocks may write to); ``hooks`` holds the scenario's
     ``outcome`` and ``figures`` (see :mod:`avblocks.scenarios.report`)."""
     import importlib
 
@@ -116,60 +122,20 @@ def load_any(target, overrides):
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
-    d, sim = sc.build()
+    d, sim = sc.build(output_dir=sc.output_dir(out))
     from .scenarios.report import hooks_from_data, hooks_from_report
     hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
     if sc.data.get("report"):
         hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
-    movie = sc._value(dict(sc.data.get("movie") or {}), "movie")   # generators too
+    movie = sc._value(sc.movie_options(), "movie")      # generators too
     return d, sim, sc.name, movie, hooks
 
 
 def cmd_run(args):
-    from .core.simulator import simulate
-    from .scenarios.report import run_report
-    overrides = _parse_sets(args.set)
-    d, sim, name, movie, hooks = load_any(args.target, overrides)
-    if args.realtime is not None:
-        sim["realtime"] = args.realtime
-    if args.t_final is not None:
-        sim["t_final"] = args.t_final
-    sim.setdefault("t_final", 10.0)
-    out = Path(args.out or Path("avblocks-out") / name)
-    movie_path = None
-    if args.movie:
-        from .viz.movie import check_movie_path
-        movie_path = Path(args.movie)
-        if not movie_path.is_absolute() and movie_path.parts[:len(out.parts)] != out.parts:
-            movie_path = out / movie_path      # movies land under --out
-        check_movie_path(movie_path)           # suffix and extra, before simulating
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    failed = None
-    try:
-        res = simulate(d, progress=None if not args.quiet else False, **sim)
-    except SimulationError as e:
-        failed = e
-        res = e.results
-    except TypeError as e:
-        raise ScenarioError(f"bad simulation settings: {e}", entry="simulation") from None
-    wall = time.perf_counter() - t0
-    summary = run_report(res, out, name, hooks, movie, movie_path, wall,
-                         ok=failed is None)
-    print(f"scenario      {name}")
-    print(f"agents        {summary['agents']}")
-    print(f"simulated     {summary['simulated_s']:.3g} s")
-    print(f"wall time     {wall:.3g} s")
-    if summary["realtime_factor"] is not None:
-        print(f"real-time x   {summary['realtime_factor']}")
-    if summary.get("outcome"):
-        print(f"outcome       {summary['outcome']}")
-    for f in summary["files"]:
-        print(f"wrote         {f}")
-    if failed is not None:
-        print(f"avblocks: error: {failed} (results up to then were saved)", file=sys.stderr)
-        return 3
-    return 0
+    # signals, the output folder and atomic writes: see _runio; what the
+    # scenario reports (outcome, figures): see scenarios.report
+    from ._runio import guarded_run
+    return guarded_run(args, load_any)
 
 
 def _summary(cls) -> str:
@@ -222,13 +188,19 @@ def build_parser():
     r = sub.add_parser("run", help="run a built-in scenario, a YAML/TOML file or a .py file")
     r.add_argument("target", help="built-in name (see `avblocks list`) or a file")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a parameter (repeatable), e.g. --set agents=300")
+                   help="override a parameter (repeatable), e.g. --set agents=300, "
+                        "or a block's numeric parameter: --set drive.gain=2.0")
     r.add_argument("--out", help="output folder (default avblocks-out/<name>)")
     r.add_argument("--movie", help="also write a movie (.mp4 or .gif)")
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--backend", choices=("numpy", "jax"),
+                   help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)
+    from .interfaces.ros2.cli import add_commands, add_run_options
+    add_run_options(r)
+    add_commands(sub)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")
     li.set_defaults(fn=cmd_list)
@@ -237,6 +209,8 @@ def build_parser():
     dg.add_argument("-o", "--output")
     dg.add_argument("--set", action="append", metavar="KEY=VALUE")
     dg.set_defaults(fn=cmd_diagram)
+    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
+    add_sweep_parser(sub)
     return ap
 
 

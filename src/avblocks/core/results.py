@@ -158,29 +158,62 @@ class Results:
         return ds
 
     def save(self, path) -> Path:
-        """Save to NetCDF (``.nc``, through h5netcdf) or Zarr (``.zarr``)."""
+        """Save to NetCDF (``.nc``, through h5netcdf) or Zarr (``.zarr``).
+
+        The file is written under a temporary name next to ``path`` and
+        renamed into place only once complete, so an existing file is never
+        left half-overwritten and a full disk leaves no corrupt file; every
+        failure is an :class:`AvError` naming the file and the cause."""
         path = Path(path)
-        ds = self.to_xarray()
+        if path.suffix not in (".nc", ".zarr"):
+            raise AvError(f"cannot save results to '{path}': unknown format",
+                          expected="a .nc (NetCDF) or .zarr path", found=path.suffix or "no suffix")
+        if not path.parent.is_dir():
+            raise AvError(f"cannot save results to '{path}': no folder '{path.parent}'",
+                          hint="create the folder first")
+        try:
+            ds = self.to_xarray()
+        except ImportError as e:
+            raise AvError(f"saving results needs xarray: {e}",
+                          hint="pip install avblocks") from None
         if path.suffix == ".zarr":
-            ds.to_zarr(path, mode="w")
-        else:
-            ds.to_netcdf(path, engine="h5netcdf")
+            return _save_zarr(ds, path)
+        try:
+            # encode in memory: a write error then never leaves HDF5 with a
+            # half-written file open (which can crash the interpreter)
+            blob = ds.to_netcdf(engine="h5netcdf")
+        except ImportError as e:
+            raise AvError(f"saving NetCDF needs h5netcdf: {e}",
+                          hint="pip install h5netcdf") from None
+        atomic_write_bytes(path, bytes(blob))
         return path
 
     @classmethod
     def load(cls, path) -> Results:
-        """Load results saved by :meth:`save`."""
-        import xarray as xr
-
+        """Load results saved by :meth:`save`; any problem (missing, not a
+        results file, truncated, a missing reader) is an :class:`AvError`."""
         path = Path(path)
         if not path.exists():
             raise AvError(f"no results file at {path}")
-        if path.suffix == ".zarr":
-            ds = xr.open_zarr(path).load()
-        else:
-            with xr.open_dataset(path, engine="h5netcdf") as f:
-                ds = f.load()
-        return cls.from_xarray(ds)
+        try:
+            import xarray as xr
+            if path.suffix == ".zarr":
+                ds = xr.open_zarr(path).load()
+            else:
+                with xr.open_dataset(path, engine="h5netcdf") as f:
+                    ds = f.load()
+            return cls.from_xarray(ds)
+        except AvError:
+            raise
+        except ImportError as e:
+            raise AvError(f"cannot read '{path}': a reader is missing ({e})",
+                          hint="pip install 'avblocks[all]'") from None
+        except MemoryError:
+            raise AvError(f"cannot read '{path}': it does not fit in memory") from None
+        except Exception as e:  # noqa: BLE001 - h5py/xarray/json/zarr errors
+            raise AvError(f"cannot read '{path}' as avblocks results: "
+                          f"{type(e).__name__}: {e}",
+                          hint="the file may be truncated or not made by Results.save") from None
 
     @classmethod
     def from_xarray(cls, ds) -> Results:
@@ -200,6 +233,84 @@ class Results:
                             bool(var.attrs.get("agents", 1)))
         meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
         return cls(np.asarray(ds["time"].values), data, ports, meta, runs=runs)
+
+
+def _os_reason(e):
+    import errno
+    if getattr(e, "errno", None) in (errno.ENOSPC, errno.EDQUOT):
+        return "the disk is full"
+    if getattr(e, "errno", None) == errno.EFBIG:
+        return "the file is larger than this process may write (file size limit)"
+    if isinstance(e, PermissionError):
+        return "permission denied"
+    if getattr(e, "errno", None) == errno.EROFS:
+        return "the file system is read-only"
+    return f"{type(e).__name__}: {e}"
+
+
+def _umask():
+    import os
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def atomic_write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder
+    and an atomic rename; on failure the temporary file is removed, ``path``
+    is untouched, and an :class:`AvError` says why."""
+    import os
+    import tempfile
+    path = Path(path)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part",
+                                   dir=path.parent)
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as e:
+        raise AvError(f"could not write '{path}': {_os_reason(e)}",
+                      hint="nothing was left behind; free space or choose another folder"
+                      ) from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return path
+
+
+def _save_zarr(ds, path):
+    import shutil
+    import tempfile
+    tmp = None
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part",
+                                    dir=path.parent))
+        ds.to_zarr(tmp / "store.zarr", mode="w")
+        old = None
+        if path.exists():
+            old = path.with_name(f".{path.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            path.rename(old)
+        (tmp / "store.zarr").rename(path)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except ImportError as e:
+        raise AvError(f"saving Zarr needs the zarr package: {e}",
+                      hint="pip install zarr (or save to .nc)") from None
+    except OSError as e:
+        raise AvError(f"could not write '{path}': {_os_reason(e)}") from None
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return path
 
 
 def _jsonable(o):

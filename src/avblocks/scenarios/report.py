@@ -305,44 +305,6 @@ def default_outcome(res):
             {"agents": n})
 
 
-def run_report(res, out, name, hooks, movie_options, movie_path, wall, ok=True):
-    """Everything ``avblocks run`` writes after a simulation: results.nc, the
-    scenario's figures, its outcome, the movie and ``summary.json``;
-    returns the summary dict."""
-    import json
-    out = Path(out)
-    files = []
-    line, numbers = None, {}
-    has = res is not None and len(res.t)
-    if has:
-        files.append(res.save(out / "results.nc"))
-        figs = hooks.figures if hooks is not None and hooks.figures else None
-        files += [Path(f) for f in (figs(res, out) if figs else
-                                    default_figures(res, out, movie_options))]
-        if ok:
-            fn = hooks.outcome if hooks is not None and hooks.outcome else default_outcome
-            line, numbers = fn(res)
-        if movie_path is not None:
-            from ..viz import save_movie
-            files.append(Path(save_movie(res, movie_path, **(movie_options or {}))))
-    simulated = float(res.t[-1] - res.t[0]) if has else 0.0
-    summary = {
-        "scenario": name,
-        "agents": res.meta.get("agents") if res is not None else None,
-        "simulated_s": simulated,
-        "wall_s": round(wall, 3),
-        "realtime_factor": round(simulated / wall, 1) if simulated and wall > 0 else None,
-        "outcome": line,
-        "numbers": _jsonable(numbers),
-        "files": [str(f) for f in files],
-    }
-    if res is not None and "overruns" in res.meta:
-        summary["overruns"] = res.meta["overruns"]
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    return summary
-
-
 def _jsonable(o):
     if isinstance(o, dict):
         return {str(k): _jsonable(v) for k, v in o.items()}

@@ -31,6 +31,7 @@ _CACHE: OrderedDict = OrderedDict()
 _CACHE_SIZE = 32
 _LOCK = threading.Lock()
 _STATS = {"traces": 0, "hits": 0, "misses": 0}
+_TRACE_LOCK = threading.RLock()
 
 
 def cache_info() -> dict:
@@ -100,6 +101,8 @@ class Program:
             self.eng = TracedEngine(compiled, dt, jax.numpy, canon)
         self.slots = [(f"{n}.{k}", i, k) for i, (n, b) in
                       enumerate(zip(compiled.names, compiled.blocks)) for k in b._params]
+        from .structure import diagram_key
+        self.struct = diagram_key(compiled)
         self.traces = 0
         self._exe = {}
         self._lock = threading.Lock()
@@ -151,20 +154,43 @@ class Program:
         return logs, carry[0]
 
     # ------------------------------------------------------- executables
-    def executable(self, mode, build, args):
+    def executable(self, mode, build, args, compiled=None):
         """Ahead-of-time compiled ``build()`` for ``args`` (cached by mode and
-        argument signature): returns (callable, seconds spent compiling)."""
+        argument signature): returns (callable, seconds spent compiling).
+
+        ``compiled`` is the requesting runner's diagram (same structure when
+        it was compiled). If the blocks this program was first traced with
+        have since been changed structurally, it traces with those instead.
+        Traces are serialized: binding traced parameter values to blocks
+        must not race with another trace."""
         import time
+
+        from .structure import diagram_key
         jax = _jax.jax()
         key = (mode, signature(args))
         with self._lock:
             exe = self._exe.get(key)
         if exe is not None:
             return exe, 0.0
-        t = time.perf_counter()
-        with jax.enable_x64(self.x64):
-            exe = jax.jit(build()).lower(*args).compile()
-        spent = time.perf_counter() - t
+        with _TRACE_LOCK:
+            with self._lock:
+                exe = self._exe.get(key)
+            if exe is not None:
+                return exe, 0.0
+            if compiled is not None and compiled is not self.cd and \
+                    diagram_key(self.cd) != self.struct:
+                self._rebind(compiled)
+            t = time.perf_counter()
+            with jax.enable_x64(self.x64):
+                exe = jax.jit(build()).lower(*args).compile()
+            spent = time.perf_counter() - t
         with self._lock:
             self._exe[key] = exe
         return exe, spent
+
+    def _rebind(self, compiled):
+        jax = _jax.jax()
+        self.cd = compiled
+        with jax.enable_x64(self.x64):
+            self.eng = TracedEngine(compiled, self.dt, jax.numpy,
+                                    jax.dtypes.canonicalize_dtype)

@@ -75,10 +75,13 @@ def fingerprint(obj, depth=0):
 
 def block_fingerprint(b):
     """Structure of one block: its attributes, with numeric parameters and
-    initial state values reduced to shapes and dtypes (they are data)."""
+    initial state values reduced to shapes and dtypes (they are data) and
+    memo attributes (``*_cache``) left out."""
     params = b._params
     items = []
     for k, v in vars(b).items():
+        if k.endswith("_cache"):            # memo of values (e.g. Block.param_flag)
+            continue
         if k in params:
             items.append((k, ("param", tuple(np.shape(v)))))
         elif k == "_init":

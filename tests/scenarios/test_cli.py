@@ -151,7 +151,7 @@ def test_builtin_python_scenario_with_simulation_override_and_movie(tmp_path, mo
     pytest.importorskip("imageio_ffmpeg")
     (tmp_path / "formation").mkdir()          # a folder named like the scenario
     monkeypatch.chdir(tmp_path)
-    rc = main(["run", "formation", "--set", "simulation.t_final=3", "--set", "followers=2",
+    rc = main(["run", "formation", "--set", "simulation.t_final=3", "--set", "agents=3",
                "--out", "o", "--movie", "o/f.gif", "--quiet"])
     assert rc == 0
     res = av.Results.load(tmp_path / "o" / "results.nc")

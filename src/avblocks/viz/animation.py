@@ -56,6 +56,21 @@ def _per_agent(results, spec, shape_tn, name):
     return a
 
 
+def find_pose_or_position(results, pose=None) -> str:
+    """:func:`find_pose`, falling back to the first ``*.position`` signal."""
+    try:
+        return find_pose(results, pose)
+    except ParameterError:
+        if pose is not None:
+            raise
+    try:
+        return find_pose(results, None, suffix=".position")
+    except ParameterError:
+        raise ParameterError("no logged signal ends in '.pose' or '.position'; name one",
+                             param="pose", expected=f"one of {sorted(results.keys())}",
+                             found=None) from None
+
+
 def pose_from_positions(p):
     """(T, N, 3) poses from (T, N, 2) positions: the heading is the
     direction of motion (kept while an agent stands still; 0 before it
@@ -137,12 +152,7 @@ class Animation(_Frames):
                  collision=None, steer=None, world=None, obstacles=None, extent=None,
                  **scene_options):
         self.results = results
-        try:
-            self.key = find_pose(results, pose)
-        except ParameterError:
-            if pose is not None:
-                raise
-            self.key = find_pose(results, None, suffix=".position")
+        self.key = find_pose_or_position(results, pose)
         self.pose = np.asarray(results[self.key], float)
         if self.pose.ndim == 3 and self.pose.shape[2] == 2:
             self.pose = pose_from_positions(self.pose)

@@ -22,7 +22,7 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.ports import Port
 from ..core.results import Results
-from .animation import find_pose, is_interactive_backend
+from .animation import find_pose_or_position, is_interactive_backend
 from .scene import _indices, obstacle_paths
 from .shapes import Drawing
 from .shapes import drawing as make_drawing
@@ -219,12 +219,7 @@ def plot_trajectories(results, pose=None, world=None, ax=None, *, agents=None,
     from matplotlib.lines import Line2D
 
     from .scene import BOOL_COLORS
-    try:
-        key = find_pose(results, pose)
-    except ParameterError:
-        if pose is not None:
-            raise
-        key = find_pose(results, None, suffix=".position")
+    key = find_pose_or_position(results, pose)
     p_all = np.asarray(results[key], float)
     if p_all.ndim != 3 or p_all.shape[2] < 2:
         raise ParameterError("positions must have shape (T, N, 2) or (T, N, 3)",

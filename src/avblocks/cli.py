@@ -154,6 +154,8 @@ def cmd_run(args):
     if args.t_final is not None:
         sim["t_final"] = args.t_final
     sim.setdefault("t_final", 10.0)
+    if args.live:  # live view in the browser (avblocks.viz.live)
+        sim["live"] = {"host": args.live_host, "port": args.live_port}
     out = Path(args.out or Path("avblocks-out") / name)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -252,6 +254,11 @@ def build_parser():
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--live", action="store_true",
+                   help="draw and steer the run in the browser (prints the URL)")
+    r.add_argument("--live-host", default="127.0.0.1",
+                   help="interface for --live (default 127.0.0.1 only)")
+    r.add_argument("--live-port", type=int, default=0, help="port for --live (0: free)")
     r.set_defaults(fn=cmd_run)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")

@@ -397,7 +397,7 @@ def _progress_wanted(progress):
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
-             max_log_bytes=2 * 1024**3, params=None, x0=None):
+             max_log_bytes=2 * 1024**3, params=None, x0=None, live=False):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -430,6 +430,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         (validated; the blocks' own values are restored afterwards).
     x0 : dict, optional
         Initial state values, ``{"block.state": value}``.
+    live : bool or dict
+        Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
+        (URL printed, with a token) that draws and steers the run; a dict
+        passes options to :class:`avblocks.viz.live.LiveView`. Paced to real
+        time unless ``realtime`` says otherwise.
 
     Returns
     -------
@@ -437,6 +442,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
+    if live:  # --- live view hook (avblocks.viz.live owns the loop) ---
+        from ..viz.live import simulate_live
+        return simulate_live(diagram, t_final, dt, solver, live=live, log=log,
+                             log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                             check_finite=check_finite, max_log_bytes=max_log_bytes,
+                             params=params, x0=x0)
     sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite,
                     x0=x0)
     binding = _param_binding(sim.compiled, params)

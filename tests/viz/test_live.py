@@ -78,7 +78,10 @@ def _browser():
     opts.binary_location = chrome
     for a in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
               "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-              "--window-size=1200,800", "--hide-scrollbars"):
+              "--window-size=1200,800", "--hide-scrollbars",
+              # a headless page counts as hidden: do not throttle its frames
+              "--disable-background-timer-throttling", "--disable-renderer-backgrounding",
+              "--disable-backgrounding-occluded-windows"):
         opts.add_argument(a)
     return webdriver.Chrome(options=opts, service=Service(driver))
 

@@ -124,7 +124,7 @@ class LiveView:
                  log=None, log_every=1, realtime=1.0, check_finite=True, x0=None,
                  params=None, max_log_bytes=2 * 1024**3, host="127.0.0.1", port=0,
                  token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
-                 agent_size=None, points_above=2000, fps=30.0, fps_points=10.0,
+                 agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
                  camera=None, obstacles=None, end_on_close=True, close_grace=2.0,
                  hold=True, verbose=True, title=None):
         from ...core.simulator import Simulator
@@ -207,10 +207,14 @@ class LiveView:
                 drawn.append(n)
                 if o == "position" and "attitude" in c.blocks[i]._outputs:
                     add(f"{c.names[i]}.attitude")
-        self.drawn = drawn
+        # a block with a 3D position and a planar pose (UAVs) is drawn once, in 3D
+        in3d = {self.idx[n][0] for n in drawn
+                if self.idx[n][1] == "position" and self.specs[n].shape[1] == 3}
+        self.drawn = [n for n in drawn
+                      if not (self.idx[n][1] == "pose" and self.idx[n][0] in in3d)]
         if plots is None:
             plots = [n for n in self.names if n not in drawn
-                     and not n.endswith(".attitude")][:3]
+                     and self.idx[n][1] not in ("attitude", "pose", "position")][:3]
         self.plots = [add(r) for r in plots]
         self.nlog = self.nsteps // self.log_every + 1
         need = sum(self.nlog * int(np.prod(self.specs[n].shape)) *
@@ -274,7 +278,7 @@ class LiveView:
         span = max(self.extent[1] - self.extent[0], self.extent[3] - self.extent[2])
         if agent_size is None:
             total = max([s["n"] for s in self.sources] + [1])
-            agent_size = float(np.clip(span / (4 * math.sqrt(total) + 20), 0.05, 2.0))
+            agent_size = float(np.clip(span / (1.5 * math.sqrt(total) + 20), 0.05, span / 20))
         self.agent_size = float(agent_size)
 
     def _initial_value(self, name):
@@ -303,11 +307,11 @@ class LiveView:
             srv.initial_camera.position = (cx, cy - 1e-3 * h, h)
             srv.initial_camera.look_at = (cx, cy, 0.0)
         else:
-            r = 1.6 * half / math.tan(fov / 2)
-            srv.initial_camera.position = (cx - 0.5 * r, cy - 0.9 * r, 0.7 * r)
+            r = 2.4 * half / math.tan(fov / 2)
+            srv.initial_camera.position = (cx - 0.35 * r, cy - 0.8 * r, 0.6 * r)
             srv.initial_camera.look_at = (cx, cy, 0.0)
         self._cam_height = half / math.tan(fov / 2)
-        sc.add_light_ambient("/light/ambient", intensity=1.2)
+        sc.add_light_ambient("/light/ambient", intensity=0.4)
         sc.add_grid("/grid", width=x1 - x0, height=y1 - y0, position=(cx, cy, -0.01),
                     plane="xy", cell_size=10 ** math.floor(math.log10(max(x1 - x0, 1e-3))) / 2,
                     section_size=10 ** math.floor(math.log10(max(x1 - x0, 1e-3))) * 2,
@@ -401,7 +405,7 @@ class LiveView:
         srv = self.server
         kt = self.count - 1 if k is None else k
         now = _time.perf_counter()
-        do_trails = now - getattr(self, "_last_trail", 0.0) > 0.2 or k is not None
+        do_trails = now - getattr(self, "_last_trail", 0.0) > 0.5 or k is not None
         with srv.atomic():
             for s in self.sources:
                 P, Q = self._frame(s, k)
@@ -419,7 +423,7 @@ class LiveView:
                         if s["trail"] is None:
                             s["trail"] = srv.scene.add_line_segments(
                                 "/trails/" + s["name"].replace(".", "_"), seg, cols,
-                                thickness=1.5, thickness_units="screen")
+                                thickness=2.5, thickness_units="screen")
                         else:
                             s["trail"].points = seg
                             if s["trail"].colors.shape != cols.shape:

@@ -295,3 +295,65 @@ def test_simulate_live_flag_and_errors():
     with pytest.raises(av.AvError, match="no such numeric parameter"):
         LiveView(make_diagram(), 1.0, params={"gain.q": 1.0}, verbose=False)
     assert math.isfinite(res.meta["wall_time"])
+
+
+class EStopGate(Block):
+    """y = (1 - estop) u: an emergency stop as a numeric parameter."""
+
+    def __init__(self, n):
+        super().__init__()
+        self.declare_parameter("estop", 0.0, bounds=(0.0, 1.0), doc="1 stops")
+        self.declare_input("u", (n, 2))
+        self.declare_output("y", (n, 2))
+
+    def output(self, t, x, u, xp):
+        return {"y": (1.0 - self.estop) * u["u"]}
+
+
+def test_stop_sets_estop_first_and_restart_takes_next_seed():
+    d = av.Diagram()
+    c = d.add(av.blocks.Constant([[1.0, 0.0], [0.0, 1.0]]), name="c")
+    gate = d.add(EStopGate(2), name="gate")
+    fleet = d.add(av.vehicles.SingleIntegrator(P0), name="fleet")
+    d.connect(c.y, gate.u)
+    d.connect(gate.y, fleet.velocity)
+    view = LiveView(d, t_final=60.0, dt=DT, realtime=None, verbose=False).start()
+    try:
+        _wait(lambda: view.sim.k > 20, timeout=10)
+        view.restart()
+        _wait(lambda: view.seed == 1 and view.sim.k > 10, timeout=10)
+        view.pause()
+        _wait(lambda: view._paused, timeout=5)
+        k = view.sim.k
+        view.stop()
+        res = view.wait(timeout=10)
+    finally:
+        if view.wait(timeout=0) is None:
+            view.close()
+    live = res.meta["live"]
+    assert live["ended_by"] == "stop button"
+    assert [r["old_seed"] for r in live["restarts"]] == [0]
+    assert res.meta["seed"] == 1
+    # the log is the restarted run, from t0 on
+    assert res.t[0] == 0.0 and np.allclose(np.diff(res.t), DT)
+    # stop: estop set, one more step taken with it, then the end
+    (t_stop, path, value), = res.meta["param_changes"]
+    assert (path, value) == ("gate.estop", 1.0) and t_stop == pytest.approx(k * DT)
+    assert res.meta["steps"] == k + 1
+    X = res["fleet.position"]
+    np.testing.assert_allclose(X[-1], X[-2])                      # stopped
+    np.testing.assert_allclose(X[-2], P0 + np.eye(2) * (k * DT))
+    assert float(view.compiled.get_param("gate.estop")) == 0.0    # restored
+
+
+def test_cli_run_live_prints_url_and_saves(tmp_path, capsys):
+    from avblocks.cli import main
+    rc = main(["run", "formation", "--live", "--t-final", "0.4", "--realtime", "4",
+               "--out", str(tmp_path), "--quiet"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    url = re.search(r"avblocks live view: (http://127\.0\.0\.1:\d+/([\w-]+)/)", out)
+    assert url and len(url.group(2)) >= 32
+    res = av.Results.load(tmp_path / "results.nc")
+    assert (tmp_path / "results.nc").is_file()
+    assert res.t[-1] == pytest.approx(0.4)

@@ -556,6 +556,8 @@ class LiveView:
         kind = cmd[0]
         if kind == "toggle":
             self._paused = not self._paused
+            if self.server is None:
+                return
             self._pause_btn.label = "Resume" if self._paused else "Pause"
             self._scrub.disabled = not self._paused
             if self._paused:
@@ -568,8 +570,11 @@ class LiveView:
             if not self._paused:
                 self._handle(("toggle",))
             self._steps += 1
+        elif kind == "pause":
+            if self._paused != cmd[1]:
+                self._handle(("toggle",))
         elif kind == "speed":
-            self.speed = SPEEDS.get(cmd[1], self.speed)
+            self.speed = SPEEDS.get(cmd[1], self.speed) if isinstance(cmd[1], str) else cmd[1]
             self._anchor()
         elif kind == "scrub":
             if self._paused and self.count:
@@ -781,6 +786,35 @@ class LiveView:
         if self._error is not None:
             raise self._error
         return self._result
+
+    # the page's controls, for scripts and notebooks (thread-safe; they take
+    # effect in the run loop, like a click)
+    def pause(self):
+        """Pause (no-op when paused)."""
+        self._cmds.put(("pause", True))
+
+    def resume(self):
+        """Resume (no-op when running)."""
+        self._cmds.put(("pause", False))
+
+    def step(self):
+        """One major step (pauses first)."""
+        self._cmds.put(("step",))
+
+    def set_speed(self, speed):
+        """Real-time factor (``None``: as fast as possible)."""
+        if speed is not None and not float(speed) > 0:
+            raise ParameterError("speed must be > 0 or None", param="speed", found=speed)
+        self._cmds.put(("speed", speed if speed is None else float(speed)))
+
+    def restart(self):
+        """Start again from t0 with the next seed (parameters as they are)."""
+        self._cmds.put(("restart",))
+
+    def stop(self):
+        """The Stop button: set every ``estop`` parameter to 1, take one
+        more step, end the run."""
+        self._cmds.put(("stop",))
 
     def close(self, timeout=10.0):
         """End the run (results saved) and return them."""

@@ -10,7 +10,9 @@ over ``--seconds``, the script measures
 - scene updates/s: agent updates the server sent (``LiveView.draws``);
 - page lag: simulated time minus the time the page shows (the status text
   is refreshed 4 times a second, so up to 0.25 s of it is by design);
-- real-time factor of the simulation while it is drawn.
+- real-time factor of the simulation while it is drawn;
+- paused page frames/s: the same page paused (no scene updates), for
+  comparison.
 
 Prints a markdown table. Not part of the test suite.
 """
@@ -92,8 +94,18 @@ def measure(drv, n, seconds, shots):
                "scene updates/s": (view.draws - d0) / wall,
                "page lag [s]": statistics.median(lags) if lags else float("nan"),
                "real-time factor": (view.sim.k - k0) * view.sim.dt / wall}
+        # the same page with nothing changing: what the browser does when
+        # it only has to keep its frame loop going
+        view.pause()
+        time.sleep(3.0)
+        n1, w1 = drv.execute_script("return window.__n;"), time.perf_counter()
+        time.sleep(3.0)
+        row["paused page frames/s"] = ((drv.execute_script("return window.__n;") - n1)
+                                       / (time.perf_counter() - w1))
         if shots:
             os.makedirs(shots, exist_ok=True)
+            drv.execute_script("document.querySelectorAll('.mantine-Notification-root')"
+                               ".forEach(e => e.remove());")
             drv.save_screenshot(os.path.join(shots, f"live-{n}.png"))
     finally:
         view.close()

@@ -280,6 +280,7 @@ def test_no_browser_never_blocks_and_paces():
     assert res.meta["live"]["ended_by"] == "finished"
     assert res.t[-1] == pytest.approx(1.0)
     assert wall >= 0.5 - 0.02
+    assert view.url in view._repr_html_()          # the notebook iframe
     np.testing.assert_allclose(res["fleet.position"][-1, 1], P0[1] + [K0 * 1.0, 0.0])
 
 
@@ -325,6 +326,7 @@ def test_stop_sets_estop_first_and_restart_takes_next_seed():
         view.pause()
         _wait(lambda: view._paused, timeout=5)
         k = view.sim.k
+        view._cmds.put(("param", "gate.estop", 7.0))   # what the page sends: out of bounds
         view.stop()
         res = view.wait(timeout=10)
     finally:

@@ -107,3 +107,19 @@ def frame_extent(points, worlds):
     x0, x1, y0, y1 = min(xs), max(xs), min(ys), max(ys)
     m = max(1.0, 0.08 * max(x1 - x0, y1 - y0))
     return (x0 - m, x1 + m, y0 - m, y1 + m)
+
+
+def grid_segments(extent, z=-0.01):
+    """(S, 2, 3) lines of a grid over ``extent`` at a round spacing
+    (10 to 25 lines across the larger side)."""
+    x0, x1, y0, y1 = extent
+    span = max(x1 - x0, y1 - y0)
+    step = 10.0 ** np.floor(np.log10(span / 10))
+    for m in (1, 2, 5, 10):
+        if span / (m * step) <= 25:
+            step *= m
+            break
+    xs = np.arange(np.ceil(x0 / step), np.floor(x1 / step) + 1) * step
+    ys = np.arange(np.ceil(y0 / step), np.floor(y1 / step) + 1) * step
+    seg = [[[x, y0, z], [x, y1, z]] for x in xs] + [[[x0, y, z], [x1, y, z]] for y in ys]
+    return np.array(seg, dtype=float).reshape(-1, 2, 3)

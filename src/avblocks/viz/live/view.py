@@ -278,17 +278,32 @@ class LiveView:
         span = max(self.extent[1] - self.extent[0], self.extent[3] - self.extent[2])
         if agent_size is None:
             total = max([s["n"] for s in self.sources] + [1])
-            agent_size = float(np.clip(span / (1.5 * math.sqrt(total) + 20), 0.05, span / 20))
+            agent_size = float(np.clip(span / (1.5 * math.sqrt(total) + 40), 0.05, span / 20))
+            if self.camera == "3d":
+                agent_size *= 3.0
         self.agent_size = float(agent_size)
 
     def _initial_value(self, name):
+        """A drawn signal at t0, to frame the camera. A diagram with side
+        effects (robot interfaces) is not started here (that waits for
+        :meth:`run`): zeros then, and the worlds frame the view."""
         i, o = self.idx[name]
         if self.sim.Y is None:
-            self.sim.init()
+            if self.sim._side:
+                return np.zeros(self.specs[name].shape)
+            self._init_sim()
         return self.sim.Y[i][o]
+
+    def _init_sim(self):
+        self.sim.horizon = self.nsteps
+        self.sim.init()
+        self.count = 0
+        self._record()
 
     def _start_server(self):
         import viser.uplot as uplot
+        if self.sim.X is None:
+            self._init_sim()
         srv, self.token = open_server(self.host, self.port, self.token, label=self.title)
         self.server = srv
         self.port = srv.get_port()
@@ -312,10 +327,10 @@ class LiveView:
             srv.initial_camera.look_at = (cx, cy, 0.0)
         self._cam_height = half / math.tan(fov / 2)
         sc.add_light_ambient("/light/ambient", intensity=0.4)
-        sc.add_grid("/grid", width=x1 - x0, height=y1 - y0, position=(cx, cy, -0.01),
-                    plane="xy", cell_size=10 ** math.floor(math.log10(max(x1 - x0, 1e-3))) / 2,
-                    section_size=10 ** math.floor(math.log10(max(x1 - x0, 1e-3))) * 2,
-                    cell_color=(225, 225, 225), section_color=(190, 190, 190))
+        # a light grid of plain lines (viser's shader grid costs seconds per
+        # frame in software WebGL)
+        sc.add_line_segments("/grid", _scene.grid_segments(self.extent), colors=(215, 215, 215),
+                             thickness=1.0, thickness_units="screen")
         height = 0.05 * self.agent_size if self.camera == "top" else 1.0
         for j, w in enumerate(self.worlds):
             for m, g in enumerate(w.geoms[: w.n_user]):
@@ -616,11 +631,8 @@ class LiveView:
         a = self._sim_args
         self.sim = Simulator(self.compiled, a["dt"], a["solver"], seed=self.seed,
                              t0=a["t0"], check_finite=a["check_finite"], x0=a["x0"])
-        self.sim.horizon = self.nsteps
         self._start_values = {k: np.array(v) for k, v in self.compiled.param_values().items()}
-        self.count = 0
-        self.sim.init()
-        self._record()
+        self._init_sim()
         self._paused = False
         self._pause_btn.label = "Pause"
         self._scrub.disabled = True
@@ -635,10 +647,10 @@ class LiveView:
         sim = self.sim
         self._paused, self._steps, self._scrubbing = False, 0, None
         self._had_client, self._last_client = False, 0.0
-        sim.horizon = self.nsteps
-        sim.init()
-        self._record()
+        if sim.X is None:
+            self._init_sim()
         self._anchor()
+        last_key = None
         last_draw, last_status, draws0, t_rate = 0.0, 0.0, 0, _time.perf_counter()
         self.late = 0
         while self._end is None:
@@ -681,10 +693,14 @@ class LiveView:
                 if sim.k % self.log_every == 0:
                     self._record()
             fps = self.fps_points if any(s["points"] for s in self.sources) else self.fps
-            if clients and now - last_draw >= 1.0 / fps:
+            key = (id(self.sim), self.sim.k, self._scrubbing if self._paused else None,
+                   self._paused, self.speed)
+            if clients and now - last_draw >= 1.0 / fps and (key != last_key or not idle
+                                                             or now - last_draw > 1.0):
+                changed, last_key = key != last_key, key
                 self._draw(self._scrubbing if self._paused else None)
                 last_draw = now
-                if now - last_status > 0.25:
+                if now - last_status > 0.25 or (changed and (self._paused or finished)):
                     self._draw_rate = (self.draws - draws0) / max(now - t_rate, 1e-9)
                     draws0, t_rate = self.draws, now
                     self._status.content = self._status_text()

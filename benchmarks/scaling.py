@@ -13,6 +13,16 @@ over fewer steps and scaled to the 3000 steps of 30 s (marked with *); pass
 
     python benchmarks/scaling.py            # table + benchmarks/scaling.png
     python benchmarks/scaling.py --quick    # N up to 3000
+
+With ``--backend jax`` (or ``all``) it measures the compiled backend on the
+same workload (W1: Unicycle + PointToPoint, Euler, dt 10 ms, 3000 steps)
+against a fused Numba loop of the same math (numba: a benchmark-only
+dependency) and the NumPy engine: first call including trace and compile at
+N = 1000, second calls at N = 10 .. 1e5, real-time factors, and an ensemble
+of 256 runs x 100 agents (one vmapped program) against 256 sequential NumPy
+runs. It writes the table and benchmarks/scaling_backends.png.
+
+    python benchmarks/scaling.py --backend jax [--quick]
 """
 
 from __future__ import annotations
@@ -113,12 +123,165 @@ def budget_steps(kind, n, full):
     return int(min(STEPS, max(50, work // max(n, 1))))
 
 
+def numba_loop():
+    """The W1 law and Euler step fused into one compiled loop (Numba)."""
+    import numba
+
+    @numba.njit(cache=False, fastmath=False)
+    def loop(pose, goal, steps):
+        n = pose.shape[0]
+        done = np.zeros(n, np.bool_)
+        for _ in range(steps):
+            for i in range(n):
+                x, y, th = pose[i, 0], pose[i, 1], pose[i, 2]
+                c, s = math.cos(th), math.sin(th)
+                ex = goal[i, 0] - x - D * c
+                ey = goal[i, 1] - y - D * s
+                if ex * ex + ey * ey <= R * R:
+                    done[i] = True
+                wx, wy = K * ex, K * ey
+                nrm = math.hypot(wx, wy)
+                if nrm > VMAX:
+                    wx, wy = wx * VMAX / nrm, wy * VMAX / nrm
+                v = c * wx + s * wy
+                w = (c * wy - s * wx) / D
+                pose[i, 0] = x + DT * v * c
+                pose[i, 1] = y + DT * v * s
+                pose[i, 2] = th + DT * w
+        return pose
+
+    def run(n, steps):
+        p0, goal = setup(n)
+        return loop(p0.copy(), goal, steps)
+    run(2, 2)                       # compile outside the timings
+    return run
+
+
+def jax_main(args):
+    """The compiled backend vs a fused Numba loop and the NumPy engine."""
+    import os
+
+    import jax
+    t = time.perf_counter()
+    jax.numpy.zeros(1).block_until_ready()
+    jax_init = time.perf_counter() - t
+    load = os.getloadavg()[0]
+    nb = numba_loop()
+    ns = [10, 100, 1000, 10000] + ([] if args.quick else [100000])
+    log_every = 100
+
+    def jax_run(d, fleet, steps, **kw):
+        return av.simulate(d, steps * DT, dt=DT, solver="euler", log=[fleet.pose],
+                           log_every=log_every, backend="jax", **kw)
+
+    # 1. first call (trace + compile + run) at N = 1000, fresh structure
+    d, fleet = diagram(1000)
+    t = time.perf_counter()
+    r = jax_run(d, fleet, STEPS)
+    first = time.perf_counter() - t
+    compile_s = r.meta["compile_time"]
+    # check: the compiled run matches the NumPy engine
+    ref = av.simulate(d, 300 * DT, dt=DT, solver="euler", log=[fleet.pose], progress=False)
+    got = av.simulate(d, 300 * DT, dt=DT, solver="euler", log=[fleet.pose], backend="jax")
+    agree = float(np.max(np.abs(ref[fleet.pose] - got[fleet.pose])))
+    rows = []
+    for n in ns:
+        d, fleet = diagram(n)
+        jsteps = STEPS if n <= 10000 or args.full else 1000
+        jax_run(d, fleet, jsteps)                                   # compile
+        j = min(_wall(lambda d=d, f=fleet, s=jsteps: jax_run(d, f, s))
+                for _ in range(3 if n <= 10000 else 1)) * STEPS / jsteps
+        nbs = jsteps
+        m = min(_wall(lambda n=n, s=nbs: nb(n, s))
+                for _ in range(3 if n <= 10000 else 1)) * STEPS / nbs
+        esteps = budget_steps("euler", n, args.full)
+        e = time_it(avblocks_run("euler"), n, esteps, 1 if n > 10000 else 2) * STEPS / esteps
+        psteps = budget_steps("numpy", n, args.full)
+        p = time_it(plain_numpy, n, psteps, 1 if n > 10000 else 2) * STEPS / psteps
+        rows.append((n, j, m, e, p, jsteps < STEPS, esteps < STEPS))
+    # ensemble: 256 runs x 100 agents x 3000 steps, each run its own start poses
+    R, n = 256, 100
+    d, fleet = diagram(n)
+    p0s = np.stack([setup(n, seed=s)[0] for s in range(R)])
+    runner = av.compile(d, T_FINAL, dt=DT, solver="euler", log=[fleet.pose],
+                        log_every=log_every)
+    runner.ensemble(x0={"fleet.pose": p0s[:8]})                  # compile (R = 8)
+    t = time.perf_counter()
+    ens = runner.ensemble(x0={"fleet.pose": p0s})
+    ens_first = time.perf_counter() - t
+    t = time.perf_counter()
+    runner.ensemble(x0={"fleet.pose": p0s})
+    ens_wall = time.perf_counter() - t
+    seq_runs = 4
+    t = time.perf_counter()
+    for s in range(seq_runs):
+        one = av.simulate(d, T_FINAL, dt=DT, solver="euler", log=[fleet.pose],
+                          log_every=log_every, x0={"fleet.pose": p0s[s]}, progress=False)
+    seq = (time.perf_counter() - t) * R / seq_runs
+    ens_agree = float(np.max(np.abs(ens[fleet.pose][seq_runs - 1] - one[fleet.pose])))
+
+    print(f"\nCompiled backend (JAX {jax.__version__}, device {jax.default_backend()}), "
+          f"W1 = Unicycle + PointToPoint, Euler, dt = 10 ms, {STEPS} steps, log every "
+          f"{log_every}; load average {load:.1f} on {os.cpu_count()} cores\n")
+    print(f"JAX start-up (import + first op): {jax_init:.2f} s (once per process)")
+    print(f"first simulate(backend='jax') at N = 1000: {first:.2f} s "
+          f"(trace + compile {compile_s:.2f} s); matches NumPy engine to {agree:.1e}\n")
+    print("| N | jax 2nd call s | fused Numba s | jax / Numba | avblocks NumPy s "
+          "| plain NumPy s | NumPy engine / jax | RT factor (jax) |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n, j, m, e, p, jest, eest in rows:
+        print(f"| {n} | {j:.3g}{'*' if jest else ''} | {m:.3g} | {j / m:.2f} | "
+              f"{e:.3g}{'*' if eest else ''} | {p:.3g}{'*' if eest else ''} | {e / j:.1f} "
+              f"| {T_FINAL / j:.0f} |")
+    print(f"\nensemble {R} runs x {n} agents x {STEPS} steps: {ens_wall:.2f} s "
+          f"(first call {ens_first:.2f} s, {ens.meta['chunks']} chunk(s)); "
+          f"{R} sequential NumPy runs: {seq:.1f} s* ({seq_runs} timed, scaled); "
+          f"speed-up {seq / ens_wall:.0f}x; run {seq_runs - 1} agrees to {ens_agree:.1e}")
+    print("* timed over fewer steps or runs and scaled")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, ax = plt.subplots(figsize=(6, 4.2))
+        xs = [r[0] for r in rows]
+        for col, style, label in ((4, "s-", "plain NumPy loop"),
+                                  (3, "^-", "avblocks, NumPy engine"),
+                                  (1, "o-", "avblocks, backend='jax' (2nd call)"),
+                                  (2, "d--", "fused Numba loop")):
+            ax.loglog(xs, [r[col] for r in rows], style, label=label)
+        ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
+        ax.set_xlabel("number of unicycles N")
+        ax.set_ylabel("wall time for 30 s simulated [s]")
+        ax.set_title("W1: go-to-goal unicycles, Euler, dt = 10 ms")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        out = Path(args.out).with_name("scaling_backends.png")
+        fig.savefig(out, dpi=110)
+        print(f"plot: {out}")
+    except ImportError:
+        pass
+
+
+def _wall(fn):
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N up to 3000 only")
     ap.add_argument("--full", action="store_true", help="run every case for 3000 steps")
+    ap.add_argument("--backend", choices=("numpy", "jax", "all"), default="numpy",
+                    help="numpy: the engines vs plain loops (default); jax: the compiled "
+                         "backend vs a fused Numba loop; all: both")
     ap.add_argument("--out", default=str(Path(__file__).with_name("scaling.png")))
     args = ap.parse_args()
+    if args.backend in ("jax", "all"):
+        jax_main(args)
+        if args.backend == "jax":
+            return
     ns = [10, 30, 100, 300, 1000, 3000] + ([] if args.quick else [10000, 30000])
     kinds = {"legacy": legacy, "numpy": plain_numpy, "euler": avblocks_run("euler"),
              "rk4": avblocks_run("rk4")}

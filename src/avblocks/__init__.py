@@ -5,20 +5,34 @@
 """
 
 from . import blocks, controllers, core, environment, utility, vehicles
-from .core import Block, Continuous, Diagram, Periodic, Port, Results, Simulator, simulate
+from .core import (
+    Block,
+    Continuous,
+    Diagram,
+    Periodic,
+    Port,
+    Results,
+    Runner,
+    Simulator,
+    compile,
+    grad,
+    simulate,
+)
 from .core.errors import (
                    AlgebraicLoopError,
                    AvError,
+                   CompileError,
                    ParameterError,
                    ScenarioError,
                    ShapeError,
                    SimulationError,
+                   SimulationWarning,
                    WiringError,
 )
 
 __version__ = "0.1.0"
 
-_LAZY = ("viz", "scenarios")
+_LAZY = ("viz", "scenarios", "sweep")
 
 
 def __getattr__(name):
@@ -30,8 +44,10 @@ def __getattr__(name):
 
 __all__ = [
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
-    "scenarios",
+    "scenarios", "sweep",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
-    "simulate", "AvError", "ParameterError", "WiringError", "ShapeError",
-    "AlgebraicLoopError", "SimulationError", "ScenarioError", "__version__",
+    "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
+    "WiringError", "ShapeError",
+    "AlgebraicLoopError", "SimulationError", "SimulationWarning", "ScenarioError",
+    "__version__",
 ]

@@ -2,22 +2,22 @@
 
     avblocks run waypoints --set agents=300 --out out/
     avblocks run my_scenario.yaml
-    avblocks run my_diagram.py --set n=50
+    avblocks run my_diagram.py --set n=50 --set drive.gain=2.0
+    avblocks run waypoints --backend jax
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
+    avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
-import time
 from pathlib import Path
 
-from .core.errors import AvError, ScenarioError, SimulationError
+from .core.errors import AvError, ScenarioError
 
 
 def _parse_sets(items):
@@ -43,6 +43,8 @@ def _from_namespace(ns, overrides, source):
     sim = dict(ns.get("simulation") or {})
     sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
                 if k.startswith("simulation.")}
+    from .scenarios._numeric import resolve, split_overrides
+    overrides, numeric = split_overrides(overrides)     # block.param keys
     params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
     if "make_diagram" in ns:
         import inspect
@@ -75,6 +77,8 @@ def _from_namespace(ns, overrides, source):
         raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
                             file=source, hint=f"found {type(d).__name__}")
     sim.update(sim_over)
+    if numeric:
+        sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
@@ -92,9 +96,10 @@ def _load_python(path: Path, overrides):
     return d, sim, path.stem, movie
 
 
-def load_any(target, overrides):
+def load_any(target, overrides, out=None):
     """(diagram, simulate kwargs, name, movie options) from a built-in name,
-    a YAML/TOML file or a .py file."""
+    a YAML/TOML file or a .py file (``out``: the output folder a scenario
+    file's blocks may write to)."""
     import importlib
 
     from .scenarios import builtin_scenarios, load_scenario
@@ -109,8 +114,8 @@ def load_any(target, overrides):
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
-    d, sim = sc.build()
-    return d, sim, sc.name, dict(sc.data.get("movie") or {})
+    d, sim = sc.build(output_dir=sc.output_dir(out))
+    return d, sim, sc.name, sc.movie_options()
 
 
 def _trajectory_png(res, path, options=None):
@@ -146,62 +151,9 @@ def _agents_label(a):
 
 
 def cmd_run(args):
-    from .core.simulator import simulate
-    overrides = _parse_sets(args.set)
-    d, sim, name, movie = load_any(args.target, overrides)
-    if args.realtime is not None:
-        sim["realtime"] = args.realtime
-    if args.t_final is not None:
-        sim["t_final"] = args.t_final
-    sim.setdefault("t_final", 10.0)
-    if args.live:  # live view in the browser (avblocks.viz.live)
-        sim["live"] = {"host": args.live_host, "port": args.live_port}
-    out = Path(args.out or Path("avblocks-out") / name)
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    failed = None
-    try:
-        res = simulate(d, progress=None if not args.quiet else False, **sim)
-    except SimulationError as e:
-        failed = e
-        res = e.results
-    except TypeError as e:
-        raise ScenarioError(f"bad simulation settings: {e}", entry="simulation") from None
-    wall = time.perf_counter() - t0
-    files = []
-    if res is not None and len(res.t):
-        files.append(res.save(out / "results.nc"))
-        png = _trajectory_png(res, out / "trajectories.png", movie)
-        if png:
-            files.append(png)
-        if args.movie:
-            from .viz import save_movie
-            files.append(Path(save_movie(res, args.movie, **movie)))
-    summary = {
-        "scenario": name,
-        "agents": res.meta.get("agents") if res is not None else None,
-        "simulated_s": float(res.t[-1] - res.t[0]) if res is not None and len(res.t) else 0.0,
-        "wall_s": round(wall, 3),
-        "realtime_factor": None,
-        "files": [str(f) for f in files],
-    }
-    if summary["simulated_s"] and wall > 0:
-        summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
-    if res is not None and "overruns" in res.meta:
-        summary["overruns"] = res.meta["overruns"]
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
-    print(f"scenario      {name}")
-    print(f"agents        {summary['agents']}")
-    print(f"simulated     {summary['simulated_s']:.3g} s")
-    print(f"wall time     {wall:.3g} s")
-    if summary["realtime_factor"] is not None:
-        print(f"real-time x   {summary['realtime_factor']}")
-    for f in files:
-        print(f"wrote         {f}")
-    if failed is not None:
-        print(f"avblocks: error: {failed} (results up to then were saved)", file=sys.stderr)
-        return 3
-    return 0
+    # signals, the output folder and atomic writes: see _runio
+    from ._runio import guarded_run
+    return guarded_run(args, load_any, _trajectory_png)
 
 
 def cmd_list(args):
@@ -248,7 +200,8 @@ def build_parser():
     r = sub.add_parser("run", help="run a built-in scenario, a YAML/TOML file or a .py file")
     r.add_argument("target", help="built-in name (see `avblocks list`) or a file")
     r.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a parameter (repeatable), e.g. --set agents=300")
+                   help="override a parameter (repeatable), e.g. --set agents=300, "
+                        "or a block's numeric parameter: --set drive.gain=2.0")
     r.add_argument("--out", help="output folder (default avblocks-out/<name>)")
     r.add_argument("--movie", help="also write a movie (.mp4 or .gif)")
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
@@ -259,7 +212,12 @@ def build_parser():
     r.add_argument("--live-host", default="127.0.0.1",
                    help="interface for --live (default 127.0.0.1 only)")
     r.add_argument("--live-port", type=int, default=0, help="port for --live (0: free)")
+    r.add_argument("--backend", choices=("numpy", "jax"),
+                   help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)
+    from .interfaces.ros2.cli import add_commands, add_run_options
+    add_run_options(r)
+    add_commands(sub)
     li = sub.add_parser("list", help="list built-in scenarios (or --blocks)")
     li.add_argument("--blocks", action="store_true", help="list block types instead")
     li.set_defaults(fn=cmd_list)
@@ -268,6 +226,8 @@ def build_parser():
     dg.add_argument("-o", "--output")
     dg.add_argument("--set", action="append", metavar="KEY=VALUE")
     dg.set_defaults(fn=cmd_diagram)
+    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
+    add_sweep_parser(sub)
     return ap
 
 

@@ -36,6 +36,7 @@ def _single(ctl, x0, t_final, dt=0.02, **kw):
     c = d.add(ctl, name="c")
     d.connect(ag.y, c.position)
     d.connect(c.velocity, ag.u)
+    t_final = round(t_final / dt) * dt      # a whole number of steps
     return av.simulate(d, t_final, dt=dt, log=[ag.y], **kw)["ag.y"]
 
 

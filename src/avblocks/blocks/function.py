@@ -7,7 +7,7 @@ import inspect
 import numpy as np
 
 from ..core.block import Block
-from ..core.errors import ParameterError, ShapeError, SimulationError
+from ..core.errors import OutputShapeError, ParameterError, ShapeError, SimulationError
 from ..core.ports import Port
 from ._shapes import set_discrete_state, set_output
 
@@ -163,11 +163,23 @@ class Function(Block):
                                       "block has several outputs", block="Function",
                                       expected=list(self._out_names),
                                       found=type(y).__name__)
-            return {self._out_names[0]: y}
-        if set(y) != set(self._out_names):
+            y = {self._out_names[0]: y}
+        elif set(y) != set(self._out_names):
             raise SimulationError("fn returned other outputs than declared",
                                   block="Function", expected=sorted(self._out_names),
                                   found=sorted(y))
+        # every call, not only the first: a (1, 2) result for a (3, 2) port
+        # would otherwise be broadcast to every agent downstream (one tuple
+        # comparison per output)
+        for nm, v in y.items():
+            want = self._outputs[nm].shape
+            got = getattr(v, "shape", None)
+            if got is None:
+                got = np.shape(v)
+            if want is not None and tuple(got) != want:
+                raise OutputShapeError(f"fn returned the wrong shape for output '{nm}'",
+                                      port=nm, expected=want, found=tuple(got),
+                                      hint="return exactly the declared shape")
         return y
 
     def configure(self, inputs):

@@ -35,7 +35,9 @@ class _Bounded(Block):
     def __init__(self, lower, upper):
         super().__init__()
         self.declare_inherited()   # sample time of its drivers
-        self.lower, self.upper = _ordered(lower, upper, type(self).__name__)
+        lo, hi = _ordered(lower, upper, type(self).__name__)
+        self.declare_parameter("lower", lo, allow_inf=True)
+        self.declare_parameter("upper", hi, allow_inf=True)
         self.declare_input("u")
         self.declare_output("y")
 
@@ -58,6 +60,7 @@ class Saturation(_Bounded):
     lower, upper : float or array_like
         Bounds, broadcast against ``u`` (e.g. ``[v_min, w_min]`` for an
         ``(N, 2)`` command); ``-inf``/``inf`` give a one-sided limit.
+        Numeric parameters (their given shapes).
 
     Equations
     ---------
@@ -88,7 +91,8 @@ class DeadZone(_Bounded):
     Parameters
     ----------
     lower, upper : float or array_like
-        Start and end of the dead zone, broadcast against ``u``.
+        Start and end of the dead zone, broadcast against ``u``. Numeric
+        parameters (their given shapes).
 
     Equations
     ---------
@@ -141,6 +145,10 @@ class RateLimiter(Block):
         with the elapsed time, so a continuous consumer sees a rate-limited
         signal too).
 
+    ``rising`` and ``falling`` are numeric parameters (a default ``falling``
+    is set once to ``-rising``: change both to keep them symmetric);
+    ``initial`` is an initial value, the period structural.
+
     Equations
     ---------
     y_0 = initial (or u_0);
@@ -160,19 +168,21 @@ class RateLimiter(Block):
     def __init__(self, rising=1.0, falling=None, *, initial=None, period=None,
                  offset=0.0):
         super().__init__()
-        self.rising = finite_array(rising, "RateLimiter", "rising")
-        if np.any(self.rising < 0):
+        rising = finite_array(rising, "RateLimiter", "rising")
+        if np.any(rising < 0):
             raise ParameterError("rising rate must be >= 0", block="RateLimiter",
-                                 param="rising", expected=">= 0", found=self.rising)
+                                 param="rising", expected=">= 0", found=rising)
         if falling is None:
-            self.falling = -self.rising
+            falling = -rising
         else:
-            self.falling = finite_array(falling, "RateLimiter", "falling")
-            if np.any(self.falling > 0):
+            falling = finite_array(falling, "RateLimiter", "falling")
+            if np.any(falling > 0):
                 raise ParameterError(
                     "falling rate must be <= 0", block="RateLimiter", param="falling",
-                    expected="<= 0", found=self.falling,
+                    expected="<= 0", found=falling,
                     hint="give the largest decrease per second as a negative number")
+        self.declare_parameter("rising", rising, bounds=(0, None))
+        self.declare_parameter("falling", falling, bounds=(None, 0))
         self.initial = None if initial is None else finite_array(
             initial, "RateLimiter", "initial")
         if period is not None:

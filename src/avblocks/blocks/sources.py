@@ -27,14 +27,18 @@ class Constant(Block):
         Whether the first axis of ``value`` counts agents.
     unit : str
         Unit of the signal, for plots and files.
+
+    A float ``value`` is a numeric parameter (``"c.value"``, its shape
+    fixed); an integer or boolean one is structural.
     """
 
     def __init__(self, value, *, agents=True, unit=""):
         super().__init__()
         v = np.asarray(value)
         if v.dtype.kind not in "biu":
-            v = finite_array(value, "Constant", "value")
-        self.value = v
+            v = self.declare_parameter("value", finite_array(value, "Constant", "value"))
+        else:
+            self.value = v
         self.declare_output("y", v.shape, v.dtype.name, unit=unit,
                             agents=agents and v.ndim > 0)
 
@@ -74,6 +78,8 @@ class Step(Block):
     agents : bool
         Whether the first axis counts agents.
 
+    ``time``, ``before`` and ``after`` are numeric parameters.
+
     Equations
     ---------
     y(t) = before + (after - before) * [t >= time]
@@ -84,8 +90,9 @@ class Step(Block):
         a = finite_array(after, "Step", "after")
         b = finite_array(before, "Step", "before")
         b = np.broadcast_to(b, a.shape).copy()
-        self.time = float(finite_array(time, "Step", "time", ()))
-        self.before, self.after = b, a
+        self.declare_parameter("time", finite_array(time, "Step", "time", ()), unit="s")
+        self.declare_parameter("before", b)
+        self.declare_parameter("after", a)
         self.declare_output("y", a.shape, agents=agents and a.ndim > 0)
 
     def output(self, t, x, u, xp):
@@ -103,7 +110,8 @@ class Sine(Block):
     Parameters
     ----------
     amplitude, frequency (Hz), phase (rad), bias : array_like
-        Broadcast against each other (per agent, per component).
+        Broadcast against each other (per agent, per component); numeric
+        parameters of the broadcast shape.
     agents : bool
         Whether the first axis counts agents.
     """
@@ -114,7 +122,8 @@ class Sine(Block):
         arrs = np.broadcast_arrays(*(finite_array(v, "Sine", n) for v, n in
                                      ((amplitude, "amplitude"), (frequency, "frequency"),
                                       (phase, "phase"), (bias, "bias"))))
-        self.amplitude, self.frequency, self.phase, self.bias = (a.copy() for a in arrs)
+        for nm, a in zip(("amplitude", "frequency", "phase", "bias"), arrs, strict=True):
+            self.declare_parameter(nm, a, unit={"frequency": "Hz", "phase": "rad"}.get(nm, ""))
         self.declare_output("y", arrs[0].shape, agents=agents and arrs[0].ndim > 0)
 
     def output(self, t, x, u, xp):

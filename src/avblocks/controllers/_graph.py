@@ -84,13 +84,14 @@ class NeighborSource:
     """
 
     def __init__(self, block, n, *, adjacency=None, radius=None, k_max=None,
-                 position_port="position"):
+                 position_port="position", radius_param="radius"):
         name = type(block).__name__
         self.block = name
+        self._owner = block
+        self.radius_param = radius_param
         self.n = n
         self.position_port = position_port
         self.fixed = None
-        self.radius = None
         if adjacency is not None and radius is not None:
             raise ParameterError("give either adjacency or radius, not both",
                                  block=name, param="adjacency")
@@ -99,7 +100,12 @@ class NeighborSource:
             self.fixed = adjacency_to_neighbors(adjacency, n, name)
         elif radius is not None:
             self.mode = "radius"
-            self.radius = positive_scalar(radius, name, "radius", allow_inf=True)
+            # a numeric parameter of the owning block ("block.radius")
+            if radius_param not in block.parameters:
+                block.declare_parameter(radius_param,
+                                        positive_scalar(radius, name, radius_param,
+                                                        allow_inf=True),
+                                        bounds=(1e-12, None), allow_inf=True, unit="m")
             if k_max is None:
                 raise ParameterError("k_max is needed with radius", block=name,
                                      param="k_max")
@@ -132,7 +138,8 @@ class NeighborSource:
             idx, w = self.fixed
             return xp.asarray(idx), xp.asarray(w)
         if self.mode == "radius":
-            idx, _ = radius_neighbors(np.asarray(pos), self.radius, self.k_max)
+            r = float(getattr(self._owner, self.radius_param))
+            idx, _ = radius_neighbors(np.asarray(pos), r, self.k_max)
         else:
             idx = u["neighbors"]
         return idx, xp.where(idx >= 0, 1.0, 0.0)

@@ -111,7 +111,7 @@ def safety_filter(position, u_nom, idx, radius, gamma=1.0, right_hand=0.0, xp=np
     dp = position[:, None, :] - pj                         # p_i - p_j
     d2 = xp.sum(dp * dp, axis=-1)
     h = d2 - radius * radius
-    if right_hand:
+    if not (isinstance(right_hand, (int, float)) and right_hand == 0):
         near = xp.any(mask & (d2 < 4 * radius * radius), axis=1)
         turn = xp.stack([u_nom[:, 1], -u_nom[:, 0]], axis=-1)
         u_nom = u_nom + xp.where(near[:, None], right_hand * turn, 0.0)
@@ -137,6 +137,9 @@ class CollisionAvoidance(Block):
         :func:`safety_filter`), default 0 (pure minimal filter).
     dim : int (2 or 3);  sensing_range, k_max : compute neighbours inside the
         block (NumPy only) instead of the port.
+
+    ``radius``, ``gamma``, ``right_hand`` (2-D) and ``sensing_range`` (when
+    given) are numeric parameters; ``n``, ``dim``, ``k_max`` are structural.
     """
 
     def __init__(self, n, radius, *, gamma=1.0, right_hand=0.0, dim=2,
@@ -144,19 +147,26 @@ class CollisionAvoidance(Block):
         super().__init__()
         name = "CollisionAvoidance"
         self.n = n = int(n)
-        self.radius = positive_scalar(radius, name, "radius")
-        self.gamma = positive_scalar(gamma, name, "gamma")
+        self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
+                               bounds=(1e-12, None), unit="m", doc="safety distance")
+        self.declare_parameter("gamma", positive_scalar(gamma, name, "gamma"),
+                               bounds=(1e-12, None), unit="1/s")
         if dim not in (2, 3):
             raise ParameterError("dim must be 2 or 3", block=name, param="dim", found=dim)
         self.dim = dim
-        self.right_hand = positive_scalar(right_hand, name, "right_hand", allow_zero=True)
-        if self.right_hand and dim != 2:
+        rh = positive_scalar(right_hand, name, "right_hand", allow_zero=True)
+        if rh and dim != 2:
             raise ParameterError("right_hand needs dim = 2", block=name,
                                  param="right_hand")
+        if dim == 2:
+            self.declare_parameter("right_hand", rh, bounds=(0, None))
+        else:
+            self.right_hand = 0.0
         self.declare_input("position", (n, dim), unit="m")
         self.declare_input("velocity_nominal", (n, dim), unit="m/s")
         self.graph = NeighborSource(self, n, radius=sensing_range,
-                                    k_max=k_max if sensing_range is not None else None)
+                                    k_max=k_max if sensing_range is not None else None,
+                                    radius_param="sensing_range")
         self.declare_output("velocity", (n, dim), unit="m/s")
 
     def configure(self, inputs):
@@ -165,5 +175,8 @@ class CollisionAvoidance(Block):
     def output(self, t, x, u, xp):
         p = u["position"]
         idx, _ = self.graph.get(u, p, xp)
+        rh = self.right_hand
+        if self.dim != 2 or not self.param_flag("rh", xp, np.any, "right_hand"):
+            rh = 0.0
         return {"velocity": safety_filter(p, u["velocity_nominal"], idx, self.radius,
-                                          self.gamma, self.right_hand, xp)}
+                                          self.gamma, rh, xp)}

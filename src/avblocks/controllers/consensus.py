@@ -52,13 +52,17 @@ class Consensus(Block):
     adjacency : (N, N) array or sparse, optional — fixed weighted graph.
     radius, k_max : optional — compute proximity neighbours internally.
 
+    ``gain`` (and ``radius`` when given) are numeric parameters; the graph
+    source, ``adjacency``, ``k_max``, ``n`` and ``dim`` are structural.
+
     Equations and references: module docstring.
     """
 
     def __init__(self, n, *, dim=2, gain=1.0, adjacency=None, radius=None, k_max=None):
         super().__init__()
         self.n = n = int(n)
-        self.gain = positive_scalar(gain, "Consensus", "gain")
+        self.declare_parameter("gain", positive_scalar(gain, "Consensus", "gain"),
+                               bounds=(1e-12, None), unit="1/s")
         self.declare_input("position", (n, int(dim)), unit="m")
         self.graph = NeighborSource(self, n, adjacency=adjacency, radius=radius,
                                     k_max=k_max)

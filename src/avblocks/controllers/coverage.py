@@ -109,8 +109,13 @@ class Coverage(Block):
     period : float, optional — make the block discrete (recompute cells at
         this period and hold), instead of at every solver stage.
 
+    ``gain`` is a numeric parameter; the polygon is structural.
+
     NumPy + shapely only. Equations, references: module docstring.
     """
+
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
 
     def __init__(self, n, polygon, *, gain=1.0, period=None):
         super().__init__()
@@ -119,7 +124,8 @@ class Coverage(Block):
             raise ParameterError("need n >= 1", block="Coverage", param="n", found=n)
         convex_halfplanes(polygon, "Coverage")          # validates convexity
         self.polygon = np.asarray(polygon, dtype=float)
-        self.gain = positive_scalar(gain, "Coverage", "gain")
+        self.declare_parameter("gain", positive_scalar(gain, "Coverage", "gain"),
+                               bounds=(1e-12, None), unit="1/s")
         if period is not None:
             self.declare_periodic(period)
         self.declare_input("position", (n, 2), unit="m")

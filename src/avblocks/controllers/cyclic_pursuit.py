@@ -18,8 +18,6 @@ vehicles in cyclic pursuit", IEEE TAC 49(11), 2004.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..core.block import Block
@@ -30,7 +28,7 @@ from ..core.params import positive_scalar
 def cyclic_pursuit_law(position, target_index, gain=1.0, angle=0.0, xp=np):
     """``K R(angle) (x[target] - x)`` for (N, 2) positions."""
     e = position[target_index] - position
-    c, s = math.cos(angle), math.sin(angle)
+    c, s = xp.cos(angle), xp.sin(angle)
     return gain * xp.stack([c * e[:, 0] - s * e[:, 1], s * e[:, 0] + c * e[:, 1]], axis=-1)
 
 
@@ -43,13 +41,16 @@ class CyclicPursuit(Block):
     ----------
     n : int;  gain : float > 0;  angle : float (rad), ``pi / n`` for a circle.
     order : (N,) permutation, optional — ``order[k]`` pursues ``order[k+1]``.
+
+    ``gain`` and ``angle`` are numeric parameters; ``order`` is structural.
     """
 
     def __init__(self, n, *, gain=1.0, angle=0.0, order=None):
         super().__init__()
         self.n = n = int(n)
-        self.gain = positive_scalar(gain, "CyclicPursuit", "gain")
-        self.angle = float(angle)
+        self.declare_parameter("gain", positive_scalar(gain, "CyclicPursuit", "gain"),
+                               bounds=(1e-12, None), unit="1/s")
+        self.declare_parameter("angle", angle, shape=(), unit="rad")
         order = np.arange(n) if order is None else np.asarray(order)
         if sorted(order.tolist()) != list(range(n)):
             raise ParameterError("order must be a permutation of 0..n-1",

@@ -41,6 +41,8 @@ class DisplacementFormation(Block):
     offsets : (N, D) — desired positions ``c`` (any common translation).
     gain : float > 0;  adjacency / radius, k_max: graph source (see
     :class:`~avblocks.controllers.Consensus`).
+
+    ``offsets``, ``gain`` (and ``radius``) are numeric parameters.
     """
 
     def __init__(self, offsets, *, gain=1.0, adjacency=None, radius=None, k_max=None):
@@ -48,9 +50,11 @@ class DisplacementFormation(Block):
         c = finite_array(offsets, "DisplacementFormation", "offsets")
         if c.ndim != 2:
             c = finite_array(offsets, "DisplacementFormation", "offsets", shape=(-1, 2))
-        self.offsets = c
+        self.declare_parameter("offsets", c, unit="m")
         self.n = n = c.shape[0]
-        self.gain = positive_scalar(gain, "DisplacementFormation", "gain")
+        self.declare_parameter("gain", positive_scalar(gain, "DisplacementFormation",
+                                                       "gain"),
+                               bounds=(1e-12, None), unit="1/s")
         self.declare_input("position", c.shape, unit="m")
         self.graph = NeighborSource(self, n, adjacency=adjacency, radius=radius,
                                     k_max=k_max)
@@ -62,5 +66,5 @@ class DisplacementFormation(Block):
     def output(self, t, x, u, xp):
         p = u["position"]
         idx, w = self.graph.get(u, p, xp)
-        return {"velocity": displacement_formation_law(p, xp.asarray(self.offsets),
+        return {"velocity": displacement_formation_law(p, self.offsets,
                                                        idx, w, self.gain, xp)}

@@ -35,8 +35,6 @@ Without gamma, Algorithm 1 may fragment; with gamma it forms a flock.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..core.block import Block
@@ -58,7 +56,7 @@ def bump(s, h, xp=np):
 
 def phi_alpha(s, r_a, d_a, a, b, h, xp=np):
     """Pairwise action ``rho_h(s / r_a) phi(s - d_a)`` on sigma-distances ``s``."""
-    c = abs(a - b) / math.sqrt(4.0 * a * b)
+    c = abs(a - b) / xp.sqrt(4.0 * a * b)
     z = s - d_a + c
     phi = 0.5 * ((a + b) * z / xp.sqrt(1.0 + z * z) + (a - b))
     return bump(s / r_a, h, xp) * phi
@@ -67,8 +65,8 @@ def phi_alpha(s, r_a, d_a, a, b, h, xp=np):
 def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
                  c1=1.0, c2=1.0, xp=np):
     """Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K)."""
-    r_a = (math.sqrt(1.0 + eps * r * r) - 1.0) / eps
-    d_a = (math.sqrt(1.0 + eps * d * d) - 1.0) / eps
+    r_a = (xp.sqrt(1.0 + eps * r * r) - 1.0) / eps
+    d_a = (xp.sqrt(1.0 + eps * d * d) - 1.0) / eps
     qj, mask = gather(position, idx, xp)
     pj, _ = gather(velocity, idx, xp)
     dq = qj - position[:, None, :]
@@ -107,6 +105,12 @@ class Flocking(Block):
     radius mode: ``neighbors="internal"`` with ``k_max`` computes neighbours
     within ``r`` inside the block (NumPy only); ``adjacency`` a fixed graph.
 
+    ``d``, ``r``, ``eps``, ``a``, ``b``, ``h``, ``c1``, ``c2``, ``target``,
+    ``target_velocity`` (both (N, D)), ``c1_gamma`` and ``c2_gamma`` are
+    numeric parameters (``"flock.c1"``...; the constraints ``r > d`` and
+    ``a <= b`` are checked at construction only); ``gamma``, ``neighbors``,
+    ``k_max``, ``adjacency``, ``n`` and ``dim`` are structural.
+
     Reference: R. Olfati-Saber, IEEE TAC 51(3):401-420, 2006, Algorithm 1
     (and the gamma term of Algorithm 2).
     """
@@ -119,36 +123,43 @@ class Flocking(Block):
         name = "Flocking"
         self.n = n = int(n)
         dim = int(dim)
-        self.d = positive_scalar(d, name, "d")
-        self.r = 1.2 * self.d if r is None else positive_scalar(r, name, "r")
-        if self.r <= self.d:
+        d = positive_scalar(d, name, "d")
+        r = 1.2 * d if r is None else positive_scalar(r, name, "r")
+        if r <= d:
             raise ParameterError("interaction range r must exceed d", block=name,
-                                 param="r", expected=f"> {self.d}", found=self.r)
-        self.eps = positive_scalar(eps, name, "eps")
-        self.a = positive_scalar(a, name, "a")
-        self.b = positive_scalar(b, name, "b")
-        if self.a > self.b:
+                                 param="r", expected=f"> {d}", found=r)
+        a, b = positive_scalar(a, name, "a"), positive_scalar(b, name, "b")
+        if a > b:
             raise ParameterError("need 0 < a <= b", block=name, param="a",
-                                 expected=f"<= b = {self.b}", found=self.a)
-        self.h = float(h)
-        if not 0 < self.h < 1:
+                                 expected=f"<= b = {b}", found=a)
+        if not 0 < float(h) < 1:
             raise ParameterError("h must lie in (0, 1)", block=name, param="h", found=h)
-        self.c1 = positive_scalar(c1, name, "c1", allow_zero=True)
-        self.c2 = positive_scalar(c2, name, "c2", allow_zero=True)
+        dp = self.declare_parameter
+        dp("d", d, bounds=(1e-12, None), unit="m", doc="lattice distance")
+        dp("r", r, bounds=(1e-12, None), unit="m", doc="interaction range (> d)")
+        dp("eps", positive_scalar(eps, name, "eps"), bounds=(1e-12, None))
+        dp("a", a, bounds=(1e-12, None))
+        dp("b", b, bounds=(1e-12, None))
+        dp("h", float(h), bounds=(1e-9, 1 - 1e-9))
+        dp("c1", positive_scalar(c1, name, "c1", allow_zero=True), bounds=(0, None))
+        dp("c2", positive_scalar(c2, name, "c2", allow_zero=True), bounds=(0, None))
         self.gamma = bool(gamma)
-        self.target = np.broadcast_to(finite_array(target, name, "target"), (n, dim)).copy()
-        self.target_velocity = np.broadcast_to(
-            finite_array(target_velocity, name, "target_velocity"), (n, dim)).copy()
-        self.c1_gamma = positive_scalar(c1_gamma, name, "c1_gamma", allow_zero=True)
-        self.c2_gamma = positive_scalar(c2_gamma, name, "c2_gamma", allow_zero=True)
+        dp("target", np.broadcast_to(finite_array(target, name, "target"), (n, dim)),
+           unit="m")
+        dp("target_velocity", np.broadcast_to(
+            finite_array(target_velocity, name, "target_velocity"), (n, dim)), unit="m/s")
+        dp("c1_gamma", positive_scalar(c1_gamma, name, "c1_gamma", allow_zero=True),
+           bounds=(0, None))
+        dp("c2_gamma", positive_scalar(c2_gamma, name, "c2_gamma", allow_zero=True),
+           bounds=(0, None))
         self.declare_input("position", (n, dim), unit="m")
         self.declare_input("velocity", (n, dim), unit="m/s")
         if neighbors not in ("port", "internal"):
             raise ParameterError("neighbors must be 'port' or 'internal'", block=name,
                                  param="neighbors", found=neighbors)
-        radius = self.r if neighbors == "internal" else None
+        radius = r if neighbors == "internal" else None
         self.graph = NeighborSource(self, n, adjacency=adjacency, radius=radius,
-                                    k_max=k_max)
+                                    k_max=k_max, radius_param="r")
         self.declare_output("accel", (n, dim), unit="m/s^2")
 
     def configure(self, inputs):

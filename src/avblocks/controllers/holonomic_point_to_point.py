@@ -88,6 +88,9 @@ class HolonomicPointToPoint(Block):
     n : int, optional (needed when all agents share one list)
     dim : int, 2 or 3 (default: from the waypoints)
     gain, v_max : float or (N,) > 0;  radius : float > 0 (m).
+
+    ``waypoints`` (padded (N, M, D); the counts are structural), ``gain``,
+    ``v_max`` and ``radius`` are numeric parameters.
     """
 
     def __init__(self, waypoints, *, n=None, dim=None, gain=1.0, v_max=1.0, radius=0.2):
@@ -109,10 +112,15 @@ class HolonomicPointToPoint(Block):
                                      "share one waypoint list", block=name, param="n")
         self.n = n = int(n)
         self.dim = dim
-        self.wps, self.counts = waypoint_array_nd(waypoints, n, dim, name)
-        self.gain = agent_array(gain, n, name, "gain", positive=True)
-        self.v_max = agent_array(v_max, n, name, "v_max", positive=True)
-        self.radius = positive_scalar(radius, name, "radius")
+        wps, self.counts = waypoint_array_nd(waypoints, n, dim, name)
+        self.declare_parameter("waypoints", wps, unit="m",
+                               doc="(N, M, D), padded with each agent's last waypoint")
+        self.declare_parameter("gain", agent_array(gain, n, name, "gain", positive=True),
+                               bounds=(1e-12, None), unit="1/s")
+        self.declare_parameter("v_max", agent_array(v_max, n, name, "v_max", positive=True),
+                               bounds=(1e-12, None), allow_inf=True, unit="m/s")
+        self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
+                               bounds=(1e-12, None), unit="m")
         self._rows = np.arange(n)
         self._last = self.counts - 1
         self.declare_discrete_state("wp", np.zeros(n, dtype=np.int64))
@@ -121,8 +129,13 @@ class HolonomicPointToPoint(Block):
         self.declare_output("target", (n, dim), unit="m")
         self.declare_output("done", (n,), "bool")
 
+    @property
+    def wps(self):
+        """The padded (N, M, D) waypoint array (the ``waypoints`` parameter)."""
+        return self.waypoints
+
     def _goal(self, wp, xp):
-        return xp.asarray(self.wps)[self._rows, wp]
+        return self.waypoints[self._rows, wp]
 
     def output(self, t, x, u, xp):
         goal = self._goal(x["wp"], xp)

@@ -178,6 +178,10 @@ class LeaderFollower(Block):
     k_l, k_alpha : float or (N,) > 0 — gains (1/s).
     l_min : float > 0 — lower clamp of ``l`` in the ``sin(alpha)/l`` term.
 
+    ``d``, ``l_ref``, ``alpha_ref``, ``k_l``, ``k_alpha`` (all (N,) but
+    ``d``) and ``l_min`` are numeric parameters (``"follow.k_alpha"``); the
+    leader tree and ``references_input`` are structural.
+
     Example
     -------
     >>> import numpy as np, avblocks as av
@@ -203,22 +207,23 @@ class LeaderFollower(Block):
         self.leader = lead.astype(np.int64)
         self.n = n = self.leader.shape[0]
         self.depth = tree_levels(self.leader, name)
-        self.d = positive_scalar(d, name, "d")
         self.references_input = bool(references_input)
         if not self.references_input and (l_ref is None or alpha_ref is None):
             raise ParameterError("l_ref and alpha_ref are needed (or "
                                  "references_input=True and a 'ref' input)",
                                  block=name, param="l_ref" if l_ref is None
                                  else "alpha_ref", found=None)
-        self.l_ref = agent_array(0.0 if l_ref is None else l_ref, n, name, "l_ref",
-                                 nonnegative=True)
-        self.alpha_ref = agent_array(0.0 if alpha_ref is None else alpha_ref, n, name,
-                                     "alpha_ref")
-        self.k_l = agent_array(k_l, n, name, "k_l", positive=True)
-        self.k_alpha = agent_array(k_alpha, n, name, "k_alpha", positive=True)
-        self.l_min = positive_scalar(l_min, name, "l_min")
-        # static level structure: levels[L] = agents at depth L; lead_pos[L] =
-        # position of their leaders inside levels[L - 1]
+        dp = self.declare_parameter
+        dp("d", positive_scalar(d, name, "d"), bounds=(1e-9, None), unit="m")
+        dp("l_ref", agent_array(0.0 if l_ref is None else l_ref, n, name, "l_ref",
+                                nonnegative=True), bounds=(0, None), unit="m")
+        dp("alpha_ref", agent_array(0.0 if alpha_ref is None else alpha_ref, n, name,
+                                    "alpha_ref"), unit="rad")
+        dp("k_l", agent_array(k_l, n, name, "k_l", positive=True), bounds=(1e-12, None),
+           unit="1/s")
+        dp("k_alpha", agent_array(k_alpha, n, name, "k_alpha", positive=True),
+           bounds=(1e-12, None), unit="1/s")
+        dp("l_min", positive_scalar(l_min, name, "l_min"), bounds=(1e-12, None), unit="m")
         self.levels = [np.flatnonzero(self.depth == k)
                        for k in range(int(self.depth.max()) + 1)]
         self.lead_pos = [None]

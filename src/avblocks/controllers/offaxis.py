@@ -47,13 +47,14 @@ class OffAxisPoint(Block):
     """Off-axis points of N unicycles.
 
     Ports: pose (N, 3) in; position (N, 2) out ``(x + d cos th, y + d sin th)``.
-    Parameters: n, d > 0 (m).
+    Parameters: n, d > 0 (m); ``d`` is a numeric parameter.
     """
 
     def __init__(self, n, d=0.1):
         super().__init__()
         self.n = n = int(n)
-        self.d = positive_scalar(d, "OffAxisPoint", "d")
+        self.declare_parameter("d", positive_scalar(d, "OffAxisPoint", "d"),
+                               bounds=(1e-9, None), unit="m")
         self.declare_input("pose", (n, 3), unit="m, m, rad")
         self.declare_output("position", (n, 2), unit="m", labels=("x", "y"))
 
@@ -70,7 +71,8 @@ class HolonomicToUnicycle(Block):
     cmd : out, (N, 2) (v, omega).
 
     Parameters: n, d > 0 (m) — same ``d`` as the OffAxisPoint feeding the
-    holonomic controller. Equations: module docstring.
+    holonomic controller; ``d`` is a numeric parameter. Equations: module
+    docstring.
 
     >>> import numpy as np
     >>> b = HolonomicToUnicycle(1, d=0.5)
@@ -82,7 +84,8 @@ class HolonomicToUnicycle(Block):
     def __init__(self, n, d=0.1):
         super().__init__()
         self.n = n = int(n)
-        self.d = positive_scalar(d, "HolonomicToUnicycle", "d")
+        self.declare_parameter("d", positive_scalar(d, "HolonomicToUnicycle", "d"),
+                               bounds=(1e-9, None), unit="m")
         self.declare_input("pose", (n, 3), unit="m, m, rad")
         self.declare_input("velocity", (n, 2), unit="m/s", labels=("vx", "vy"))
         self.declare_output("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"))

@@ -139,6 +139,10 @@ class PointToPoint(Block):
     radius : float
         Arrival radius (m).
 
+    ``waypoints`` (as the padded (N, M, 2) array; the counts M_i are
+    structural), ``d``, ``gain``, ``v_max`` (both (N,)) and ``radius`` are
+    numeric parameters: ``"drive.gain"``, ``"drive.waypoints"``...
+
     Equations: see the module docstring.
     """
 
@@ -156,15 +160,20 @@ class PointToPoint(Block):
                                      "agents share one waypoint list",
                                      block="PointToPoint", param="n")
         self.n = n = int(n)
-        self.wps, self.counts = waypoint_array(waypoints, n)
-        self.d = positive_scalar(d, "PointToPoint", "d")
-        self.gain = agent_array(gain, n, "PointToPoint", "gain", positive=True)
-        self.v_max = agent_array(v_max, n, "PointToPoint", "v_max", positive=True)
-        self.radius = positive_scalar(radius, "PointToPoint", "radius")
-        m = self.wps.shape[1]
+        wps, self.counts = waypoint_array(waypoints, n)
+        name = "PointToPoint"
+        self.declare_parameter("waypoints", wps, bounds=(None, None), unit="m",
+                               doc="(N, M, 2), padded with each agent's last waypoint")
+        self.declare_parameter("d", positive_scalar(d, name, "d"), bounds=(1e-9, None),
+                               unit="m")
+        self.declare_parameter("gain", agent_array(gain, n, name, "gain", positive=True),
+                               bounds=(1e-12, None), unit="1/s")
+        self.declare_parameter("v_max", agent_array(v_max, n, name, "v_max", positive=True),
+                               bounds=(1e-12, None), allow_inf=True, unit="m/s")
+        self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
+                               bounds=(1e-12, None), unit="m")
+        m = wps.shape[1]
         self._single = m == 1
-        self._goal0 = np.ascontiguousarray(self.wps[:, 0])
-        self._flat = self.wps.reshape(n * m, 2)
         self._base = np.arange(n) * m
         self._last = self.counts - 1
         self.declare_discrete_state("wp", np.zeros(n, dtype=np.int64))
@@ -175,10 +184,16 @@ class PointToPoint(Block):
         self.declare_output("arrived", (n,), "bool")
         self.declare_output("done", (n,), "bool")
 
+    @property
+    def wps(self):
+        """The padded (N, M, 2) waypoint array (the ``waypoints`` parameter)."""
+        return self.waypoints
+
     def _goal(self, wp, xp):
+        w = self.waypoints
         if self._single:
-            return xp.asarray(self._goal0)
-        return xp.take(xp.asarray(self._flat), self._base + wp, axis=0)
+            return w[:, 0]
+        return xp.take(xp.reshape(w, (-1, 2)), self._base + wp, axis=0)
 
     def output(self, t, x, u, xp):
         goal = self._goal(x["wp"], xp)

@@ -91,12 +91,20 @@ class Distribution:
                                  "('exponential', mean)", block="RandomWalk",
                                  param="interval", found=spec) from None
 
-    def sample(self, key, shape, xp=np):
+    @property
+    def params(self):
+        """``(a,)`` or ``(a, b)``: the numeric values of the distribution."""
+        return (float(self.a),) if self.b is None else (float(self.a), float(self.b))
+
+    def sample(self, key, shape, xp=np, params=None):
+        """Draw; ``params`` (like :attr:`params`) overrides ``a``, ``b``."""
+        a, b = (self.a, self.b) if params is None else (
+            params[0], params[1] if len(params) > 1 else None)
         if self.kind == "normal":
-            return rng.normal(key, shape, xp, self.a, self.b)
+            return rng.normal(key, shape, xp, a, b)
         if self.kind == "uniform":
-            return rng.uniform(key, shape, xp, self.a, self.b)
-        return rng.exponential(key, shape, xp, self.a)
+            return rng.uniform(key, shape, xp, a, b)
+        return rng.exponential(key, shape, xp, a)
 
     def scipy(self):
         """The same distribution as a frozen :mod:`scipy.stats` object."""
@@ -159,6 +167,11 @@ class RandomWalk(Block):
     bounds : (xmin, ymin, xmax, ymax), optional;  polygon : (M, 2) convex.
     boundary : "reflect" or "turn_back";  margin : float (m).
     min_interval : float >= 0 — lower clip of drawn intervals.
+
+    Numeric parameters: ``interval_params`` (the distribution's ``(a,)`` or
+    ``(a, b)``), ``speed`` (2,), ``turn_std`` (when given), ``gain``,
+    ``omega_max``, ``min_interval``, ``margin``. The distribution kind, the
+    region (``bounds``/``polygon``) and ``boundary`` are structural.
     """
 
     def __init__(self, n, *, interval=("exponential", 2.0), speed=(0.5, 1.0),
@@ -172,14 +185,23 @@ class RandomWalk(Block):
         if not sp[0] <= sp[1]:
             raise ParameterError("speed must be (low, high) with low <= high",
                                  block=name, param="speed", found=sp)
-        self.speed = sp
-        self.turn_std = None if turn_std is None else positive_scalar(turn_std, name,
-                                                                      "turn_std")
-        self.gain = positive_scalar(gain, name, "gain")
-        self.omega_max = positive_scalar(omega_max, name, "omega_max", allow_inf=True)
-        self.min_interval = positive_scalar(min_interval, name, "min_interval",
-                                            allow_zero=True)
-        self.margin = positive_scalar(margin, name, "margin", allow_zero=True)
+        dp = self.declare_parameter
+        dp("interval_params", self.interval.params,
+           bounds=(None, None) if self.interval.kind == "normal" else (0, None),
+           unit="s", doc="(a,) or (a, b) of the interval distribution")
+        dp("speed", sp, unit="m/s", doc="(low, high) of the uniform speed draw")
+        if turn_std is None:
+            self.turn_std = None
+        else:
+            dp("turn_std", positive_scalar(turn_std, name, "turn_std"),
+               bounds=(1e-12, None), unit="rad")
+        dp("gain", positive_scalar(gain, name, "gain"), bounds=(1e-12, None), unit="1/s")
+        dp("omega_max", positive_scalar(omega_max, name, "omega_max", allow_inf=True),
+           bounds=(0, None), allow_inf=True, unit="rad/s")
+        dp("min_interval", positive_scalar(min_interval, name, "min_interval",
+                                           allow_zero=True), bounds=(0, None), unit="s")
+        dp("margin", positive_scalar(margin, name, "margin", allow_zero=True),
+           bounds=(0, None), unit="m")
         if bounds is not None and polygon is not None:
             raise ParameterError("give bounds or polygon, not both", block=name,
                                  param="bounds")
@@ -214,7 +236,8 @@ class RandomWalk(Block):
         pose = u["pose"]
         st = x["started"]
         due = (~st) | (t >= x["t_next"])
-        tau = xp.maximum(self.interval.sample(k1, (n,), xp), self.min_interval)
+        tau = xp.maximum(self.interval.sample(k1, (n,), xp, self.interval_params),
+                         self.min_interval)
         t_next = xp.where(due, xp.where(st, x["t_next"], t) + tau, x["t_next"])
         v_new = rng.uniform(k2, (n,), xp, self.speed[0], self.speed[1])
         if self.turn_std is None:

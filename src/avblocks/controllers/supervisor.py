@@ -180,6 +180,9 @@ class Supervisor(_Machine):
         current state fires at a major step.
     outputs : ``{name: {state: value}}``.
 
+    No numeric parameters: states, transitions (guards are Python callables)
+    and the output tables are structural (a mode machine, not a gain).
+
     Example
     -------
     >>> import numpy as np

@@ -3,10 +3,12 @@
 from . import check, rng
 from .block import CONTINUOUS, INHERITED, Block, Continuous, Inherited, Periodic
 from .check import check_block
+from .compiled import Runner, compile, grad
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
                      AlgebraicLoopError,
                      AvError,
+                     CompileError,
                      ParameterError,
                      ScenarioError,
                      ShapeError,
@@ -25,5 +27,5 @@ __all__ = [
     "PortRef", "CompiledDiagram", "AvError", "ParameterError", "WiringError",
     "ShapeError", "AlgebraicLoopError", "SimulationError", "ScenarioError", "Port",
     "Results", "Simulator", "simulate", "Solver", "Euler", "RK4", "Scipy",
-    "make_solver",
+    "make_solver", "compile", "grad", "Runner", "CompileError",
 ]

@@ -48,6 +48,75 @@ from .params import Param
 from .ports import Port
 
 
+def _guard_init(cls, init):
+    """Wrap a block constructor so that a plain Python/NumPy error raised on
+    the user's arguments (a bare ``int()`` of a string, a negative size, an
+    overflow) becomes a :class:`ParameterError` naming the block, instead
+    of leaking from deep inside. A ``TypeError`` stays a ``TypeError`` too
+    (``ParameterTypeError``), so unknown keywords are still TypeErrors."""
+    import functools
+
+    from .errors import AvError, ParameterError, ParameterTypeError
+
+    @functools.wraps(init)
+    def __init__(self, *args, **kwargs):
+        try:
+            init(self, *args, **kwargs)
+        except AvError:
+            raise
+        except TypeError as e:
+            raise ParameterTypeError(_ctor_msg(e), block=cls.__name__,
+                                     param=_culprit(init, self, args, kwargs, e),
+                                     hint=_ctor_hint(init)) from e
+        except MemoryError:
+            raise ParameterError("the arguments ask for more memory than there is",
+                                 block=cls.__name__,
+                                 hint="use fewer agents or smaller sizes") from None
+        except (ValueError, OverflowError, ZeroDivisionError, IndexError, KeyError,
+                FloatingPointError) as e:
+            raise ParameterError(_ctor_msg(e), block=cls.__name__,
+                                 param=_culprit(init, self, args, kwargs, e),
+                                 hint=_ctor_hint(init)) from e
+
+    __init__._av_guarded = True
+    return __init__
+
+
+def _culprit(init, self, args, kwargs, e):
+    """The argument the error message quotes, when exactly one does."""
+    import inspect
+    try:
+        bound = inspect.signature(init).bind(self, *args, **kwargs)
+    except TypeError:
+        return None
+    msg = str(e)
+    hits = []
+    for k, v in bound.arguments.items():
+        if k == "self" or isinstance(v, (bool, type(None))):
+            continue
+        try:
+            r = repr(v)
+        except Exception:  # noqa: BLE001 - an odd object's repr
+            continue
+        if 0 < len(r) <= 60 and r in msg:
+            hits.append(k)
+    return hits[0] if len(hits) == 1 else None
+
+
+def _ctor_msg(e):
+    msg = " ".join(str(e).split()) or type(e).__name__
+    return f"bad argument: {type(e).__name__}: {msg}"
+
+
+def _ctor_hint(init):
+    import inspect
+    try:
+        sig = str(inspect.signature(init)).replace("(self, ", "(").replace("(self)", "()")
+    except (TypeError, ValueError):  # pragma: no cover - builtins
+        return None
+    return f"the constructor takes {sig}"
+
+
 @dataclass(frozen=True)
 class Continuous:
     """Sample time of a continuous-time block.
@@ -108,11 +177,34 @@ class Block:
     #: True when ``on_major_step`` has side effects (I/O, drawing, hardware).
     side_effects = False
 
+    #: False for a block whose math is NumPy/SciPy/shapely code that JAX cannot
+    #: trace (spatial indexes, geometry): ``backend="jax"`` then refuses the
+    #: diagram at compile time naming the block. Blocks written with ``xp``
+    #: only keep the default.
+    traceable = True
+
     #: True when ``update`` needs this block's own outputs of the same major
     #: step (Simulink's and Drake's discrete updates may read them too). The
     #: simulator then calls ``update(t, x, u, xp, y=outputs)``, so work done in
     #: ``output`` (a distance, a mode test) is not repeated in ``update``.
     update_uses_outputs = False
+
+    def __init_subclass__(cls, **kw):
+        super().__init_subclass__(**kw)
+        if "__init__" in cls.__dict__ and not getattr(cls.__init__, "_av_guarded", False):
+            cls.__init__ = _guard_init(cls, cls.__dict__["__init__"])
+
+    def __getattr__(self, name):
+        # only reached when normal lookup fails: a port name gets a clear hint
+        if not name.startswith("_"):
+            d = self.__dict__
+            if name in d.get("_inputs", ()) or name in d.get("_outputs", ()):
+                from .errors import PortAttributeError
+                raise PortAttributeError(
+                    "ports are reached through the handle Diagram.add returned, "
+                    "not through the block object", port=name,
+                    hint=f"h = diagram.add(block); then h.{name}")
+        raise AttributeError(f"'{type(self).__name__}' object has no attribute '{name}'")
 
     def __init__(self):
         self._inputs: dict[str, Port] = {}
@@ -225,6 +317,27 @@ class Block:
         self._params[name] = spec
         self.__dict__[name] = a
         return a
+
+    def param_flag(self, key, xp, test, *names) -> bool:
+        """A Python bool ``test(*values)`` of the current values of the named
+        parameters, for skipping work that a value makes a no-op (a clip
+        to an infinite limit, a zero drag term) on the NumPy path.
+
+        Cached until one of the parameters is given a new value (every set
+        replaces the array). Under any other array namespace (a traced
+        JAX value) it is ``True``: the general computation is done.
+        """
+        if xp is not np:
+            return True
+        d = self.__dict__
+        vals = tuple(d[n] for n in names)
+        cache = d.setdefault("_flag_cache", {})
+        hit = cache.get(key)
+        if hit is not None and all(a is b for a, b in zip(hit[0], vals)):
+            return hit[1]
+        r = bool(test(*vals))
+        cache[key] = (vals, r)
+        return r
 
     @property
     def parameters(self) -> dict[str, Param]:

@@ -16,6 +16,7 @@ agent-count mismatches, and algebraic loops (with the cycle printed).
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 from .block import CONTINUOUS, Block, Inherited, Periodic
@@ -86,6 +87,10 @@ class BlockHandle:
         return f"<{type(self.block).__name__} '{self.path}'>"
 
 
+#: block -> weak reference to the diagram holding it (one diagram per block)
+_OWNER = weakref.WeakKeyDictionary()
+
+
 def _inputs_of(b) -> dict[str, Port]:
     return b.input_ports
 
@@ -138,6 +143,15 @@ class Diagram:
                 raise WiringError(f"this block object is already in the diagram as "
                                   f"'{h.name}'", block=name,
                                   hint="create a second block instance")
+        if isinstance(block, Block):
+            ref = _OWNER.get(block)
+            other = ref() if ref is not None else None
+            if other is not None and other is not self:
+                raise WiringError("this block object is already in another diagram",
+                                  block=name,
+                                  hint="a block belongs to one diagram: create a second "
+                                       "instance (or copy.deepcopy the block)")
+            _OWNER[block] = weakref.ref(self)
         h = BlockHandle(self, name, block)
         if isinstance(block, Diagram):
             if block._parent_handle is not None:

@@ -59,6 +59,10 @@ class ParameterError(AvError, ValueError):
     """A block parameter has the wrong type, shape or value."""
 
 
+class ParameterTypeError(ParameterError, TypeError):
+    """A constructor argument of the wrong kind (also a ``TypeError``)."""
+
+
 class WiringError(AvError):
     """A connection is impossible: unknown port, two drivers, unconnected input."""
 
@@ -106,3 +110,22 @@ class ScenarioError(AvError):
         if entry is not None:
             where += (": " if where else "") + f"{entry}"
         super().__init__((where + ": " if where else "") + cause, hint=hint)
+
+
+class SimulationWarning(UserWarning):
+    """Something went wrong that did not cost the results (a block's
+    ``on_stop`` failed after a complete run, for example)."""
+
+
+class PortAttributeError(WiringError, AttributeError):
+    """A port was looked up on a block object instead of its diagram handle."""
+
+
+class OutputShapeError(SimulationError, ShapeError):
+    """A block returned an output of another shape than its port declares,
+    during a run (both a :class:`SimulationError` and a :class:`ShapeError`)."""
+
+
+class CompileError(AvError):
+    """A diagram cannot be compiled (a block that cannot be traced by JAX, a
+    side-effect block, a variable-step solver): names the block and the fix."""

@@ -187,3 +187,34 @@ class bound_parameters:
             blk.__dict__[k] = v
         self.saved = []
         return False
+
+
+def integer(value, block, name, *, lo=None, hi=None):
+    """A Python int from an int-like value (``3``, ``3.0``, ``np.int64(3)``;
+    never ``3.5``, ``"3"``, ``True``, NaN or inf), within ``[lo, hi]``."""
+    bad = isinstance(value, (bool, np.bool_, str, bytes))
+    v = None
+    if not bad:
+        try:
+            f = value if isinstance(value, (int, np.integer)) else float(value)
+            if isinstance(f, float) and not (np.isfinite(f) and f == int(f)):
+                bad = True
+            else:
+                v = int(f)
+        except (TypeError, ValueError, OverflowError):
+            bad = True
+    if bad:
+        raise ParameterError("must be a whole number", block=block, param=name,
+                             expected="an integer", found=repr(value)[:80])
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = (f">= {lo}" if hi is None else f"<= {hi}" if lo is None
+               else f"in [{lo}, {hi}]")
+        raise ParameterError("out of range", block=block, param=name,
+                             expected=rng, found=v)
+    return v
+
+
+def count(value, block, name, *, lo=0, hi=10**8):
+    """A number of agents/items: a whole number in ``[lo, hi]`` (refuses
+    negative counts and sizes no machine could hold)."""
+    return integer(value, block, name, lo=lo, hi=hi)

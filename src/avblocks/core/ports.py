@@ -16,6 +16,17 @@ import numpy as np
 from .errors import ShapeError
 
 
+def _size(s):
+    if isinstance(s, (bool, np.bool_)):
+        raise TypeError("a size is not a bool")
+    if isinstance(s, (int, np.integer)):
+        return int(s)
+    f = float(s)
+    if f != int(f):
+        raise ValueError("a size is a whole number")
+    return int(f)
+
+
 @dataclass(frozen=True)
 class Port:
     """Specification of an input or output port (or of a state).
@@ -53,8 +64,21 @@ class Port:
                              port=self.name, expected="identifier",
                              found=repr(self.name))
         if self.shape is not None:
-            object.__setattr__(self, "shape", tuple(int(s) for s in self.shape))
-        object.__setattr__(self, "dtype", np.dtype(self.dtype).name)
+            try:
+                shape = tuple(_size(s) for s in self.shape)
+            except (TypeError, ValueError, OverflowError):
+                shape = None
+            if shape is None or any(s < 0 for s in shape):
+                raise ShapeError("a port shape is a tuple of whole numbers >= 0 "
+                                 "(a negative agent count?)", port=self.name,
+                                 expected="e.g. (n, 3) with n >= 0",
+                                 found=repr(self.shape)[:60])
+            object.__setattr__(self, "shape", shape)
+        try:
+            object.__setattr__(self, "dtype", np.dtype(self.dtype).name)
+        except TypeError:
+            raise ShapeError("unknown dtype", port=self.name,
+                             found=repr(self.dtype)[:40]) from None
 
     @property
     def n(self) -> int | None:

@@ -33,15 +33,24 @@ class Results:
         factor, overruns (when paced), error (when it failed).
     """
 
-    def __init__(self, t, data, ports=None, meta=None, aliases=None):
+    def __init__(self, t, data, ports=None, meta=None, aliases=None, *, runs=None):
         self.t = np.asarray(t)
         self.data = dict(data)
         self.ports = dict(ports or {})
         self.meta = dict(meta or {})
         self.aliases = dict(aliases or {})
+        #: number of runs of an ensemble (signals then have a leading run
+        #: axis: ``(runs, T, ...)``), ``None`` for a single run.
+        self.runs = None if runs is None else int(runs)
+        #: ``{"block.state": array}`` at the end of the run, when the backend
+        #: returns it (``(runs, ...)`` for an ensemble), else ``None``.
+        self.final_state = None
         for k, v in self.data.items():
-            if len(v) != len(self.t):
-                raise AvError(f"signal '{k}' has {len(v)} samples but there are "
+            nt = len(v) if self.runs is None else (v.shape[1] if v.ndim > 1 else -1)
+            if self.runs is not None and len(v) != self.runs:
+                raise AvError(f"signal '{k}' has {len(v)} runs but runs={self.runs}")
+            if nt != len(self.t):
+                raise AvError(f"signal '{k}' has {nt} samples but there are "
                               f"{len(self.t)} times")
 
     def _key(self, ref) -> str:
@@ -66,12 +75,27 @@ class Results:
         return self.data.keys()
 
     def final(self, ref) -> np.ndarray:
-        """Last logged value of a signal."""
-        return self[ref][-1]
+        """Last logged value of a signal (of every run for an ensemble)."""
+        return self[ref][-1] if self.runs is None else self[ref][:, -1]
+
+    def run(self, r) -> Results:
+        """Run ``r`` of an ensemble as single-run Results."""
+        if self.runs is None:
+            raise AvError("these results hold a single run (no run axis)")
+        meta = dict(self.meta)
+        if "seeds" in meta:
+            meta["seed"] = meta["seeds"][r]
+        out = Results(self.t, {k: v[r] for k, v in self.data.items()}, self.ports, meta,
+                      self.aliases)
+        if self.final_state is not None:
+            out.final_state = {k: v[r] for k, v in self.final_state.items()}
+        return out
 
     def __repr__(self):
-        sigs = ", ".join(f"{k} {v.shape[1:]}" for k, v in self.data.items())
-        return (f"Results({len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
+        lead = 1 if self.runs is None else 2
+        sigs = ", ".join(f"{k} {v.shape[lead:]}" for k, v in self.data.items())
+        runs = "" if self.runs is None else f"{self.runs} runs x "
+        return (f"Results({runs}{len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
                 f", {self.t[-1] if len(self.t) else 0}]: {sigs})")
 
     # --------------------------------------------------------------- xarray
@@ -81,17 +105,25 @@ class Results:
         Each signal is a variable with dimensions ``time``, then ``agent``
         for per-agent signals (``<signal>.agent`` when the agent counts of
         the logged signals differ), then ``<signal>.comp...`` with component
-        labels as coordinates when the port declares them.
+        labels as coordinates when the port declares them. An ensemble's
+        results (``runs`` set) put a ``run`` dimension first, with the runs'
+        seeds as a ``seed`` coordinate.
         """
         import xarray as xr
 
         counts = {p.n for k, p in self.ports.items() if p.n is not None}
         shared_agent = len(counts) == 1
         variables, coords = {}, {"time": ("time", self.t)}
+        lead = ["time"] if self.runs is None else ["run", "time"]
+        if self.runs is not None:
+            coords["run"] = ("run", np.arange(self.runs))
+            if len(self.meta.get("seeds") or ()) == self.runs:
+                coords["seed"] = ("run", np.asarray(self.meta["seeds"]))
         for k, v in self.data.items():
-            p = self.ports.get(k, Port(k.replace(".", "_"), v.shape[1:], v.dtype.name))
-            dims = ["time"]
-            rest = list(v.shape[1:])
+            p = self.ports.get(k, Port(k.replace(".", "_"), v.shape[len(lead):],
+                                       v.dtype.name))
+            dims = list(lead)
+            rest = list(v.shape[len(lead):])
             if p.agents and rest:
                 dims.append("agent" if shared_agent else f"{k}.agent")
                 rest = rest[1:]
@@ -106,46 +138,159 @@ class Results:
         return ds
 
     def save(self, path) -> Path:
-        """Save to NetCDF (``.nc``, through h5netcdf) or Zarr (``.zarr``)."""
+        """Save to NetCDF (``.nc``, through h5netcdf) or Zarr (``.zarr``).
+
+        The file is written under a temporary name next to ``path`` and
+        renamed into place only once complete, so an existing file is never
+        left half-overwritten and a full disk leaves no corrupt file; every
+        failure is an :class:`AvError` naming the file and the cause."""
         path = Path(path)
-        ds = self.to_xarray()
+        if path.suffix not in (".nc", ".zarr"):
+            raise AvError(f"cannot save results to '{path}': unknown format",
+                          expected="a .nc (NetCDF) or .zarr path", found=path.suffix or "no suffix")
+        if not path.parent.is_dir():
+            raise AvError(f"cannot save results to '{path}': no folder '{path.parent}'",
+                          hint="create the folder first")
+        try:
+            ds = self.to_xarray()
+        except ImportError as e:
+            raise AvError(f"saving results needs xarray: {e}",
+                          hint="pip install avblocks") from None
         if path.suffix == ".zarr":
-            ds.to_zarr(path, mode="w")
-        else:
-            ds.to_netcdf(path, engine="h5netcdf")
+            return _save_zarr(ds, path)
+        try:
+            # encode in memory: a write error then never leaves HDF5 with a
+            # half-written file open (which can crash the interpreter)
+            blob = ds.to_netcdf(engine="h5netcdf")
+        except ImportError as e:
+            raise AvError(f"saving NetCDF needs h5netcdf: {e}",
+                          hint="pip install h5netcdf") from None
+        atomic_write_bytes(path, bytes(blob))
         return path
 
     @classmethod
     def load(cls, path) -> Results:
-        """Load results saved by :meth:`save`."""
-        import xarray as xr
-
+        """Load results saved by :meth:`save`; any problem (missing, not a
+        results file, truncated, a missing reader) is an :class:`AvError`."""
         path = Path(path)
         if not path.exists():
             raise AvError(f"no results file at {path}")
-        if path.suffix == ".zarr":
-            ds = xr.open_zarr(path).load()
-        else:
-            with xr.open_dataset(path, engine="h5netcdf") as f:
-                ds = f.load()
-        return cls.from_xarray(ds)
+        try:
+            import xarray as xr
+            if path.suffix == ".zarr":
+                ds = xr.open_zarr(path).load()
+            else:
+                with xr.open_dataset(path, engine="h5netcdf") as f:
+                    ds = f.load()
+            return cls.from_xarray(ds)
+        except AvError:
+            raise
+        except ImportError as e:
+            raise AvError(f"cannot read '{path}': a reader is missing ({e})",
+                          hint="pip install 'avblocks[all]'") from None
+        except MemoryError:
+            raise AvError(f"cannot read '{path}': it does not fit in memory") from None
+        except Exception as e:  # noqa: BLE001 - h5py/xarray/json/zarr errors
+            raise AvError(f"cannot read '{path}' as avblocks results: "
+                          f"{type(e).__name__}: {e}",
+                          hint="the file may be truncated or not made by Results.save") from None
 
     @classmethod
     def from_xarray(cls, ds) -> Results:
         data, ports = {}, {}
+        runs = ds.sizes["run"] if "run" in ds.dims else None
         for k, var in ds.data_vars.items():
             v = np.asarray(var.values)
             data[k] = v
+            lead = 1 if runs is None else 2
             labels = ()
             last = var.dims[-1]
             if last in ds.coords and last != "time" and not last.endswith("agent"):
                 labels = tuple(str(s) for s in ds.coords[last].values)
-            ports[k] = Port(k.rsplit(".", 1)[-1], v.shape[1:], v.dtype.name,
+            ports[k] = Port(k.rsplit(".", 1)[-1], v.shape[lead:], v.dtype.name,
                             str(var.attrs.get("unit", "")), labels,
                             str(var.attrs.get("doc", "")),
                             bool(var.attrs.get("agents", 1)))
         meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
-        return cls(np.asarray(ds["time"].values), data, ports, meta)
+        return cls(np.asarray(ds["time"].values), data, ports, meta, runs=runs)
+
+
+def _os_reason(e):
+    import errno
+    if getattr(e, "errno", None) in (errno.ENOSPC, errno.EDQUOT):
+        return "the disk is full"
+    if getattr(e, "errno", None) == errno.EFBIG:
+        return "the file is larger than this process may write (file size limit)"
+    if isinstance(e, PermissionError):
+        return "permission denied"
+    if getattr(e, "errno", None) == errno.EROFS:
+        return "the file system is read-only"
+    return f"{type(e).__name__}: {e}"
+
+
+def _umask():
+    import os
+    old = os.umask(0o022)
+    os.umask(old)
+    return old
+
+
+def atomic_write_bytes(path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` through a temporary file in the same folder
+    and an atomic rename; on failure the temporary file is removed, ``path``
+    is untouched, and an :class:`AvError` says why."""
+    import os
+    import tempfile
+    path = Path(path)
+    tmp = None
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part",
+                                   dir=path.parent)
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+        tmp = None
+    except OSError as e:
+        raise AvError(f"could not write '{path}': {_os_reason(e)}",
+                      hint="nothing was left behind; free space or choose another folder"
+                      ) from None
+    finally:
+        if tmp is not None:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+    return path
+
+
+def _save_zarr(ds, path):
+    import shutil
+    import tempfile
+    tmp = None
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".part",
+                                    dir=path.parent))
+        ds.to_zarr(tmp / "store.zarr", mode="w")
+        old = None
+        if path.exists():
+            old = path.with_name(f".{path.name}.old")
+            shutil.rmtree(old, ignore_errors=True)
+            path.rename(old)
+        (tmp / "store.zarr").rename(path)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+    except ImportError as e:
+        raise AvError(f"saving Zarr needs the zarr package: {e}",
+                      hint="pip install zarr (or save to .nc)") from None
+    except OSError as e:
+        raise AvError(f"could not write '{path}': {_os_reason(e)}") from None
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return path
 
 
 def _jsonable(o):

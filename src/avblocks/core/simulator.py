@@ -107,8 +107,11 @@ class Simulator:
                                  param="dt", expected="> 0", found=dt)
         self.dt = dt
         self.solver = make_solver(solver)
-        self.seed = int(seed)
-        self.t0 = float(t0)
+        self.seed = _seed(seed)
+        self.t0 = _finite(t0, "t0")
+        if not isinstance(check_finite, (bool, np.bool_)):
+            raise ParameterError("check_finite must be True or False",
+                                 param="check_finite", found=repr(check_finite)[:40])
         self.check_finite = bool(check_finite)
         self.eng = Engine(diagram, dt)
         self._fx = [(i, o) for i in self.eng.with_outputs
@@ -135,6 +138,7 @@ class Simulator:
         self.k = 0
         self.X = None
         self.Y = None
+        self._Yprev = None
 
     # --------------------------------------------------------------- state
     @property
@@ -211,14 +215,17 @@ class Simulator:
         """Reset to ``t0``: initial states, initial outputs, side effects."""
         self.k = 0
         self._queue = []
+        self._Yprev = None
+        # on_start first: an interface block (robots) connects there and may
+        # set its initial state from what it receives (the robots' poses)
+        for i in self._side:
+            self.compiled.blocks[i].on_start()
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
         self._check_declared()
         self._check(self.t0)
         self.check_outputs(self.t0)
-        for i in self._side:
-            self.compiled.blocks[i].on_start()
         self._side_effects()
         return self
 
@@ -244,8 +251,8 @@ class Simulator:
     def _guard(self, fn, t, *args):
         try:
             return fn(t, *args)
-        except AvError:
-            raise
+        except AvError as e:
+            raise self._enrich(e, t) from e
         except Exception as e:  # noqa: BLE001 - add the block context
             raise self._wrap(e, t) from e
 
@@ -285,6 +292,18 @@ class Simulator:
                 self._blame_nonfinite(t, None)
 
     def _blame_nonfinite(self, t, state):
+        prev = getattr(self, "_Yprev", None)
+        if state is not None and prev is not None:
+            # a state went bad during the step: an input that drove the step
+            # (a controller's output at t_k) is the first suspect
+            for i, o in self._fx:
+                if not np.all(np.isfinite(prev[i][o])):
+                    raise SimulationError(
+                        "output is NaN or infinite", block=self.compiled.names[i],
+                        port=o, time=t - self.dt,
+                        hint=f"it drove the step to t={t:.6g}, where "
+                             f"'{self.compiled.names[state[0]]}.{state[1]}' became "
+                             "non-finite")
         for i, o in self._fx:
             if not np.all(np.isfinite(self.Y[i][o])):
                 raise SimulationError("output is NaN or infinite",
@@ -319,23 +338,45 @@ class Simulator:
             else:
                 X = eng.update(t, self.X, self.Y, eng.hits(k))
                 end = self._span_end(k)
+                states = None
                 if end > k + 1:
                     times = [self.t0 + j * h for j in range(k + 1, end + 1)]
-                    states = self.solver.integrate(eng, t, X, self.Y, times)
+                    states = self._try_span(t, X, times)
+                if states is not None:
                     self._queue = states[::-1]
                     X = self._queue.pop()
                 else:
                     X = self.solver.step(eng, t, X, self.Y, h)
             Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
-        except AvError:
-            raise
+        except AvError as e:
+            raise self._enrich(e, t) from e
         except Exception as e:  # noqa: BLE001 - add the block context
             raise self._wrap(e, t) from e
+        self._Yprev = self.Y        # the outputs that drove this step (for blame)
         self.X, self.Y = X, Y
         self.k = k + 1
         self._check(t1)
         if self._side:
             self._side_effects()
+
+    def _try_span(self, t, X, times):
+        """One adaptive solve across ``times``; when it fails, spans are
+        switched off so the step-by-step rerun reports the fault at the
+        major step where it happens (with every sample before it logged)."""
+        try:
+            return self.solver.integrate(self.eng, t, X, self.Y, times)
+        except Exception:  # noqa: BLE001 - located by the step-by-step rerun
+            self._span = False
+            return None
+
+    def _enrich(self, e, t):
+        """A SimulationError raised without time or block gets both."""
+        if isinstance(e, SimulationError) and e.time is None and e.results is None:
+            name = _blame(e, self.compiled) or e.block
+            err = type(e)(e.cause, block=name, port=e.port, time=t,
+                          expected=e.expected, found=e.found, hint=e.hint)
+            return err
+        return e
 
     def _span_end(self, k):
         """Last step index up to which one adaptive solve may run from step k:
@@ -361,8 +402,17 @@ class Simulator:
         return self.X[self.compiled.index(block)][name]
 
     def close(self):
+        """Run every side-effect block's ``on_stop`` (all of them, whatever
+        one raises) and return the failures as ``[(block name, exception)]``
+        (an interrupt while a block stops counts as one). Never raises: a
+        failing ``on_stop`` must not hide the results or the run's own error."""
+        failures = []
         for i in self._side:
-            self.compiled.blocks[i].on_stop()
+            try:
+                self.compiled.blocks[i].on_stop()
+            except BaseException as e:  # noqa: BLE001 - collected, reported by caller
+                failures.append((self.compiled.names[i], e))
+        return failures
 
 
 def _blame(exc, compiled):
@@ -397,14 +447,17 @@ def _progress_wanted(progress):
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
-             max_log_bytes=2 * 1024**3, params=None, x0=None, live=False):
+             max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
+             live=False, **backend_options):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
     ----------
     diagram : Diagram
     t_final : float
-        End time (a whole number of steps is run: ``round((t_final-t0)/dt)``).
+        End time. ``t_final - t0`` must be a whole number of major steps
+        ``dt`` (to 1e-9 of a step): otherwise a :class:`ParameterError` names
+        the two nearest valid end times (a run never stops short silently).
     dt : float
         Major step. Discrete periods must be multiples of it.
     solver : str or Solver
@@ -430,11 +483,17 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         (validated; the blocks' own values are restored afterwards).
     x0 : dict, optional
         Initial state values, ``{"block.state": value}``.
+    backend : ``"numpy"`` (default) or ``"jax"``
+        ``"jax"`` compiles the whole run (:mod:`avblocks.core.compiled`):
+        same arguments and Results (plus ``res.final_state``), fixed-step
+        solvers and traceable blocks only, no ``realtime``; it takes the
+        option ``dtype="float32"`` (default ``"float64"``). A second run of
+        the same structure with other numeric values does not recompile.
     live : bool or dict
         Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
         (URL printed, with a token) that draws and steers the run; a dict
         passes options to :class:`avblocks.viz.live.LiveView`. Paced to real
-        time unless ``realtime`` says otherwise.
+        time unless ``realtime`` says otherwise. NumPy backend only.
 
     Returns
     -------
@@ -443,17 +502,37 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         results logged so far in ``err.results``.
     """
     if live:  # --- live view hook (avblocks.viz.live owns the loop) ---
+        if backend != "numpy" or backend_options:
+            raise ParameterError("live=True runs the NumPy backend step by step",
+                                 param="backend", expected="'numpy'", found=backend)
         from ..viz.live import simulate_live
         return simulate_live(diagram, t_final, dt, solver, live=live, log=log,
                              log_every=log_every, seed=seed, t0=t0, realtime=realtime,
                              check_finite=check_finite, max_log_bytes=max_log_bytes,
                              params=params, x0=x0)
+    if backend != "numpy":
+        if backend != "jax":
+            raise ParameterError("unknown backend", param="backend",
+                                 expected="'numpy' or 'jax'", found=backend)
+        from .compiled import simulate_compiled
+        return simulate_compiled(diagram, t_final, dt, solver, log=log,
+                                 log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                                 progress=progress, check_finite=check_finite,
+                                 max_log_bytes=max_log_bytes, params=params, x0=x0,
+                                 backend=backend, **backend_options)
+    if backend_options:
+        raise ParameterError("unknown keyword argument(s) for backend='numpy'",
+                             param=", ".join(sorted(backend_options)))
     sim = Simulator(diagram, dt, solver, seed=seed, t0=t0, check_finite=check_finite,
                     x0=x0)
     binding = _param_binding(sim.compiled, params)
     with binding:
-        return _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes,
-                    params)
+        res = _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes,
+                   params)
+    if sim.X is not None:       # the state at the end (as backend="jax" returns it)
+        res.final_state = {f"{n}.{k}": v for n, x in zip(sim.compiled.names, sim.X)
+                           for k, v in x.items()}
+    return res
 
 
 def _param_binding(compiled, params):
@@ -473,28 +552,78 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+def _seed(seed):
+    from .params import integer
+    return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
+
+
+def _finite(v, name):
+    ok = not isinstance(v, (bool, np.bool_, str, bytes))
+    f = math.nan
+    if ok:
+        try:
+            f = float(v)
+        except (TypeError, ValueError, OverflowError):
+            ok = False
+    if not (ok and math.isfinite(f)):
+        raise ParameterError("must be a finite number", param=name,
+                             expected="a number", found=repr(v)[:60])
+    return f
+
+
+def whole_steps(t0, t_final, dt):
+    """Number of major steps from ``t0`` to ``t_final``; a
+    :class:`ParameterError` unless ``t_final - t0`` is a whole number of
+    steps ``dt`` (within 1e-9 of a step): a run never stops silently short
+    of, or past, the time asked for."""
+    span = t_final - t0
+    if span < 0:
+        raise ParameterError("t_final must be >= t0", param="t_final",
+                             expected=f">= {t0:g}", found=t_final)
+    steps = span / dt
+    n = int(round(steps))
+    if abs(steps - n) > 1e-9 * max(1.0, steps):
+        lo, hi = math.floor(steps), math.ceil(steps)
+        if steps < 1:
+            what, expected = ("dt is longer than the whole run",
+                              f"t_final = t0 + k*dt with k >= 1, e.g. {t0 + dt:.10g}")
+        else:
+            what = "t_final - t0 is not a whole number of major steps"
+            expected = f"t0 + k*dt, e.g. {t0 + lo * dt:.10g} or {t0 + hi * dt:.10g}"
+        raise ParameterError(
+            what, param="t_final", expected=expected,
+            found=f"t_final={t_final:g} with dt={dt:g} ({steps:.6g} steps)",
+            hint="change t_final, or pick a dt that divides t_final - t0")
+    return n
+
+
 def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params):
-    try:
-        span = float(t_final) - sim.t0
-    except (TypeError, ValueError):
-        span = float("nan")
-    if not (math.isfinite(span) and span >= 0):
-        raise ParameterError("t_final must be a number >= t0", param="t_final",
-                             expected=f">= {sim.t0}", found=t_final)
-    nsteps = int(round(span / sim.dt))
-    log_every = int(log_every)
-    if log_every < 1:
-        raise ParameterError("log_every must be >= 1", param="log_every",
-                             expected=">= 1", found=log_every)
-    if realtime is not None and not (float(realtime) > 0):
+    from .params import integer
+    t_final = _finite(t_final, "t_final")
+    nsteps = whole_steps(sim.t0, t_final, sim.dt)
+    log_every = integer(log_every, None, "log_every", lo=1)
+    if realtime is not None and not (_finite(realtime, "realtime") > 0):
         raise ParameterError("realtime factor must be > 0", param="realtime",
                              expected="> 0", found=realtime)
+    if progress is not None and not isinstance(progress, (bool, np.bool_)):
+        raise ParameterError("progress must be None, True or False", param="progress",
+                             found=repr(progress)[:40])
+    if isinstance(max_log_bytes, (bool, np.bool_)) or not isinstance(
+            max_log_bytes, (int, float, np.integer, np.floating)) or \
+            math.isnan(max_log_bytes) or max_log_bytes < 0:
+        raise ParameterError("max_log_bytes must be a number of bytes >= 0",
+                             param="max_log_bytes", found=repr(max_log_bytes)[:40],
+                             hint="float('inf') for no limit")
     if log is None:
         refs = default_log(sim.compiled)
     elif isinstance(log, (str, PortRef)):
         refs = [log]
-    else:
+    elif isinstance(log, (list, tuple)) and all(isinstance(r, (str, PortRef))
+                                                 for r in log):
         refs = list(log)
+    else:
+        raise ParameterError("log must be a port handle, a 'block.port' string or a "
+                             "list of them", param="log", found=repr(log)[:60])
     idx, names, specs, aliases = [], [], [], {}
     for r in refs:
         i, o = sim.compiled.resolve(r)
@@ -554,49 +683,74 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
     overruns, worst = 0, 0.0
     wall0 = _time.perf_counter()
     sim.horizon = nsteps
+    failure = interrupt = None
     try:
-        sim.init()
-        record()
-        tick = max(1, nsteps // 100)
-        for k in range(nsteps):
-            sim.step()
-            if (k + 1) % log_every == 0:
-                record()
-            if pace is not None:
-                target = wall0 + (k + 1) * sim.dt / pace
-                now = _time.perf_counter()
-                if now < target:
-                    _time.sleep(target - now)
-                else:
-                    late = now - target
-                    worst = max(worst, late)
-                    if late > sim.dt / pace:
-                        overruns += 1
-            if bar is not None and (k + 1) % tick == 0:
-                bar.update(tick)
-    except SimulationError as e:
-        meta["wall_time"] = _time.perf_counter() - wall0
-        meta["error"] = str(e)
-        e.results = partial()
-        raise
-    except KeyboardInterrupt:
-        meta["interrupted_at"] = sim.t
-        meta["wall_time"] = _time.perf_counter() - wall0
-        res = partial()
-        res.meta["interrupted"] = True
-        return res
-    finally:
-        if bar is not None:
-            bar.close()
-        sim.close()
+        try:
+            sim.init()
+            record()
+            # pace from the end of init: on_start may connect to robots first
+            pace0 = _time.perf_counter()
+            tick = max(1, nsteps // 100)
+            for k in range(nsteps):
+                sim.step()
+                if (k + 1) % log_every == 0:
+                    record()
+                if pace is not None:
+                    target = pace0 + (k + 1) * sim.dt / pace
+                    now = _time.perf_counter()
+                    if now < target:
+                        _time.sleep(target - now)
+                    else:
+                        late = now - target
+                        worst = max(worst, late)
+                        if late > sim.dt / pace:
+                            overruns += 1
+                if bar is not None and (k + 1) % tick == 0:
+                    bar.update(tick)
+        except SimulationError as e:
+            failure = e
+        except KeyboardInterrupt as e:
+            interrupt = e
+        finally:
+            if bar is not None:
+                bar.close()
+        stop_failures = sim.close()
+    except KeyboardInterrupt as e:   # landed between the loop and close()
+        interrupt = interrupt or e
+        stop_failures = []
+    for _name, e in stop_failures:
+        if isinstance(e, KeyboardInterrupt) and interrupt is None:
+            interrupt = e
+    stop_errors = [f"block '{n}' on_stop: {type(e).__name__}: {e}"
+                   for n, e in stop_failures if not isinstance(e, KeyboardInterrupt)]
     wall = _time.perf_counter() - wall0
     meta["wall_time"] = wall
-    meta["realtime_factor"] = (nsteps * sim.dt / wall) if wall > 0 else math.inf
+    if stop_errors:
+        meta["on_stop_errors"] = stop_errors
+    if failure is not None:
+        meta["error"] = str(failure)
+        failure.results = partial()
+        failure.on_stop_errors = stop_errors
+        if stop_errors:
+            failure.add_note("also, while stopping: " + "; ".join(stop_errors))
+        raise failure
+    if interrupt is not None:
+        meta["interrupted_at"] = sim.t
+        meta["interrupted"] = True
+        meta["interrupted_by"] = getattr(interrupt, "signal_name", "SIGINT")
+    else:
+        meta["realtime_factor"] = (nsteps * sim.dt / wall) if wall > 0 else math.inf
     if pace is not None:
         meta["overruns"] = overruns
         meta["max_lateness"] = worst
     if hasattr(sim.solver, "nfev"):
         meta["nfev"] = sim.solver.nfev
+    if stop_errors:
+        import warnings
+
+        from .errors import SimulationWarning
+        warnings.warn("the run finished and its results are returned, but "
+                      + "; ".join(stop_errors), SimulationWarning, stacklevel=3)
     if count < nlog:
         return partial()
     return Results(tlog, dict(zip(names, bufs)), dict(zip(names, specs)), meta,

@@ -139,9 +139,9 @@ def make_solver(spec) -> Solver:
     if isinstance(spec, str):
         if spec.lower() in _BY_NAME:
             return _BY_NAME[spec.lower()]()
-        up = spec.upper()
-        if up in Scipy._methods:
-            return Scipy(up)
+        for m in Scipy._methods:            # "radau", "bdf", "rk45": any case
+            if spec.upper() == m.upper():
+                return Scipy(m)
     raise ParameterError("unknown solver", param="solver",
                          expected="'rk4', 'euler', a solve_ivp method name "
                                   f"{Scipy._methods} or a Solver object",

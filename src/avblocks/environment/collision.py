@@ -182,7 +182,8 @@ class Collision(Block):
         :class:`PolygonFootprint` (see :func:`default_footprint`).
     input : "pose" or "position"
     margin : float
-        Safety distance added around each footprint (default 0).
+        Safety distance added around each footprint (default 0); a numeric
+        parameter (``"coll.margin"``).
     agents : bool
         Check agent-agent contacts (default True).
     period : float, optional
@@ -208,6 +209,9 @@ class Collision(Block):
     ([True, False], [0, -1])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, world, n, *, footprint=None, input="pose", margin=0.0,
                  agents=True, period=None):
         super().__init__()
@@ -226,7 +230,8 @@ class Collision(Block):
             raise ParameterError("margin must be >= 0", block="Collision",
                                  param="margin", found=margin)
         self.world, self.footprint = world, footprint
-        self.margin, self.agents = float(margin), bool(agents)
+        self.declare_parameter("margin", float(margin), bounds=(0, None), unit="m")
+        self.agents = bool(agents)
         self.input = declare_agents_input(self, n, input)
         self.declare_output("hit_obstacle", (n,), "bool", doc="touches an obstacle")
         self.declare_output("hit_agent", (n,), "bool", doc="touches another agent")
@@ -239,7 +244,7 @@ class Collision(Block):
 
     def output(self, t, x, u, xp):
         return collide(self.world, np.asarray(u[self.input]), self.footprint,
-                       self.margin, self.agents)
+                       float(self.margin), self.agents)
 
 
 class StopOnCollision(Block):

@@ -60,13 +60,14 @@ class CommChannel(Block):
     ----------
     n : int
     radius : float
-        Communication range [m] (inclusive).
+        Communication range [m] (inclusive). Numeric parameter.
     msg_dim : int
         ``D``, the width of a message.
     k : int, optional
         Most messages received per agent (default ``min(n - 1, 16)``).
     p_loss : float
-        Packet-loss probability per link and step, in [0, 1].
+        Packet-loss probability per link and step, in [0, 1]. Numeric
+        parameter (``"comm.p_loss"``).
     latency : int
         Delay in steps (sample hits), >= 0. With 0 the inputs feed straight
         through (beware of algebraic loops); the default 1 breaks them.
@@ -86,6 +87,9 @@ class CommChannel(Block):
     ([[1], [0]], [7.0, 5.0])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, *, radius, msg_dim=1, k=None, p_loss=0.0, latency=1,
                  input="pose", period=None):
         super().__init__()
@@ -94,12 +98,14 @@ class CommChannel(Block):
         if k is None:
             k = max(1, min(n - 1, 16))
         self.k = k = agent_count(k, name)
-        self.radius = float(radius)
-        if not self.radius > 0:
+        if not float(radius) > 0:
             raise ParameterError("radius must be > 0", block=name, param="radius",
                                  found=radius)
+        self.declare_parameter("radius", float(radius), bounds=(1e-12, None),
+                               allow_inf=True, unit="m")
         self.d = d = agent_count(msg_dim, name)
-        self.p_loss = _probability(p_loss, name)
+        self.declare_parameter("p_loss", _probability(p_loss, name), bounds=(0, 1),
+                               doc="probability that a message is lost")
         latency = int(latency)
         if latency < 0:
             raise ParameterError("latency must be >= 0 steps", block=name,
@@ -121,9 +127,9 @@ class CommChannel(Block):
 
     def deliver(self, pos, message, key):
         """One delivery: (sender (N, K), received (N, K, D)) for a random key."""
-        idx, _ = radius_neighbors(np.asarray(pos)[:, :2], self.radius, self.k)
+        idx, _ = radius_neighbors(np.asarray(pos)[:, :2], float(self.radius), self.k)
         if self.p_loss > 0:
-            keep = _rng.uniform(key, idx.shape, np) >= self.p_loss
+            keep = _rng.uniform(key, idx.shape, np) >= float(self.p_loss)
             idx = np.where(keep, idx, -1)
         msg = np.asarray(message)[np.maximum(idx, 0)]
         msg = np.where((idx >= 0)[..., None], msg, 0.0)
@@ -211,9 +217,9 @@ class Gossip(Block):
     ----------
     n : int
     radius : float
-        Contact range [m] (inclusive).
+        Contact range [m] (inclusive). Numeric parameter.
     p_loss : float
-        Contact failure probability, [0, 1].
+        Contact failure probability, [0, 1]. Numeric parameter.
     value_dim : int, optional
         Also spread a value of this width (a broadcast).
     input : "pose" or "position"
@@ -234,16 +240,21 @@ class Gossip(Block):
     [True, True, True]
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, *, radius, p_loss=0.0, value_dim=None, input="pose",
                  period=None):
         super().__init__()
         name = "Gossip"
         self.n = n = agent_count(n, name)
-        self.radius = float(radius)
-        if not self.radius > 0:
+        if not float(radius) > 0:
             raise ParameterError("radius must be > 0", block=name, param="radius",
                                  found=radius)
-        self.p_loss = _probability(p_loss, name)
+        self.declare_parameter("radius", float(radius), bounds=(1e-12, None),
+                               allow_inf=True, unit="m")
+        self.declare_parameter("p_loss", _probability(p_loss, name), bounds=(0, 1),
+                               doc="probability that a message is lost")
         self.value_dim = None if value_dim is None else agent_count(value_dim, name)
         self.input = declare_agents_input(self, n, input, feedthrough=False)
         self.declare_input("flag", (n,), "bool", doc="seeds: informed from outside")
@@ -271,7 +282,8 @@ class Gossip(Block):
     def update(self, t, x, u, xp):
         key, sub = _rng.split(x["key"], np)
         inf, val = self._seeded(x, u)
-        new, val = gossip_step(inf, u[self.input], self.radius, self.p_loss, sub, val)
+        new, val = gossip_step(inf, u[self.input], float(self.radius), float(self.p_loss),
+                               sub, val)
         out = {"key": key, "informed": new}
         if self.value_dim:
             out["carried"] = val
@@ -293,6 +305,8 @@ class Broadcast(Gossip):
         As :class:`Gossip`.
     kw
         Any other keyword of :class:`Gossip` (loss, period, input...).
+
+    Numeric parameters: ``radius`` and ``p_loss``, as :class:`Gossip`.
     """
 
     def __init__(self, n, *, radius, value_dim=1, **kw):

@@ -171,6 +171,10 @@ class Neighbors(Block):
         Full field-of-view angle in radians (needs ``input="pose"``); a
         neighbour's bearing relative to the heading must lie in
         ``[-fov/2, fov/2]``. Default: all around.
+
+    ``radius`` and ``fov`` (when given) are numeric parameters; ``k`` and
+    whether there is a field of view are structural.
+
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (outputs held between hits).
@@ -194,6 +198,9 @@ class Neighbors(Block):
     [[1, -1], [0, -1], [-1, -1]]
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None):
         super().__init__()
         self.n = n = agent_count(n, "Neighbors")
@@ -209,7 +216,12 @@ class Neighbors(Block):
                                      param="fov", expected="(0, 2 pi]", found=fov)
             if fov >= 2 * np.pi:
                 fov = None
-        self.radius, self.fov = radius, fov
+        self.declare_parameter("radius", radius, bounds=(1e-12, None), allow_inf=True,
+                               unit="m")
+        if fov is None:
+            self.fov = None
+        else:
+            self.declare_parameter("fov", fov, bounds=(1e-12, 2 * np.pi), unit="rad")
         self.input = declare_agents_input(self, n, input, need_heading=fov is not None)
         self.declare_output("neighbors", (n, k), "int64",
                             doc="neighbour indices, nearest first, -1 padded")
@@ -220,7 +232,7 @@ class Neighbors(Block):
     def output(self, t, x, u, xp):
         p = np.asarray(u[self.input])
         if self.fov is None:
-            idx, dist = radius_neighbors(p[:, :2], self.radius, self.k)
+            idx, dist = radius_neighbors(p[:, :2], float(self.radius), self.k)
         else:
-            idx, dist = fov_neighbors(p, self.radius, self.k, self.fov)
+            idx, dist = fov_neighbors(p, float(self.radius), self.k, float(self.fov))
         return {"neighbors": idx, "distance": np.where(idx >= 0, dist, PAD_DISTANCE)}

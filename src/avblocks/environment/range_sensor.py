@@ -242,6 +242,11 @@ class RangeSensor(Block):
         See other agents as discs of this radius (default: agents invisible).
     angles : (R,) array, optional
         Explicit ray angles (overrides ``n_rays`` and ``fov``).
+
+    ``angles`` (the rays, (R,)), ``max_range``, ``noise_std`` and
+    ``agent_radius`` (when given) are numeric parameters; ``n_rays`` and
+    whether there is noise (a random state) are structural.
+
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (a scan per hit).
@@ -259,6 +264,9 @@ class RangeSensor(Block):
     array([[ 2., 10., 10., 10.]])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, world, n, *, n_rays=32, fov=2 * np.pi, max_range=10.0,
                  noise_std=0.0, agent_radius=None, angles=None, input="pose",
                  period=None):
@@ -275,31 +283,38 @@ class RangeSensor(Block):
                 raise ParameterError("fov must lie in (0, 2 pi]", block=name,
                                      param="fov", found=fov)
             angles = ray_angles(n_rays, fov)
-        self.angles = np.asarray(angles, dtype=float).ravel()
+        self.declare_parameter("angles", np.asarray(angles, dtype=float).ravel(),
+                               unit="rad", doc="ray directions relative to the heading")
         if not (np.isfinite(max_range) and max_range > 0):
             raise ParameterError("max_range must be > 0", block=name,
                                  param="max_range", found=max_range)
         if not (np.isfinite(noise_std) and noise_std >= 0):
             raise ParameterError("noise_std must be >= 0", block=name,
                                  param="noise_std", found=noise_std)
-        self.max_range, self.noise_std = float(max_range), float(noise_std)
+        self.declare_parameter("max_range", float(max_range), bounds=(1e-12, None),
+                               unit="m")
+        self.declare_parameter("noise_std", float(noise_std), bounds=(0, None), unit="m")
+        noisy = float(noise_std) > 0
         if agent_radius is not None:
             r = np.asarray(agent_radius, dtype=float)
             if r.shape not in ((), (n,)) or np.any(r < 0):
                 raise ParameterError("agent_radius must be >= 0, scalar or (N,)",
                                      block=name, param="agent_radius", found=r.shape)
-        self.agent_radius = agent_radius
+            self.declare_parameter("agent_radius", r, bounds=(0, None), unit="m")
+        else:
+            self.agent_radius = None
         self.input = declare_agents_input(self, n, input)
         self.declare_output("ranges", (n, len(self.angles)), unit="m",
                             doc="range along each ray")
-        if self.noise_std > 0:
+        self._noisy = noisy
+        if noisy:
             self.declare_random_state("key")
         maybe_periodic(self, period)
 
     def output(self, t, x, u, xp):
         r = cast_rays(self.world, np.asarray(u[self.input]), self.angles,
-                      self.max_range, self.agent_radius)
-        if self.noise_std > 0:
+                      float(self.max_range), self.agent_radius)
+        if self._noisy:
             _, sub = _rng.split(x["key"], np)
             noisy = r + _rng.normal(sub, r.shape, np, 0.0, self.noise_std)
             r = np.where(r < self.max_range, np.clip(noisy, 0.0, self.max_range), r)

@@ -73,6 +73,10 @@ class TargetDetection(Block):
         [m].
     target_radius : float or (M,)
         [m] (default 0: point targets).
+
+    ``targets``, ``sensing_radius`` and ``target_radius`` are numeric
+    parameters (shapes as given).
+
     pickup : bool
         Found targets are removed: they are no longer detected after the
         step they were found (search-and-pickup). Default False.
@@ -90,6 +94,9 @@ class TargetDetection(Block):
     ([True, True], [0, 0], [True, False])
     """
 
+    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+    traceable = False
+
     def __init__(self, n, targets, *, sensing_radius, target_radius=0.0,
                  pickup=False, input="pose", period=None):
         super().__init__()
@@ -99,7 +106,7 @@ class TargetDetection(Block):
         if t.ndim != 2 or t.shape[1] != 2 or not np.all(np.isfinite(t)):
             raise ParameterError("targets must be an (M, 2) array of positions",
                                  block=name, param="targets", found=t.shape)
-        self.targets = t
+        self.declare_parameter("targets", t, unit="m")
         m = len(t)
         R = np.asarray(sensing_radius, dtype=float)
         r = np.asarray(target_radius, dtype=float)
@@ -109,7 +116,8 @@ class TargetDetection(Block):
         if r.shape not in ((), (m,)) or np.any(~np.isfinite(r)) or np.any(r < 0):
             raise ParameterError("target_radius must be >= 0, scalar or (M,)",
                                  block=name, param="target_radius", found=r)
-        self.sensing_radius, self.target_radius = R, r
+        self.declare_parameter("sensing_radius", R, bounds=(0, None), unit="m")
+        self.declare_parameter("target_radius", r, bounds=(0, None), unit="m")
         self.pickup = bool(pickup)
         self.input = declare_agents_input(self, n, input)
         self.declare_output("detected", (n,), "bool", doc="senses a target")

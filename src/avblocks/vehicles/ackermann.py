@@ -74,6 +74,11 @@ class Ackermann(Block):
     steer0 : float or (N,), optional
         Initial steering angle with a lag (default 0).
 
+    Numeric parameters (shape (N,) unless said): ``wheelbase``, ``v_max``,
+    ``delta_max``; with a lag also ``steer_tau`` (scalar, > 0) and
+    ``steer_rate_max``. Whether there is a lag (``steer_tau > 0``) is
+    structural: it decides the ``steer`` state and output.
+
     Equations
     ---------
     See the module docstring.
@@ -96,25 +101,36 @@ class Ackermann(Block):
         name = "Ackermann"
         p0 = poses(pose0, name, "pose0")
         self.n = n = p0.shape[0]
-        self.wheelbase = agent_array(wheelbase, n, name, "wheelbase", positive=True)
-        self.v_max = limit(v_max, n, name, "v_max")
-        self.delta_max = limit(delta_max, n, name, "delta_max")
-        if np.any(self.delta_max >= np.pi / 2):
+        self.declare_parameter("wheelbase", agent_array(wheelbase, n, name, "wheelbase",
+                                                        positive=True),
+                               bounds=(1e-12, None), unit="m")
+        self.declare_parameter("v_max", limit(v_max, n, name, "v_max"), bounds=(0, None),
+                               allow_inf=True, unit="m/s")
+        dmax = limit(delta_max, n, name, "delta_max")
+        if np.any(dmax >= np.pi / 2):
             raise ParameterError("steering limit must be below pi/2", block=name,
                                  param="delta_max", expected="< pi/2",
-                                 found=float(self.delta_max.max()))
-        self.steer_tau = float(steer_tau)
-        if not (np.isfinite(self.steer_tau) and self.steer_tau >= 0):
+                                 found=float(dmax.max()))
+        self.declare_parameter("delta_max", dmax, bounds=(0, np.pi / 2 - 1e-9),
+                               unit="rad")
+        steer_tau = float(steer_tau)
+        if not (np.isfinite(steer_tau) and steer_tau >= 0):
             raise ParameterError("must be >= 0", block=name, param="steer_tau",
                                  expected=">= 0", found=steer_tau)
-        self.steer_rate_max = limit(steer_rate_max, n, name, "steer_rate_max")
-        self.lag = self.steer_tau > 0
+        self.lag = steer_tau > 0
+        if self.lag:
+            self.declare_parameter("steer_tau", steer_tau, bounds=(1e-12, None), unit="s")
+            self.declare_parameter("steer_rate_max",
+                                   limit(steer_rate_max, n, name, "steer_rate_max"),
+                                   bounds=(0, None), allow_inf=True, unit="rad/s")
+        else:
+            self.steer_tau = 0.0
+            self.steer_rate_max = limit(steer_rate_max, n, name, "steer_rate_max")
         self.declare_continuous_state("pose", p0, unit="m, m, rad",
                                       labels=("x", "y", "theta"))
         if self.lag:
             s0 = agent_array(steer0, n, name, "steer0")
-            self.declare_continuous_state("steer", np.clip(s0, -self.delta_max,
-                                                           self.delta_max), unit="rad")
+            self.declare_continuous_state("steer", np.clip(s0, -dmax, dmax), unit="rad")
         self.declare_input("cmd", (n, 2), unit="m/s, rad", labels=("v", "delta"),
                            doc="forward speed and steering angle", feedthrough=False)
         self.declare_output("pose", (n, 3), unit="m, m, rad",

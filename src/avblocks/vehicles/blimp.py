@@ -103,6 +103,10 @@ class Blimp(Block):
     torque_max : float or (N,), optional
         Limit on |tau_r| [N m] (default none).
 
+    ``mass``, ``inertia``, ``added_mass``, ``net_lift``, ``drag_coeff``,
+    ``thrust_max`` and ``torque_max`` are numeric parameters (per agent,
+    shapes as above with N leading); ``drag`` (the law) is structural.
+
     Equations
     ---------
     See the module docstring.
@@ -130,22 +134,24 @@ class Blimp(Block):
         self.n = n = p0.shape[0]
         y0 = agent_array(yaw0, n, name, "yaw0")
         nu0 = agent_array(body_velocity0, n, name, "body_velocity0", (4,))
-        self.mass = agent_array(mass, n, name, "mass", positive=True)
-        self.inertia = agent_array(inertia, n, name, "inertia", positive=True)
-        self.added_mass = agent_array(added_mass, n, name, "added_mass", (4,),
-                                      nonnegative=True)
-        self.m4 = np.stack([self.mass, self.mass, self.mass, self.inertia], axis=-1) \
-            + self.added_mass
-        self.net_lift = agent_array(net_lift, n, name, "net_lift")
+        dp = self.declare_parameter
+        dp("mass", agent_array(mass, n, name, "mass", positive=True),
+           bounds=(1e-12, None), unit="kg")
+        dp("inertia", agent_array(inertia, n, name, "inertia", positive=True),
+           bounds=(1e-12, None), unit="kg m^2")
+        dp("added_mass", agent_array(added_mass, n, name, "added_mass", (4,),
+                                     nonnegative=True), bounds=(0, None))
+        dp("net_lift", agent_array(net_lift, n, name, "net_lift"), unit="N")
         if drag not in ("linear", "quadratic"):
             raise ParameterError("unknown drag law", block=name, param="drag",
                                  expected="'linear' or 'quadratic'", found=drag)
         self.quadratic = drag == "quadratic"
-        self.drag_coeff = agent_array(drag_coeff, n, name, "drag_coeff", (4,),
-                                      nonnegative=True)
-        self.thrust_max = limit(thrust_max, n, name, "thrust_max", (2,))
-        self.torque_max = limit(torque_max, n, name, "torque_max")
-        self._limited = any_finite(self.thrust_max, self.torque_max)
+        dp("drag_coeff", agent_array(drag_coeff, n, name, "drag_coeff", (4,),
+                                     nonnegative=True), bounds=(0, None))
+        dp("thrust_max", limit(thrust_max, n, name, "thrust_max", (2,)),
+           bounds=(0, None), allow_inf=True, unit="N")
+        dp("torque_max", limit(torque_max, n, name, "torque_max"), bounds=(0, None),
+           allow_inf=True, unit="N m")
         xyz = ("x", "y", "z")
         self.declare_continuous_state("position", p0, unit="m", labels=xyz)
         self.declare_continuous_state("yaw", y0, unit="rad")
@@ -171,9 +177,11 @@ class Blimp(Block):
 
     def derivative(self, t, x, u, xp):
         f = u["thrust"]
-        if self._limited:
+        if self.param_flag("limited", xp, any_finite, "thrust_max", "torque_max"):
             lim = xp.concatenate([self.thrust_max, self.torque_max[:, None]], axis=-1)
             f = xp.clip(f, -lim, lim)
-        dp, dyaw, dnu = blimp_rhs(x["yaw"], x["body_velocity"], f, self.m4,
+        m4 = self.added_mass + xp.stack([self.mass, self.mass, self.mass,
+                                         self.inertia], axis=-1)
+        dp, dyaw, dnu = blimp_rhs(x["yaw"], x["body_velocity"], f, m4,
                                   self.drag_coeff, self.net_lift, self.quadratic, xp)
         return {"position": dp, "yaw": dyaw, "body_velocity": dnu}

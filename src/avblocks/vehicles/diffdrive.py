@@ -70,6 +70,9 @@ class DiffDrive(Block):
     wheel_speed_max : float or (N,), optional
         Symmetric wheel-speed limit [rad/s] (default: none).
 
+    ``wheel_radius``, ``track_width`` and ``wheel_speed_max`` are numeric
+    parameters of shape (N,).
+
     Equations
     ---------
     See the module docstring; ``wheels_to_twist`` / ``twist_to_wheels`` are
@@ -93,10 +96,15 @@ class DiffDrive(Block):
         name = "DiffDrive"
         p0 = poses(pose0, name, "pose0")
         self.n = n = p0.shape[0]
-        self.wheel_radius = agent_array(wheel_radius, n, name, "wheel_radius", positive=True)
-        self.track_width = agent_array(track_width, n, name, "track_width", positive=True)
-        self.wheel_speed_max = limit(wheel_speed_max, n, name, "wheel_speed_max")
-        self._limited = any_finite(self.wheel_speed_max)
+        self.declare_parameter(
+            "wheel_radius", agent_array(wheel_radius, n, name, "wheel_radius",
+                                        positive=True), bounds=(1e-12, None), unit="m")
+        self.declare_parameter(
+            "track_width", agent_array(track_width, n, name, "track_width",
+                                       positive=True), bounds=(1e-12, None), unit="m")
+        self.declare_parameter(
+            "wheel_speed_max", limit(wheel_speed_max, n, name, "wheel_speed_max"),
+            bounds=(0, None), allow_inf=True, unit="rad/s")
         self.declare_continuous_state("pose", p0, unit="m, m, rad",
                                       labels=("x", "y", "theta"))
         self.declare_input("wheels", (n, 2), unit="rad/s", labels=("left", "right"),
@@ -110,7 +118,7 @@ class DiffDrive(Block):
 
     def derivative(self, t, x, u, xp):
         w = u["wheels"]
-        if self._limited:
+        if self.param_flag("limited", xp, any_finite, "wheel_speed_max"):
             m = self.wheel_speed_max[:, None]
             w = xp.clip(w, -m, m)
         return {"pose": diffdrive_rhs(x["pose"], w, self.wheel_radius,

@@ -76,7 +76,7 @@ class SingleIntegrator(Block):
     dim : {2, 3}, optional
         Space dimension (default: from ``position0``).
     v_max : float or (N,), optional
-        Speed limit [m/s] (norm, default: none).
+        Speed limit [m/s] (norm, default: none). Numeric parameter, (N,).
 
     Equations
     ---------
@@ -95,8 +95,8 @@ class SingleIntegrator(Block):
         name = "SingleIntegrator"
         p0, self.dim = _dim(position0, dim, name)
         self.n = n = p0.shape[0]
-        self.v_max = limit(v_max, n, name, "v_max")
-        self._limited = any_finite(self.v_max)
+        self.declare_parameter("v_max", limit(v_max, n, name, "v_max"), bounds=(0, None),
+                               allow_inf=True, unit="m/s")
         labels = ("x", "y", "z")[: self.dim]
         self.declare_continuous_state("position", p0, unit="m", labels=labels)
         self.declare_input("velocity", (n, self.dim), unit="m/s", labels=labels,
@@ -108,7 +108,7 @@ class SingleIntegrator(Block):
 
     def derivative(self, t, x, u, xp):
         v = u["velocity"]
-        if self._limited:
+        if self.param_flag("limited", xp, any_finite, "v_max"):
             v = clip_norm(v, self.v_max, xp)
         return {"position": v}
 
@@ -142,6 +142,9 @@ class DoubleIntegrator(Block):
     a_max, v_max : float or (N,), optional
         Acceleration and speed limits (norms; default none).
 
+    ``mass``, ``drag``, ``a_max`` and ``v_max`` are numeric parameters of
+    shape (N,); ``input`` and ``dim`` are structural.
+
     Equations
     ---------
     See the module docstring.
@@ -165,13 +168,15 @@ class DoubleIntegrator(Block):
                                  expected="'accel' or 'force'", found=input)
         self.input = input
         v0 = agent_array(velocity0, n, name, "velocity0", (self.dim,))
-        self.mass = agent_array(mass, n, name, "mass", positive=True)
-        self.drag = agent_array(drag, n, name, "drag", nonnegative=True)
-        self.a_max = limit(a_max, n, name, "a_max")
-        self.v_max = limit(v_max, n, name, "v_max")
-        self._alim = any_finite(self.a_max)
-        self._vlim = any_finite(self.v_max)
-        self._drag = bool(np.any(self.drag > 0))
+        dp = self.declare_parameter
+        dp("mass", agent_array(mass, n, name, "mass", positive=True),
+           bounds=(1e-12, None), unit="kg")
+        dp("drag", agent_array(drag, n, name, "drag", nonnegative=True),
+           bounds=(0, None), unit="N s/m")
+        dp("a_max", limit(a_max, n, name, "a_max"), bounds=(0, None), allow_inf=True,
+           unit="m/s^2")
+        dp("v_max", limit(v_max, n, name, "v_max"), bounds=(0, None), allow_inf=True,
+           unit="m/s")
         labels = ("x", "y", "z")[: self.dim]
         self.declare_continuous_state("position", p0, unit="m", labels=labels)
         self.declare_continuous_state("velocity", v0, unit="m/s", labels=labels)
@@ -190,10 +195,10 @@ class DoubleIntegrator(Block):
     def derivative(self, t, x, u, xp):
         vel = x["velocity"]
         a = u["accel"] if self.input == "accel" else u["force"] / self.mass[:, None]
-        if self._alim:
+        if self.param_flag("alim", xp, any_finite, "a_max"):
             a = clip_norm(a, self.a_max, xp)
-        if self._vlim:
+        if self.param_flag("vlim", xp, any_finite, "v_max"):
             a = speed_limited_accel(vel, a, self.v_max, xp)
-        if self._drag:
+        if self.param_flag("drag", xp, np.any, "drag"):
             a = a - (self.drag / self.mass)[:, None] * vel
         return {"position": vel, "velocity": a}

@@ -140,13 +140,19 @@ def quadrotor_rhs(vel, q, rates, thrust, torque, mass, inertia, gravity=9.81,
 
 def _set_airframe(blk, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff):
     """Validate and set the physical parameters both quadrotor blocks share."""
-    blk.mass = agent_array(mass, n, name, "mass", positive=True)
-    blk.inertia = agent_array(inertia, n, name, "inertia", (3,), positive=True)
-    blk.drag = agent_array(drag, n, name, "drag", (3,), nonnegative=True)
+    dp = blk.declare_parameter
+    dp("mass", agent_array(mass, n, name, "mass", positive=True), bounds=(1e-12, None),
+       unit="kg")
+    dp("inertia", agent_array(inertia, n, name, "inertia", (3,), positive=True),
+       bounds=(1e-12, None), unit="kg m^2")
+    dp("drag", agent_array(drag, n, name, "drag", (3,), nonnegative=True),
+       bounds=(0, None), unit="N s/m")
     mixer_matrix(frame)                       # raises for an unknown frame
     blk.frame = frame
-    blk.arm_length = agent_array(arm_length, n, name, "arm_length", positive=True)
-    blk.yaw_coeff = agent_array(yaw_coeff, n, name, "yaw_coeff", positive=True)
+    dp("arm_length", agent_array(arm_length, n, name, "arm_length", positive=True),
+       bounds=(1e-12, None), unit="m")
+    dp("yaw_coeff", agent_array(yaw_coeff, n, name, "yaw_coeff", positive=True),
+       bounds=(1e-12, None), unit="m")
 
 
 def _kind(value, name, param):
@@ -208,6 +214,11 @@ class Quadrotor(Block):
     quat_gain : float
         k_q [1/s], quaternion norm stabilization (default 1).
 
+    Numeric parameters (per agent, N leading): ``mass``, ``inertia``,
+    ``drag``, ``arm_length``, ``yaw_coeff``, ``rotor_max``, ``thrust_max``,
+    ``torque_max``; scalars ``gravity`` and ``quat_gain``. ``input`` and
+    ``frame`` are structural.
+
     Equations
     ---------
     See the module docstring.
@@ -243,15 +254,18 @@ class Quadrotor(Block):
                                  param="attitude0", found="a zero quaternion")
         q0 = q0 / nq[:, None]
         _set_airframe(self, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff)
-        self.gravity = positive_scalar(gravity, name, "gravity", allow_zero=True)
+        dp = self.declare_parameter
+        dp("gravity", positive_scalar(gravity, name, "gravity", allow_zero=True),
+           bounds=(0, None), unit="m/s^2")
         self.input = _kind(input, name, "input")
-        self.rotor_max = limit(rotor_max, n, name, "rotor_max")
-        self.thrust_max = limit(thrust_max, n, name, "thrust_max")
-        self.torque_max = limit(torque_max, n, name, "torque_max", (3,))
-        self._drag = bool(np.any(self.drag > 0))
-        self.quat_gain = positive_scalar(quat_gain, name, "quat_gain", allow_zero=True)
-        self._tlim = any_finite(self.thrust_max, self.torque_max)
-        self._rlim = any_finite(self.rotor_max)
+        dp("rotor_max", limit(rotor_max, n, name, "rotor_max"), bounds=(0, None),
+           allow_inf=True, unit="N")
+        dp("thrust_max", limit(thrust_max, n, name, "thrust_max"), bounds=(0, None),
+           allow_inf=True, unit="N")
+        dp("torque_max", limit(torque_max, n, name, "torque_max", (3,)), bounds=(0, None),
+           allow_inf=True, unit="N m")
+        dp("quat_gain", positive_scalar(quat_gain, name, "quat_gain", allow_zero=True),
+           bounds=(0, None), unit="1/s")
         xyz = ("x", "y", "z")
         self.declare_continuous_state("position", p0, unit="m", labels=xyz)
         self.declare_continuous_state("velocity", v0, unit="m/s", labels=xyz)
@@ -285,10 +299,13 @@ class Quadrotor(Block):
         """Saturated (T, tau) (N, 4) from the input dict."""
         if self.input == "rotors":
             f = u["rotors"]
-            f = xp.clip(f, 0.0, self.rotor_max[:, None]) if self._rlim else xp.maximum(f, 0.0)
+            if self.param_flag("rlim", xp, any_finite, "rotor_max"):
+                f = xp.clip(f, 0.0, self.rotor_max[:, None])
+            else:
+                f = xp.maximum(f, 0.0)
             return rotors_to_wrench(f, self.arm_length, self.yaw_coeff, self.frame, xp)
         w = u["wrench"]
-        if self._tlim:
+        if self.param_flag("tlim", xp, any_finite, "thrust_max", "torque_max"):
             lo = xp.concatenate([xp.zeros((self.n, 1)), -self.torque_max], axis=-1)
             hi = xp.concatenate([self.thrust_max[:, None], self.torque_max], axis=-1)
             w = xp.clip(w, lo, hi)
@@ -298,7 +315,9 @@ class Quadrotor(Block):
         w = self.wrench(u, xp)
         dp, dv, dq, dw = quadrotor_rhs(x["velocity"], x["attitude"], x["rates"],
                                        w[:, 0], w[:, 1:], self.mass, self.inertia,
-                                       self.gravity, self.drag if self._drag else 0.0,
+                                       self.gravity,
+                                       self.drag if self.param_flag("drag", xp, np.any,
+                                                                    "drag") else 0.0,
                                        self.quat_gain, xp)
         return {"position": dp, "velocity": dv, "attitude": dq, "rates": dw}
 
@@ -342,6 +361,10 @@ class QuadrotorVelocityControl(Block):
     rotor_max, thrust_max : float or (N,)
         Actuator limits.
 
+    Every value above except ``n``, ``output`` and ``frame`` (structural) is
+    a numeric parameter (``"ctrl.kv"``...; per-agent ones of shape (N,) or
+    (N, 3)). :meth:`for_quadrotor` copies the vehicle's values once.
+
     Equations
     ---------
     Velocity loop (desired force, drag feed-forward, tilt limited)::
@@ -373,19 +396,27 @@ class QuadrotorVelocityControl(Block):
         name = "QuadrotorVelocityControl"
         self.n = n = int(n)
         _set_airframe(self, name, n, mass, inertia, drag, frame, arm_length, yaw_coeff)
-        self.gravity = positive_scalar(gravity, name, "gravity")
+        dp = self.declare_parameter
+        dp("gravity", positive_scalar(gravity, name, "gravity"), bounds=(1e-12, None),
+           unit="m/s^2")
         self.out_kind = _kind(output, name, "output")
-        self.kv = positive_scalar(kv, name, "kv")
-        self.k_att = positive_scalar(k_att, name, "k_att")
-        self.k_rate = positive_scalar(k_rate, name, "k_rate")
-        self.tilt_max = positive_scalar(tilt_max, name, "tilt_max")
-        if self.tilt_max >= np.pi / 2:
+        dp("kv", positive_scalar(kv, name, "kv"), bounds=(1e-12, None), unit="1/s")
+        dp("k_att", positive_scalar(k_att, name, "k_att"), bounds=(1e-12, None),
+           unit="1/s")
+        dp("k_rate", positive_scalar(k_rate, name, "k_rate"), bounds=(1e-12, None),
+           unit="1/s")
+        tilt = positive_scalar(tilt_max, name, "tilt_max")
+        if tilt >= np.pi / 2:
             raise ParameterError("tilt limit must be below pi/2", block=name,
                                  param="tilt_max", expected="< pi/2", found=tilt_max)
-        self.rate_max = positive_scalar(rate_max, name, "rate_max", allow_inf=True)
-        self.yaw = agent_array(yaw, n, name, "yaw")
-        self.rotor_max = limit(rotor_max, n, name, "rotor_max")
-        self.thrust_max = limit(thrust_max, n, name, "thrust_max")
+        dp("tilt_max", tilt, bounds=(1e-12, np.pi / 2 - 1e-9), unit="rad")
+        dp("rate_max", positive_scalar(rate_max, name, "rate_max", allow_inf=True),
+           bounds=(1e-12, None), allow_inf=True, unit="rad/s")
+        dp("yaw", agent_array(yaw, n, name, "yaw"), unit="rad")
+        dp("rotor_max", limit(rotor_max, n, name, "rotor_max"), bounds=(0, None),
+           allow_inf=True, unit="N")
+        dp("thrust_max", limit(thrust_max, n, name, "thrust_max"), bounds=(0, None),
+           allow_inf=True, unit="N")
         xyz = ("x", "y", "z")
         self.declare_input("velocity", (n, 3), unit="m/s", labels=xyz,
                            doc="velocity set-point, world frame")
@@ -416,7 +447,7 @@ class QuadrotorVelocityControl(Block):
         a = self.kv * (u["velocity"] - vel) + (self.drag / m) * vel
         axy = a[:, :2]
         nxy = xp.sqrt(dot(axy, axy))
-        axy = axy * xp.minimum(1.0, g * np.tan(self.tilt_max) / xp.maximum(nxy, 1e-300))[:, None]
+        axy = axy * xp.minimum(1.0, g * xp.tan(self.tilt_max) / xp.maximum(nxy, 1e-300))[:, None]
         az = xp.maximum(a[:, 2], -0.8 * g) + g
         F = m * xp.concatenate([axy, az[:, None]], axis=-1)
         R = quat_to_rotmat(q, xp)

@@ -18,9 +18,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.block import Block
-from ..core.params import agent_array, poses
+from ..core.params import limit, poses
 from ..utility.angles import wrap_angle
 from ..utility.arrays import columns
+from ._common import any_finite
 
 
 def unicycle_rhs(pose, cmd, xp=np):
@@ -56,7 +57,8 @@ class Unicycle(Block):
     pose0 : array_like, (N, 3)
         Initial poses; N is the number of vehicles.
     v_max, omega_max : float or (N,), optional
-        Symmetric input limits (default: none).
+        Symmetric input limits (default: none). Numeric parameters of shape
+        (N,), bounds [0, inf] (inf: no limit).
     saturation_output : bool, optional
         Add an output ``saturated`` (N, 2) bool: whether ``|v| > v_max`` and
         ``|omega| > omega_max`` for the current command. It depends on the
@@ -78,13 +80,10 @@ class Unicycle(Block):
         super().__init__()
         p0 = poses(pose0, "Unicycle", "pose0")
         self.n = n = p0.shape[0]
-        self.v_max = np.broadcast_to(np.asarray(v_max, float), (n,)).copy()
-        self.omega_max = np.broadcast_to(np.asarray(omega_max, float), (n,)).copy()
-        for nm, a in (("v_max", self.v_max), ("omega_max", self.omega_max)):
-            if np.any(np.isnan(a)) or np.any(a < 0):
-                agent_array(-1.0, n, "Unicycle", nm, nonnegative=True)
-        self._limited = bool(np.any(np.isfinite(self.v_max)) or
-                             np.any(np.isfinite(self.omega_max)))
+        for nm, val in (("v_max", v_max), ("omega_max", omega_max)):
+            self.declare_parameter(nm, limit(val, n, "Unicycle", nm), bounds=(0, None),
+                                   allow_inf=True, unit="m/s" if nm == "v_max" else "rad/s",
+                                   doc="symmetric input limit (inf: none)")
         self.declare_continuous_state("pose", p0, unit="m, m, rad",
                                       labels=("x", "y", "theta"))
         self.declare_input("cmd", (n, 2), unit="m/s, rad/s", labels=("v", "omega"),
@@ -107,6 +106,6 @@ class Unicycle(Block):
 
     def derivative(self, t, x, u, xp):
         cmd = u["cmd"]
-        if self._limited:
+        if self.param_flag("limited", xp, any_finite, "v_max", "omega_max"):
             cmd = clip_cmd(cmd, self.v_max, self.omega_max, xp)
         return {"pose": unicycle_rhs(x["pose"], cmd, xp)}

@@ -71,6 +71,10 @@ class Unicycle2(Block):
     f_max, tau_max : float or (N,), optional
         Symmetric input limits (default: none).
 
+    ``mass``, ``inertia``, the dampings and the limits are numeric
+    parameters of shape (N,) (``"block.mass"`` ...); ``pose0``/``twist0``
+    are initial states (set them with ``x0=``).
+
     Equations
     ---------
     See the module docstring: ``m dv/dt = f - b_v v``, ``J domega/dt = tau -
@@ -96,13 +100,19 @@ class Unicycle2(Block):
         p0 = poses(pose0, name, "pose0")
         self.n = n = p0.shape[0]
         tw0 = agent_array(twist0, n, name, "twist0", (2,))
-        self.mass = agent_array(mass, n, name, "mass", positive=True)
-        self.inertia = agent_array(inertia, n, name, "inertia", positive=True)
-        self.lin_damping = agent_array(lin_damping, n, name, "lin_damping", nonnegative=True)
-        self.ang_damping = agent_array(ang_damping, n, name, "ang_damping", nonnegative=True)
-        self.f_max = limit(f_max, n, name, "f_max")
-        self.tau_max = limit(tau_max, n, name, "tau_max")
-        self._limited = any_finite(self.f_max, self.tau_max)
+        dp = self.declare_parameter
+        dp("mass", agent_array(mass, n, name, "mass", positive=True),
+           bounds=(1e-12, None), unit="kg")
+        dp("inertia", agent_array(inertia, n, name, "inertia", positive=True),
+           bounds=(1e-12, None), unit="kg m^2")
+        dp("lin_damping", agent_array(lin_damping, n, name, "lin_damping",
+                                      nonnegative=True), bounds=(0, None), unit="N s/m")
+        dp("ang_damping", agent_array(ang_damping, n, name, "ang_damping",
+                                      nonnegative=True), bounds=(0, None), unit="N m s/rad")
+        dp("f_max", limit(f_max, n, name, "f_max"), bounds=(0, None), allow_inf=True,
+           unit="N")
+        dp("tau_max", limit(tau_max, n, name, "tau_max"), bounds=(0, None),
+           allow_inf=True, unit="N m")
         self.declare_continuous_state("pose", p0, unit="m, m, rad",
                                       labels=("x", "y", "theta"))
         self.declare_continuous_state("twist", tw0, unit="m/s, rad/s",
@@ -121,7 +131,7 @@ class Unicycle2(Block):
 
     def derivative(self, t, x, u, xp):
         w = u["wrench"]
-        if self._limited:
+        if self.param_flag("limited", xp, any_finite, "f_max", "tau_max"):
             w = xp.stack([xp.clip(w[:, 0], -self.f_max, self.f_max),
                           xp.clip(w[:, 1], -self.tau_max, self.tau_max)], axis=-1)
         dp, dt = unicycle2_rhs(x["pose"], x["twist"], w, self.mass, self.inertia,

@@ -1,0 +1,15 @@
+"""Deferred import of JAX (an optional extra) with a clear error."""
+
+from __future__ import annotations
+
+from ..errors import AvError
+
+
+def jax():
+    """The ``jax`` module, or an AvError telling how to install it."""
+    try:
+        import jax as _jax
+    except ImportError as e:  # pragma: no cover - depends on the extra
+        raise AvError("backend='jax' needs JAX: pip install 'avblocks[jax]' "
+                      "(or run with backend='numpy')") from e
+    return _jax

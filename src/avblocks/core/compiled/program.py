@@ -1,0 +1,196 @@
+"""One compiled program per diagram structure: the traced run and its variants.
+
+A :class:`Program` owns the pure function ``run(theta, X0) -> (logs, X_T)``
+of the numeric parameters ``theta`` (``{"block.name": array}``) and the
+initial states ``X0`` (one dict per block, random keys included). It is
+written once per structure and lowered/compiled ahead of time for each way
+it is used (a single run, a chunk of a vmapped ensemble, a gradient), so a
+call with new values never traces or compiles again. Programs live in a
+small module-level LRU cache keyed by :func:`structure.diagram_key` plus
+the run settings (see :func:`cache_info`).
+
+The run is a nested ``lax.scan``: the outer scan has one iteration per log
+sample, which records the logged outputs and then advances ``log_every``
+major steps with the inner scan (skipped by a ``lax.cond`` after the last
+sample); the steps left over when ``log_every`` does not divide the step
+count run after it. Only the decimated log leaves the program: one copy.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import OrderedDict
+
+import numpy as np
+
+from ..params import bound_parameters
+from . import _jax
+from .engine import TracedEngine
+
+_CACHE: OrderedDict = OrderedDict()
+_CACHE_SIZE = 32
+_LOCK = threading.Lock()
+_STATS = {"traces": 0, "hits": 0, "misses": 0}
+_TRACE_LOCK = threading.RLock()
+
+
+def cache_info() -> dict:
+    """Counters of the compile cache: ``traces`` (Python traces of a run =
+    compilations), ``hits``/``misses`` of the structure cache, ``size``."""
+    return {**_STATS, "size": len(_CACHE)}
+
+
+def clear_cache():
+    """Forget every compiled program (the counters are kept)."""
+    with _LOCK:
+        _CACHE.clear()
+
+
+def enable_persistent_cache(path=None, *, min_compile_time_s=0.0):
+    """Turn on JAX's persistent compilation cache (off by default), so a new
+    Python process reuses compiled programs from ``path`` (default
+    ``~/.cache/avblocks/jax``). This sets JAX's global configuration."""
+    from pathlib import Path
+    jax = _jax.jax()
+    p = Path(path) if path is not None else Path.home() / ".cache" / "avblocks" / "jax"
+    p.mkdir(parents=True, exist_ok=True)
+    jax.config.update("jax_compilation_cache_dir", str(p))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_s))
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+    return p
+
+
+def get_program(key, factory):
+    """The cached program for ``key``, or a new one from ``factory()``."""
+    with _LOCK:
+        prog = _CACHE.get(key)
+        if prog is not None:
+            _CACHE.move_to_end(key)
+            _STATS["hits"] += 1
+            return prog
+        _STATS["misses"] += 1
+    prog = factory()
+    with _LOCK:
+        _CACHE[key] = prog
+        while len(_CACHE) > _CACHE_SIZE:
+            _CACHE.popitem(last=False)
+    return prog
+
+
+def signature(tree):
+    """Hashable (structure, shapes, dtypes) of a pytree of arrays."""
+    jax = _jax.jax()
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    return (treedef, tuple((np.shape(x), np.dtype(x.dtype).str) for x in leaves))
+
+
+class Program:
+    """The traced run of one diagram structure with fixed settings."""
+
+    def __init__(self, compiled, *, dt, t0, nsteps, log_every, log_idx, solver, x64):
+        jax = _jax.jax()
+        self.cd = compiled
+        self.dt, self.t0 = float(dt), float(t0)
+        self.nsteps, self.log_every = int(nsteps), int(log_every)
+        self.nlog = self.nsteps // self.log_every + 1
+        self.log_idx = list(log_idx)
+        self.solver = solver
+        self.x64 = bool(x64)
+        with jax.enable_x64(self.x64):
+            canon = jax.dtypes.canonicalize_dtype
+            self.eng = TracedEngine(compiled, dt, jax.numpy, canon)
+        self.slots = [(f"{n}.{k}", i, k) for i, (n, b) in
+                      enumerate(zip(compiled.names, compiled.blocks)) for k in b._params]
+        from .structure import diagram_key
+        self.struct = diagram_key(compiled)
+        self.traces = 0
+        self._exe = {}
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------ the run
+    def run(self, theta, X0, remat=False):
+        """Pure: ``(logs, X_T)`` for parameters ``theta`` and states ``X0``.
+        Must be called under a JAX transformation (it traces)."""
+        jax = _jax.jax()
+        jnp, lax = jax.numpy, jax.lax
+        self.traces += 1
+        _STATS["traces"] += 1
+        per_block = {}
+        for path, i, k in self.slots:
+            per_block.setdefault(i, (self.cd.blocks[i], {}))[1][k] = theta[path]
+        eng, dt, t0 = self.eng, self.dt, self.t0
+        solver, le, nlog, idx = self.solver, self.log_every, self.nlog, self.log_idx
+        with bound_parameters(list(per_block.values())):
+            Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
+
+            def step(carry, k):
+                X, Y = carry
+                t = t0 + k * dt
+                X = eng.update(t, X, Y, eng.hits(k))
+                X = solver.step(eng, t, X, Y, dt)
+                Y = eng.major_outputs(t0 + (k + 1) * dt, X, Y, eng.hits(k + 1))
+                return (X, Y), None
+
+            def advance(carry, k0, count):
+                carry, _ = lax.scan(step, carry, k0 + jnp.arange(count))
+                return carry
+
+            def advance_le(carry, k0):
+                return advance(carry, k0, le)
+
+            if remat:
+                advance_le = jax.checkpoint(advance_le)
+
+            def outer(carry, i):
+                row = [carry[1][j][o] for j, o in idx]
+                carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, i * le),
+                                 lambda c: c, carry)
+                return carry, row
+
+            carry, logs = lax.scan(outer, (X0, Y0), jnp.arange(nlog))
+            rem = self.nsteps - (nlog - 1) * le
+            if rem:
+                carry = advance(carry, (nlog - 1) * le, rem)
+        return logs, carry[0]
+
+    # ------------------------------------------------------- executables
+    def executable(self, mode, build, args, compiled=None):
+        """Ahead-of-time compiled ``build()`` for ``args`` (cached by mode and
+        argument signature): returns (callable, seconds spent compiling).
+
+        ``compiled`` is the requesting runner's diagram (same structure when
+        it was compiled). If the blocks this program was first traced with
+        have since been changed structurally, it traces with those instead.
+        Traces are serialized: binding traced parameter values to blocks
+        must not race with another trace."""
+        import time
+
+        from .structure import diagram_key
+        jax = _jax.jax()
+        key = (mode, signature(args))
+        with self._lock:
+            exe = self._exe.get(key)
+        if exe is not None:
+            return exe, 0.0
+        with _TRACE_LOCK:
+            with self._lock:
+                exe = self._exe.get(key)
+            if exe is not None:
+                return exe, 0.0
+            if compiled is not None and compiled is not self.cd and \
+                    diagram_key(self.cd) != self.struct:
+                self._rebind(compiled)
+            t = time.perf_counter()
+            with jax.enable_x64(self.x64):
+                exe = jax.jit(build()).lower(*args).compile()
+            spent = time.perf_counter() - t
+        with self._lock:
+            self._exe[key] = exe
+        return exe, spent
+
+    def _rebind(self, compiled):
+        jax = _jax.jax()
+        self.cd = compiled
+        with jax.enable_x64(self.x64):
+            self.eng = TracedEngine(compiled, self.dt, jax.numpy,
+                                    jax.dtypes.canonicalize_dtype)

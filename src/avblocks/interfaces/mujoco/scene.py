@@ -1,0 +1,561 @@
+"""A MuJoCo scene built from avblocks data (or from a user's MJCF file).
+
+A :class:`Scene` is plain data, like :class:`~avblocks.environment.World`:
+agent groups, obstacles, ground and cameras. It compiles once to a MuJoCo
+model shared by the blocks that use it: :class:`~.physics.PhysicsWorld`
+(simulates the dynamic groups) and :class:`~.camera.SceneCamera` (renders
+images of the scene from any agent poses).
+
+Agent groups
+------------
+``add_ground_robots(name, pose0)``
+    N planar robots (unicycle or differential drive): a cylinder body on
+    three joints (slide x, slide y, hinge z about the body centre), so the
+    generalized coordinates *are* ``(x, y, theta)``. They collide with
+    obstacles and with each other, not with the ground (they carry no
+    weight on it: the velocity loop is a body-velocity servo, see
+    :mod:`.physics`).
+``add_quadrotors(name, position0)``
+    N free bodies (mass, diagonal inertia) with a visual airframe and,
+    optionally, a camera under each (``camera=CameraMount(...)``).
+    They collide with the ground and obstacles, not with ground robots.
+
+``kinematic=True`` makes a group of MuJoCo *mocap* bodies instead: they
+are not simulated by :class:`PhysicsWorld` (their poses come from other
+blocks, e.g. a plain :class:`~avblocks.vehicles.Unicycle`: co-simulation)
+but cameras see them at the poses wired to the camera block.
+
+Obstacles of a World
+--------------------
+Polygons are extruded to prisms of height ``obstacle_height`` (split into
+convex pieces by a constrained Delaunay triangulation when concave or
+holed, since MuJoCo collides convex meshes); circles become cylinders.
+
+Collision bits (contype/conaffinity): ground 2/2, ground robots 1/1,
+quadrotors 2/2, obstacles 3/3, mocap bodies 0/0 (seen, never touched).
+
+Frames: world z up. A camera looks along its own -z with x to the image
+right and y to the image top (MuJoCo's convention).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from ...core.errors import ParameterError
+from ...core.params import agent_array, limit, poses, positive_scalar
+from ...vehicles.quadrotor import _ANGLES, mixer_matrix
+from ._gl import import_mujoco
+
+_NAME = "Scene"
+
+
+def _f(*vals):
+    return " ".join(f"{float(v):.9g}" for v in vals)
+
+
+def _rgba(color, where):
+    c = np.asarray(color, dtype=float).ravel()
+    if c.shape == (3,):
+        c = np.append(c, 1.0)
+    if c.shape != (4,) or np.any(c < 0) or np.any(c > 1):
+        raise ParameterError("colour must be (r, g, b) or (r, g, b, a) in [0, 1]",
+                             block=_NAME, param=where, found=color)
+    return c
+
+
+def look_at_axes(pos, lookat, up=(0.0, 0.0, 1.0)):
+    """MuJoCo ``xyaxes`` (x right, y up) of a camera at ``pos`` looking at ``lookat``."""
+    f = np.asarray(lookat, float) - np.asarray(pos, float)
+    nf = np.linalg.norm(f)
+    if nf < 1e-12:
+        raise ParameterError("camera position and look-at point coincide",
+                             block=_NAME, param="lookat", found=lookat)
+    f = f / nf
+    x = np.cross(f, up)
+    if np.linalg.norm(x) < 1e-9:           # looking straight up or down
+        x = np.cross(f, (0.0, 1.0, 0.0))
+    x = x / np.linalg.norm(x)
+    z = -f
+    y = np.cross(z, x)
+    return np.concatenate([x, y])
+
+
+@dataclass(frozen=True)
+class CameraMount:
+    """A camera fixed to each agent of a group.
+
+    ``pos`` in the body frame [m]; ``xyaxes`` the camera's x (image right)
+    and y (image up) axes in the body frame. The default looks straight
+    down from under the body, image top = body forward (+x), image right =
+    body right (-y). ``fovy`` is the vertical field of view [deg].
+    """
+
+    pos: tuple = (0.0, 0.0, -0.05)
+    xyaxes: tuple = (0.0, -1.0, 0.0, 1.0, 0.0, 0.0)
+    fovy: float = 60.0
+
+    def rotation(self):
+        """Camera axes in the body frame: columns x, y, z (3, 3)."""
+        a = np.asarray(self.xyaxes, float)
+        x = a[:3] / np.linalg.norm(a[:3])
+        y = a[3:] - x * np.dot(x, a[3:])
+        y = y / np.linalg.norm(y)
+        return np.column_stack([x, y, np.cross(x, y)])
+
+
+@dataclass
+class Group:
+    """One agent group of a scene (see :class:`Scene`)."""
+
+    name: str
+    kind: str                   # "ground" or "quad"
+    n: int
+    bodies: list
+    kinematic: bool = False
+    params: dict = field(default_factory=dict)
+    camera: CameraMount | None = None
+
+    @property
+    def camera_names(self):
+        return [f"{b}_cam" for b in self.bodies] if self.camera is not None else []
+
+
+class Scene:
+    """Agents, obstacles, ground and cameras of a MuJoCo world.
+
+    Parameters
+    ----------
+    world : environment.World, optional
+        Its obstacles become walls/prisms and cylinders.
+    ground : bool
+        Add a ground plane (z = 0).
+    ground_size : (xmin, ymin, xmax, ymax), optional
+        Extent of the plane (default: the world's bounds, else +-20 m).
+    texture : {"checker", None} or path
+        Ground texture: a grey checker (default), plain grey, or an image
+        file (PNG) stretched over the plane.
+    obstacle_height : float
+        Height of extruded obstacles [m] (default 1).
+    timestep : float
+        MuJoCo's step [s] (default 0.002).
+    max_image : (width, height)
+        Largest offscreen image the cameras may render (default 640x480).
+    shadows : bool
+        Let the sun cast shadows and the ground reflect (default False: a
+        flat-lit scene renders several times faster in software GL and is
+        easier to threshold; ``SceneCamera(shadows=True)`` then draws them).
+
+    Example
+    -------
+    >>> import numpy as np
+    >>> from avblocks.interfaces.mujoco import Scene
+    >>> s = Scene()
+    >>> g = s.add_ground_robots("robots", np.zeros((2, 3)))
+    >>> g.n, s.model.nq
+    (2, 6)
+    """
+
+    def __init__(self, world=None, *, ground=True, ground_size=None, texture="checker",
+                 obstacle_height=1.0, obstacle_color=(0.55, 0.6, 0.7), timestep=0.002,
+                 max_image=(640, 480), gravity=9.81, shadows=False):
+        self.world = world
+        self.ground = bool(ground)
+        if ground_size is None:
+            b = getattr(world, "bounds", None)
+            ground_size = b if b is not None else (-20.0, -20.0, 20.0, 20.0)
+        gs = np.asarray(ground_size, float)
+        if gs.shape != (4,) or not (gs[2] > gs[0] and gs[3] > gs[1]):
+            raise ParameterError("ground_size must be (xmin, ymin, xmax, ymax)",
+                                 block=_NAME, param="ground_size", found=ground_size)
+        self.ground_size = gs
+        if texture not in ("checker", None) and not Path(str(texture)).is_file():
+            raise ParameterError("ground texture must be 'checker', None or an image file",
+                                 block=_NAME, param="texture", found=texture)
+        self.texture = texture
+        self.obstacle_height = positive_scalar(obstacle_height, _NAME, "obstacle_height")
+        self.obstacle_color = _rgba(obstacle_color, "obstacle_color")
+        self.timestep = positive_scalar(timestep, _NAME, "timestep")
+        self.gravity = positive_scalar(gravity, _NAME, "gravity", allow_zero=True)
+        mi = tuple(int(v) for v in max_image)
+        if len(mi) != 2 or min(mi) < 1:
+            raise ParameterError("max_image must be (width, height)", block=_NAME,
+                                 param="max_image", found=max_image)
+        self.max_image = mi
+        self.shadows = bool(shadows)
+        self.groups: dict[str, Group] = {}
+        self.fixed_cameras: dict[str, dict] = {}
+        self._mjcf = None        # user MJCF text (from_mjcf)
+        self._model = None
+
+    # ------------------------------------------------------------- building
+    def _new_group(self, name):
+        if self._model is not None:
+            raise ParameterError("the scene is compiled already; add groups first",
+                                 block=_NAME, param=name)
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ParameterError("group name must be an identifier", block=_NAME,
+                                 param="name", found=name)
+        if name in self.groups or name in self.fixed_cameras:
+            raise ParameterError("name used twice in the scene", block=_NAME,
+                                 param="name", found=name)
+
+    def add_ground_robots(self, name, pose0, *, radius=0.2, height=0.15, mass=1.0,
+                          color=(0.2, 0.4, 0.9), kind="unicycle", wheel_radius=0.05,
+                          track_width=0.3, kinematic=False, marker=True):
+        """N planar robots; ``kind`` "unicycle" (input ``cmd`` (v, omega)) or
+        "diffdrive" (input ``wheels``, wheel angular speeds). ``marker``
+        draws a white heading mark on top (leave it off for a target that a
+        colour tracker must see whole). Returns the group."""
+        self._new_group(name)
+        p0 = poses(pose0, _NAME, "pose0")
+        n = p0.shape[0]
+        if kind not in ("unicycle", "diffdrive"):
+            raise ParameterError("unknown ground robot kind", block=_NAME, param="kind",
+                                 expected="'unicycle' or 'diffdrive'", found=kind)
+        prm = {"pose0": p0,
+               "radius": positive_scalar(radius, _NAME, "radius"),
+               "height": positive_scalar(height, _NAME, "height"),
+               "mass": agent_array(mass, n, _NAME, "mass", positive=True),
+               "color": _rgba(color, "color"), "kind": kind,
+               "wheel_radius": positive_scalar(wheel_radius, _NAME, "wheel_radius"),
+               "track_width": positive_scalar(track_width, _NAME, "track_width"),
+               "marker": bool(marker)}
+        g = Group(name, "ground", n, [f"{name}{i}" for i in range(n)], bool(kinematic), prm)
+        self.groups[name] = g
+        return g
+
+    def add_quadrotors(self, name, position0, *, attitude0=(1.0, 0.0, 0.0, 0.0),
+                       mass=1.0, inertia=(0.01, 0.01, 0.02), arm_length=0.2,
+                       frame="x", yaw_coeff=0.016, drag=0.0, input="wrench",
+                       rotor_max=np.inf, thrust_max=np.inf,
+                       color=(0.25, 0.25, 0.28), camera=None, kinematic=False):
+        """N quadrotors with the airframe parameters of
+        :class:`~avblocks.vehicles.Quadrotor`; ``camera`` a :class:`CameraMount`
+        (or True for the default downward camera). ``rotor_max`` clips rotor
+        thrusts (``input="rotors"``), ``thrust_max`` the collective thrust
+        (``input="wrench"``), as in the model block. Returns the group."""
+        self._new_group(name)
+        p0 = poses(position0, _NAME, "position0", dim=3)
+        n = p0.shape[0]
+        q0 = agent_array(attitude0, n, _NAME, "attitude0", (4,))
+        q0 = q0 / np.linalg.norm(q0, axis=1, keepdims=True)
+        mixer_matrix(frame)
+        if input not in ("wrench", "rotors"):
+            raise ParameterError("unknown quadrotor input", block=_NAME, param="input",
+                                 expected="'wrench' or 'rotors'", found=input)
+        if camera is True:
+            camera = CameraMount()
+        if camera is not None and not isinstance(camera, CameraMount):
+            raise ParameterError("camera must be a CameraMount, True or None",
+                                 block=_NAME, param="camera", found=type(camera).__name__)
+        prm = {"position0": p0, "attitude0": q0,
+               "mass": agent_array(mass, n, _NAME, "mass", positive=True),
+               "inertia": agent_array(inertia, n, _NAME, "inertia", (3,), positive=True),
+               "arm_length": agent_array(arm_length, n, _NAME, "arm_length", positive=True),
+               "yaw_coeff": agent_array(yaw_coeff, n, _NAME, "yaw_coeff", positive=True),
+               "drag": agent_array(drag, n, _NAME, "drag", (3,), nonnegative=True),
+               "rotor_max": limit(rotor_max, n, _NAME, "rotor_max"),
+               "thrust_max": limit(thrust_max, n, _NAME, "thrust_max"),
+               "frame": frame, "input": input, "color": _rgba(color, "color")}
+        g = Group(name, "quad", n, [f"{name}{i}" for i in range(n)], bool(kinematic),
+                  prm, camera)
+        self.groups[name] = g
+        return g
+
+    def add_camera(self, name, pos, lookat=(0.0, 0.0, 0.0), *, fovy=45.0):
+        """A fixed scene camera at ``pos`` looking at ``lookat``."""
+        self._new_group(name)
+        pos = np.asarray(pos, float)
+        self.fixed_cameras[name] = {"pos": pos, "xyaxes": look_at_axes(pos, lookat),
+                                    "fovy": positive_scalar(fovy, _NAME, "fovy")}
+
+    @classmethod
+    def from_mjcf(cls, mjcf, *, ground_robots=None, quadrotors=None, **kw):
+        """A scene from a user's MJCF (file path or XML text).
+
+        ``ground_robots`` / ``quadrotors``: ``{group: [body names]}``. A
+        ground robot body needs three joints in order: slide x, slide y,
+        hinge z (world axes); a quadrotor body a free joint; a mocap body
+        makes the group kinematic. Masses and inertias are the model's.
+        """
+        s = cls(ground=False, **kw)
+        text = Path(mjcf).read_text() if Path(str(mjcf)).suffix == ".xml" and \
+            Path(str(mjcf)).is_file() else str(mjcf)
+        s._mjcf = text
+        mj = import_mujoco()
+        try:
+            m = mj.MjModel.from_xml_string(text)
+        except Exception as e:  # noqa: BLE001 - MuJoCo's own parse error
+            raise ParameterError(f"MuJoCo cannot load the MJCF: {e}", block=_NAME,
+                                 param="mjcf") from None
+        for kind, spec in (("ground", ground_robots or {}), ("quad", quadrotors or {})):
+            for gname, bodies in spec.items():
+                ids = []
+                for b in bodies:
+                    i = mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, b)
+                    if i < 0:
+                        raise ParameterError("no such body in the MJCF", block=_NAME,
+                                             param=gname, found=b)
+                    ids.append(i)
+                n = len(ids)
+                kin = bool(np.all(m.body_mocapid[ids] >= 0))
+                prm = {"mass": m.body_mass[ids].copy(),
+                       "inertia": m.body_inertia[ids].copy()}
+                if kind == "quad":
+                    prm.update(arm_length=np.full(n, 0.2), yaw_coeff=np.full(n, 0.016),
+                               drag=np.zeros((n, 3)), frame="x", input="wrench",
+                               rotor_max=np.full(n, np.inf), thrust_max=np.full(n, np.inf))
+                else:
+                    prm.update(kind="unicycle", wheel_radius=0.05, track_width=0.3)
+                s.groups[gname] = Group(gname, kind, n, list(bodies), kin, prm)
+        s._model = m
+        s._map()
+        return s
+
+    # ------------------------------------------------------------------ MJCF
+    def _obstacles_xml(self, assets, bodies):
+        w = self.world
+        if w is None:
+            return
+        import shapely
+        h = self.obstacle_height
+        rgba = _f(*self.obstacle_color)
+        for j, geom in enumerate(w.geoms):
+            if w.is_circle[j]:
+                c, r = w.circle_center[j], w.circle_radius[j]
+                bodies.append(f'<geom name="obstacle{j}" type="cylinder" size="{_f(r, h / 2)}" '
+                              f'pos="{_f(c[0], c[1], h / 2)}" rgba="{rgba}" '
+                              'contype="3" conaffinity="3"/>')
+                continue
+            g = geom.buffer(0) if not geom.is_valid else geom
+            convex = len(g.interiors) == 0 and abs(g.convex_hull.area - g.area) < 1e-9 * max(
+                g.area, 1.0)
+            if convex:
+                pieces = [np.asarray(g.exterior.coords)[:-1]]
+            else:
+                if hasattr(shapely, "constrained_delaunay_triangles"):   # shapely >= 2.1
+                    tris = shapely.constrained_delaunay_triangles(g).geoms
+                else:       # Delaunay of the vertices, keep the triangles inside
+                    tris = [t for t in shapely.delaunay_triangles(g).geoms
+                            if g.contains(t.representative_point())]
+                pieces = [np.asarray(t.exterior.coords)[:-1] for t in tris
+                          if t.area > 1e-12]
+            for k, pts in enumerate(pieces):
+                verts = np.concatenate([np.column_stack([pts, np.zeros(len(pts))]),
+                                        np.column_stack([pts, np.full(len(pts), h)])])
+                mname = f"obstacle{j}_{k}"
+                assets.append(f'<mesh name="{mname}" vertex="{_f(*verts.ravel())}"/>')
+                bodies.append(f'<geom name="{mname}" type="mesh" mesh="{mname}" '
+                              f'rgba="{rgba}" contype="3" conaffinity="3"/>')
+
+    def _ground_robot_xml(self, g):
+        p = g.params
+        r, h = p["radius"], p["height"]
+        rgba = _f(*p["color"])
+        out = []
+        for i, b in enumerate(g.bodies):
+            m = p["mass"][i]
+            izz = 0.5 * m * r * r
+            ixx = m * (3 * r * r + h * h) / 12
+            vis = (f'<geom type="cylinder" size="{_f(r, h / 2)}" rgba="{rgba}" '
+                   f'contype="{0 if g.kinematic else 1}" conaffinity="{0 if g.kinematic else 1}"/>')
+            if p.get("marker", True):
+                vis += (f'<geom type="box" size="{_f(0.25 * r, 0.12 * r, 0.01)}" '
+                   f'pos="{_f(0.6 * r, 0, h / 2 + 0.005)}" rgba="0.95 0.95 0.95 1" '
+                        'contype="0" conaffinity="0"/>')
+            if g.kinematic:
+                x, y, th = p["pose0"][i]
+                out.append(f'<body name="{b}" mocap="true" pos="{_f(x, y, h / 2)}" '
+                           f'euler="{_f(0, 0, th)}">{vis}</body>')
+            else:
+                out.append(
+                    f'<body name="{b}" pos="{_f(0, 0, h / 2)}">'
+                    f'<joint name="{b}_x" type="slide" axis="1 0 0"/>'
+                    f'<joint name="{b}_y" type="slide" axis="0 1 0"/>'
+                    f'<joint name="{b}_yaw" type="hinge" axis="0 0 1"/>'
+                    f'<inertial pos="0 0 0" mass="{_f(m)}" diaginertia="{_f(ixx, ixx, izz)}"/>'
+                    f'{vis}</body>')
+        return out
+
+    def _quad_xml(self, g):
+        p = g.params
+        rgba = _f(*p["color"])
+        ang = _ANGLES[p["frame"]]
+        out = []
+        for i, b in enumerate(g.bodies):
+            arm = p["arm_length"][i]
+            col = 0 if g.kinematic else 2
+            geoms = [f'<geom type="box" size="{_f(0.3 * arm, 0.3 * arm, 0.04 * 1)}" '
+                     f'rgba="{rgba}" contype="{col}" conaffinity="{col}"/>']
+            for k, a in enumerate(ang):
+                ex, ey = arm * np.cos(a), arm * np.sin(a)
+                rc = "0.9 0.9 0.9 0.8" if k in (0, 3) else "0.2 0.2 0.2 0.8"
+                geoms.append(f'<geom type="capsule" fromto="{_f(0, 0, 0, ex, ey, 0)}" '
+                             f'size="{_f(0.06 * arm)}" rgba="{rgba}" contype="0" conaffinity="0"/>')
+                geoms.append(f'<geom type="cylinder" size="{_f(0.45 * arm, 0.005)}" '
+                             f'pos="{_f(ex, ey, 0.03)}" rgba="{rc}" contype="0" conaffinity="0"/>')
+            cam = ""
+            if g.camera is not None:
+                c = g.camera
+                cam = (f'<camera name="{b}_cam" pos="{_f(*c.pos)}" xyaxes="{_f(*c.xyaxes)}" '
+                       f'fovy="{_f(c.fovy)}"/>')
+            x, y, z = p["position0"][i]
+            if g.kinematic:
+                out.append(f'<body name="{b}" mocap="true" pos="{_f(x, y, z)}" '
+                           f'quat="{_f(*p["attitude0"][i])}">{"".join(geoms)}{cam}</body>')
+            else:
+                out.append(f'<body name="{b}"><freejoint name="{b}_free"/>'
+                           f'<inertial pos="0 0 0" mass="{_f(p["mass"][i])}" '
+                           f'diaginertia="{_f(*p["inertia"][i])}"/>{"".join(geoms)}{cam}</body>')
+        return out
+
+    def to_mjcf(self) -> str:
+        """The generated MJCF text (the user's, for :meth:`from_mjcf`)."""
+        if self._mjcf is not None:
+            return self._mjcf
+        assets, world = [], []
+        x0, y0, x1, y1 = self.ground_size
+        w, h = self.max_image
+        if self.ground:
+            if self.texture == "checker":
+                assets.append('<texture name="groundtex" type="2d" builtin="checker" '
+                              'rgb1="0.56 0.58 0.56" rgb2="0.44 0.46 0.44" width="256" '
+                              'height="256"/>')
+                rep = _f((x1 - x0) / 2, (y1 - y0) / 2)
+                assets.append(f'<material name="groundmat" texture="groundtex" '
+                              f'texrepeat="{rep}" reflectance="{0.2 if self.shadows else 0}"/>')
+                mat = 'material="groundmat"'
+            elif self.texture is None:
+                mat = 'rgba="0.5 0.52 0.5 1"'
+            else:
+                assets.append(f'<texture name="groundtex" type="2d" '
+                              f'file={quoteattr(str(Path(self.texture).resolve()))}/>')
+                assets.append('<material name="groundmat" texture="groundtex" '
+                              'texrepeat="1 1" texuniform="false" reflectance="0"/>')
+                mat = 'material="groundmat"'
+            world.append(f'<geom name="ground" type="plane" '
+                         f'size="{_f((x1 - x0) / 2, (y1 - y0) / 2, 0.1)}" '
+                         f'pos="{_f((x0 + x1) / 2, (y0 + y1) / 2, 0)}" {mat} '
+                         'contype="2" conaffinity="2"/>')
+        world.append('<light name="sun" directional="true" pos="0 0 20" dir="0.2 0.1 -1" '
+                     f'diffuse="0.7 0.7 0.7" castshadow="{str(self.shadows).lower()}"/>')
+        self._obstacles_xml(assets, world)
+        for g in self.groups.values():
+            world += self._ground_robot_xml(g) if g.kind == "ground" else self._quad_xml(g)
+        for name, c in self.fixed_cameras.items():
+            world.append(f'<camera name="{name}" pos="{_f(*c["pos"])}" '
+                         f'xyaxes="{_f(*c["xyaxes"])}" fovy="{_f(c["fovy"])}"/>')
+        return (
+            '<mujoco model="avblocks">'
+            '<compiler angle="radian"/>'
+            f'<option timestep="{_f(self.timestep)}" gravity="{_f(0, 0, -self.gravity)}"/>'
+            f'<visual><global offwidth="{w}" offheight="{h}"/>'
+            '<headlight ambient="0.35 0.35 0.35" diffuse="0.45 0.45 0.45" specular="0 0 0"/>'
+            f'<quality shadowsize="{2048 if self.shadows else 0}"/></visual>'
+            f'<asset>{"".join(assets)}</asset>'
+            f'<worldbody>{"".join(world)}</worldbody></mujoco>')
+
+    @property
+    def model(self):
+        """The compiled ``mujoco.MjModel`` (built on first use, then fixed)."""
+        if self._model is None:
+            mj = import_mujoco()
+            self._model = mj.MjModel.from_xml_string(self.to_mjcf())
+            self._map()
+        return self._model
+
+    # --------------------------------------------------------------- indices
+    def _map(self):
+        """Index arrays of each group into qpos / qvel / mocap."""
+        mj = import_mujoco()
+        m = self._model
+        for g in self.groups.values():
+            ids = np.array([mj.mj_name2id(m, mj.mjtObj.mjOBJ_BODY, b) for b in g.bodies])
+            g.body_ids = ids
+            if g.kinematic:
+                g.mocap_ids = m.body_mocapid[ids].copy()
+                if np.any(g.mocap_ids < 0):
+                    raise ParameterError("a kinematic group needs mocap bodies",
+                                         block=_NAME, param=g.name)
+                continue
+            ja, jn = m.body_jntadr[ids], m.body_jntnum[ids]
+            if g.kind == "quad":
+                ok = np.all(jn == 1) and np.all(m.jnt_type[ja] == mj.mjtJoint.mjJNT_FREE)
+                if not ok:
+                    raise ParameterError("a quadrotor body needs one free joint",
+                                         block=_NAME, param=g.name)
+                g.qadr = m.jnt_qposadr[ja][:, None] + np.arange(7)
+                g.vadr = m.jnt_dofadr[ja][:, None] + np.arange(6)
+            else:
+                jt = m.jnt_type
+                ok = np.all(jn == 3)
+                if ok:
+                    j3 = ja[:, None] + np.arange(3)
+                    ok = (np.all(jt[j3[:, :2]] == mj.mjtJoint.mjJNT_SLIDE)
+                          and np.all(jt[j3[:, 2]] == mj.mjtJoint.mjJNT_HINGE)
+                          and np.allclose(m.jnt_axis[j3[:, 0]], (1, 0, 0))
+                          and np.allclose(m.jnt_axis[j3[:, 1]], (0, 1, 0))
+                          and np.allclose(m.jnt_axis[j3[:, 2]], (0, 0, 1)))
+                if not ok:
+                    raise ParameterError("a ground robot body needs joints slide x, "
+                                         "slide y, hinge z (in that order)",
+                                         block=_NAME, param=g.name)
+                g.qadr = m.jnt_qposadr[j3]
+                g.vadr = m.jnt_dofadr[j3]
+                g.params["izz"] = m.body_inertia[ids, 2].copy()
+                g.params["mass"] = m.body_mass[ids].copy()
+
+    @property
+    def dynamic_groups(self):
+        _ = self.model          # compiles, fills the index arrays
+        return [g for g in self.groups.values() if not g.kinematic]
+
+    def camera_names(self):
+        """Every camera of the scene: per-agent ones, then fixed ones."""
+        names = []
+        for g in self.groups.values():
+            names += g.camera_names
+        return names + list(self.fixed_cameras)
+
+    def set_poses(self, data, values):
+        """Write agent poses into ``data``: ``values`` maps ``"group_port"`` to
+        arrays (ground: ``pose`` (N, 3); quad: ``position`` (N, 3), ``attitude``
+        (N, 4)); dynamic groups go to qpos, kinematic ones to mocap."""
+        for g in self.groups.values():
+            if g.kind == "ground":
+                p = np.asarray(values[f"{g.name}_pose"], float)
+                if g.kinematic:
+                    h = g.params.get("height", 0.0)
+                    data.mocap_pos[g.mocap_ids] = np.column_stack(
+                        [p[:, :2], np.full(g.n, h / 2)])
+                    half = p[:, 2] / 2
+                    data.mocap_quat[g.mocap_ids] = np.column_stack(
+                        [np.cos(half), np.zeros(g.n), np.zeros(g.n), np.sin(half)])
+                else:
+                    data.qpos[g.qadr] = p
+            else:
+                pos = np.asarray(values[f"{g.name}_position"], float)
+                q = np.asarray(values[f"{g.name}_attitude"], float)
+                if g.kinematic:
+                    data.mocap_pos[g.mocap_ids] = pos
+                    data.mocap_quat[g.mocap_ids] = q
+                else:
+                    data.qpos[g.qadr] = np.concatenate([pos, q], axis=1)
+
+    def initial_qpos(self):
+        """qpos with every dynamic group at its initial pose."""
+        mj = import_mujoco()
+        m = self.model
+        d = mj.MjData(m)
+        for g in self.dynamic_groups:
+            if g.kind == "ground" and "pose0" in g.params:
+                d.qpos[g.qadr] = g.params["pose0"]
+            elif g.kind == "quad" and "position0" in g.params:
+                d.qpos[g.qadr] = np.concatenate([g.params["position0"],
+                                                 g.params["attitude0"]], axis=1)
+        return d.qpos.copy()

@@ -1,0 +1,58 @@
+"""Command-line hooks: ``avblocks robots emulate`` and
+``avblocks run <scenario> --robots tb1,tb2,tb3``."""
+
+from __future__ import annotations
+
+
+def add_commands(sub):
+    """Add the ``robots`` command group."""
+    from .emulator import add_parser
+    return add_parser(sub)
+
+
+def add_run_options(r):
+    """Options of ``avblocks run`` that put the scenario on robots."""
+    g = r.add_argument_group("robots (extra [ros2])")
+    g.add_argument("--robots", help="run on these ROS 2 robots instead of the model, "
+                                    "e.g. tb1,tb2,tb3 (agent order)")
+    g.add_argument("--transport", default="bridge", choices=["bridge", "rmw_zenoh", "rclpy"],
+                   help="zenoh-bridge-ros2dds keys, rmw_zenoh keys, or rclpy")
+    g.add_argument("--router", default="tcp/127.0.0.1:7447", help="Zenoh router endpoint")
+    g.add_argument("--replace", default=None,
+                   help="name of the block to replace (default 'fleet' or the first "
+                        "vehicle model)")
+    g.add_argument("--robot-timeout", type=float, default=0.5, dest="robot_timeout",
+                   help="watchdog timeout [s]")
+    g.add_argument("--pose-source", default="odom", choices=["odom", "mocap"],
+                   dest="pose_source")
+
+
+def apply(args, diagram, sim):
+    """Swap the model block for robots when ``--robots`` is given. A run on
+    robots is paced: ``realtime`` defaults to 1, and the block's
+    ``time_scale`` follows it (an emulator run with the same factor)."""
+    if not getattr(args, "robots", None):
+        return None
+    from .swap import _find_model, replace_block, robots_like
+    name = args.replace or ("fleet" if "fleet" in diagram.blocks else _find_model(diagram))
+    sim.setdefault("realtime", 1.0)
+    if sim["realtime"] is None:
+        sim["realtime"] = 1.0
+    if name is None or name not in diagram.blocks:
+        replace_block(diagram, name, None)      # raises the clear error
+    robots = robots_like(diagram[name].block, args.robots, pose=args.pose_source,
+                         transport=args.transport, router=args.router,
+                         timeout=args.robot_timeout, time_scale=float(sim["realtime"]))
+    replace_block(diagram, name, robots)
+    return robots
+
+
+def report(res):
+    """One line about pacing: achieved factor, overruns, worst lateness."""
+    m = res.meta
+    if "overruns" not in m:
+        return None
+    steps = max(int(m.get("steps", 0)), 1)
+    return (f"real time     x{m.get('realtime_factor', float('nan')):.2f} achieved, "
+            f"{m['overruns']} of {steps} steps overran, worst lateness "
+            f"{1e3 * m['max_lateness']:.1f} ms")

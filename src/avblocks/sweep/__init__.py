@@ -1,0 +1,259 @@
+"""Parameter sweeps and Monte Carlo studies on Dask (extra ``[sweep]``).
+
+``av.sweep(scenario, grid=..., seeds=..., metrics=..., out=...)`` runs one
+case per grid point and seed on a ``dask.distributed`` cluster (by default
+a LocalCluster of one single-threaded worker process per core on
+127.0.0.1, started and closed here); each worker writes its case straight
+into one Zarr store, the client only counts. ``scheduler="tcp://host:8786"``
+(or a ``Client``) sends the same cases to a running cluster.
+
+The module itself is callable: ``avblocks.sweep(...)`` is
+:func:`run_sweep`. See docs/sweeps.md.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+import types
+from collections.abc import Callable
+
+from .metrics import DEFAULTS, FALLBACK, METRICS, MetricError
+from .spec import (
+    SPEC_VERSION,
+    Spec,
+    SweepError,
+    build_case,
+    normalise_grid,
+    normalise_seeds,
+    pickle_callables,
+    scenario_source,
+    split_overrides,
+)
+from .study import Study
+
+
+def _metrics_spec(metrics, scenario_name):
+    """``(names, {name: callable})`` from None, names or a dict."""
+    if metrics is None:
+        names = list(DEFAULTS.get(scenario_name, FALLBACK))
+        return names, {}
+    if isinstance(metrics, str):
+        metrics = [metrics]
+    if isinstance(metrics, list | tuple):
+        metrics = {m: m for m in metrics}
+    if not isinstance(metrics, dict) or not metrics:
+        raise SweepError("metrics must be metric names or a dict {name: fn(results)}",
+                         found=repr(metrics))
+    names, custom = [], {}
+    for name, fn in metrics.items():
+        if not isinstance(name, str) or not name or "/" in name:
+            raise SweepError(f"metric names are non-empty strings without '/', "
+                             f"found {name!r}")
+        if isinstance(fn, str):
+            if fn not in METRICS:
+                raise SweepError(f"unknown built-in metric '{fn}'",
+                                 hint=f"built-in metrics: {sorted(METRICS)}; or pass "
+                                      "a callable fn(results) -> number")
+            if fn != name:
+                custom[name] = METRICS[fn]
+        elif isinstance(fn, Callable):
+            custom[name] = fn
+        else:
+            raise SweepError(f"metric '{name}' must be a built-in name or a callable",
+                             found=type(fn).__name__)
+        names.append(name)
+    return names, custom
+
+
+def _check_first_case(spec: Spec):
+    """Build case 0 on the client so misspelt names fail before any task."""
+    from ..core.errors import AvError
+    try:
+        d, sim = spec.build(0)
+        params = sim.get("params") or {}
+        compiled = d.build()
+        for path in params:
+            compiled.param_index(path)
+        if spec.data.get("ensemble"):
+            from .ensemble import check_traceable
+            check_traceable(d)
+    except AvError as e:
+        raise SweepError(f"the first case ({spec.label(0)}) cannot be built: {e}") \
+            from None
+
+
+def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=None,
+              log_every=1, ensemble=False) -> tuple[Spec, dict]:
+    """The :class:`Spec` of a sweep and its custom metric callables."""
+    src = scenario_source(scenario)
+    g = normalise_grid(grid)
+    fx = normalise_grid({k: [v] for k, v in (fixed or {}).items()})
+    fx = {k: v[0] for k, v in fx.items()}
+    clash = set(g) & set(fx)
+    if clash:
+        raise SweepError(f"{sorted(clash)} are both in grid and fixed")
+    names, custom = _metrics_spec(metrics, src["name"])
+    if log is True:
+        log = ["*"]
+    elif isinstance(log, str):
+        log = [log]
+    elif log is not None:
+        log = [p if isinstance(p, str) else p.path for p in log]
+        if not log:
+            log = None
+    if int(log_every) < 1:
+        raise SweepError("log_every must be >= 1", found=log_every)
+    data = {"version": SPEC_VERSION, "scenario": src, "grid": g,
+            "seeds": normalise_seeds(seeds), "fixed": fx, "metrics": names,
+            "log": log, "log_every": int(log_every), "ensemble": bool(ensemble)}
+    data["token"] = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
+    blob = pickle_callables(custom) if custom else ""
+    data["metrics_pickle"] = blob
+    return Spec(data), custom
+
+
+def _same_cases(a: dict, b: dict):
+    keys = ("scenario", "grid", "seeds", "fixed", "metrics", "log", "log_every", "ensemble")
+    diff = [k for k in keys if json.dumps(a.get(k), sort_keys=True) !=
+            json.dumps(b.get(k), sort_keys=True)]
+    return diff
+
+
+def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
+              fixed=None, scheduler=None, workers=None, log=None, log_every=1,
+              resume=False, overwrite=False, progress=None, plot=True, summary=True,
+              dashboard=False, ensemble=False) -> Study:
+    """Run ``scenario`` over ``grid`` x ``seeds`` on Dask; results in ``out``.
+
+    Parameters
+    ----------
+    scenario : str
+        Built-in scenario name (``avblocks list``) or a ``.yaml``/``.toml``/
+        ``.py`` scenario file (its text is stored with the sweep).
+    grid : dict, optional
+        ``{name: [values]}``. A name is a scenario parameter (``followers``),
+        a simulation setting (``simulation.t_final``) or a numeric block
+        parameter (``drive.gain``), exactly as ``avblocks run --set`` names them.
+    seeds : int or list of int
+        ``20`` means seeds 0..19. Each case's seed goes to the scenario's
+        ``seed`` parameter (when it has one) and to ``simulate(seed=)``.
+    metrics : None, list of str or dict
+        Built-in metric names (:data:`METRICS`) and/or ``{name: fn}`` with
+        ``fn(results) -> number or small array``. Default: the built-in
+        scenario's usual metrics (:data:`DEFAULTS`).
+    out : str
+        The Zarr store (a folder, or a URL zarr opens). It must be reachable
+        by every worker (a shared filesystem or an object store on a cluster).
+    fixed : dict, optional
+        Overrides applied to every case (``{"followers": 2}``).
+    scheduler : None, str or dask.distributed.Client
+        None: a LocalCluster of ``workers`` processes (default one per core)
+        on 127.0.0.1, closed at the end. A ``"tcp://host:8786"`` address or a
+        Client: that cluster.
+    workers : int, optional
+        Worker processes of the local cluster.
+    log : None, True or list of str
+        Also store these logged ports per case (True: everything the
+        scenario logs), decimated by ``log_every``.
+    resume : bool
+        ``out`` exists: run only its missing cases (the sweep definition
+        must be the same).
+    overwrite : bool
+        Replace an existing store.
+    progress : bool, optional
+        Progress bar (default: only on a terminal, not in CI).
+    plot, summary : bool
+        Write the metric plots next to the store; print the summary table.
+    dashboard : bool
+        Serve the Dask dashboard of the local cluster on 127.0.0.1 (a free
+        port; ``client.dashboard_link``).
+    ensemble : bool
+        One task per grid point runs all its seeds as one vmapped JAX
+        ensemble (``avblocks.compile(...).ensemble``) instead of one NumPy
+        run per case. Needs a traceable diagram (extra ``[jax]``); metrics
+        then agree with the NumPy runs to round-off. See docs/sweeps.md for
+        when it pays.
+
+    Returns
+    -------
+    Study
+    """
+    from . import store
+    from .runner import client_for, execute
+    spec, _custom = make_spec(scenario, grid, seeds, metrics, fixed=fixed, log=log,
+                              log_every=log_every, ensemble=ensemble)
+    exists = store.store_exists(out)
+    if exists and resume:
+        root = store.open_store(out)
+        old, _blob = store.read_spec(root)
+        diff = _same_cases(old, spec.data)
+        if diff:
+            raise SweepError(f"'{out}' holds a different sweep (differs in {diff})",
+                             hint="resume with the same arguments, or "
+                                  "avblocks.sweep.resume(out) to use the stored ones")
+        return resume_sweep(out, scheduler=scheduler, workers=workers, progress=progress,
+                            plot=plot, summary=summary, dashboard=dashboard)
+    if exists and not overwrite:
+        raise SweepError(f"'{out}' already exists",
+                         hint="pass resume=True to finish it, overwrite=True to "
+                              "replace it, or another out=")
+    _check_first_case(spec)
+    store.create_store(out, {k: v for k, v in spec.data.items() if k != "metrics_pickle"},
+                       spec.data["metrics_pickle"], overwrite=overwrite)
+    with client_for(scheduler, workers, dashboard) as client:
+        counts = execute(spec, range(spec.n_cases), out, client, progress)
+    return _finish(out, counts, plot, summary)
+
+
+def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progress=None,
+                 plot=True, summary=True, dashboard=False) -> Study:
+    """Run the cases of the sweep stored at ``out`` that are missing (and
+    the failed ones with ``retry_failed=True``), with the stored definition."""
+    from . import store
+    from .runner import client_for, execute
+    root = store.open_store(out)
+    data, blob = store.read_spec(root)
+    data = {**data, "metrics_pickle": blob}
+    spec = Spec(data)
+    todo = Study(out).missing(retry_failed)
+    with client_for(scheduler, workers, dashboard) as client:
+        counts = execute(spec, todo, out, client, progress)
+    return _finish(out, counts, plot, summary)
+
+
+def _finish(out, counts, plot, summary) -> Study:
+    study = Study(out, last_run=counts)
+    if summary:
+        print(study.summary())
+        failed = study.errors()
+        for label, err in list(failed.items())[:5]:
+            print(f"failed: {label}: {err.splitlines()[0] if err else ''}")
+    if plot:
+        files = study.plot()
+        if summary:
+            for f in files:
+                print(f"wrote {f}")
+    return study
+
+
+def open_study(out) -> Study:
+    """Read a sweep's store (finished or not)."""
+    return Study(out)
+
+
+resume = resume_sweep
+open = open_study  # noqa: A001 - avblocks.sweep.open(out), like xarray.open_dataset
+
+
+class _CallableModule(types.ModuleType):
+    def __call__(self, *args, **kwargs):
+        return run_sweep(*args, **kwargs)
+
+
+sys.modules[__name__].__class__ = _CallableModule
+
+__all__ = ["run_sweep", "resume_sweep", "resume", "open_study", "Study", "Spec",
+           "SweepError", "MetricError", "METRICS", "DEFAULTS", "make_spec", "build_case",
+           "split_overrides"]

@@ -1,0 +1,235 @@
+"""What a sweep is: a scenario, a grid of overrides, seeds, metrics.
+
+A *case* is one point of the grid and one seed. Cases are numbered in
+row-major order over ``(grid dims..., seed)`` so the number is stable
+across runs and resumes (``case_id = ravel_multi_index(index, shape)``).
+
+Override names follow ``avblocks run --set``:
+
+- ``name`` (no dot): a scenario parameter (``followers``, ``gain``, ...);
+- ``simulation.<key>``: a simulation setting (``simulation.t_final``);
+- ``block.param`` (any other dotted name): a numeric block parameter, handed
+  to ``simulate(params={...})`` (``drive.gain``, ``lf.k_l``).
+
+The spec is plain JSON (stored in the Zarr store's attributes) plus the
+pickled metric callables, so ``resume`` needs only the store.
+"""
+
+from __future__ import annotations
+
+import base64
+import inspect
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import AvError
+
+
+class SweepError(AvError):
+    """A sweep is ill-formed (unknown scenario, parameter or metric, a store
+    that exists or is not a sweep) or could not run."""
+
+
+SPEC_VERSION = 1
+
+
+def _jsonable_value(v, where):
+    """Grid values must survive JSON (they label the result's coordinates)."""
+    if isinstance(v, np.generic):
+        v = v.item()
+    if isinstance(v, bool | int | str) or v is None:
+        return v
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise SweepError(f"grid value {v!r} of '{where}' is not finite",
+                             hint="grid values must be finite numbers or strings")
+        return v
+    if isinstance(v, list | tuple):
+        return [_jsonable_value(x, where) for x in v]
+    raise SweepError(f"grid value {v!r} of '{where}' is a {type(v).__name__}",
+                     hint="grid values are numbers, strings or lists of them")
+
+
+def normalise_grid(grid) -> dict:
+    if grid is None:
+        return {}
+    if not isinstance(grid, dict):
+        raise SweepError("grid must be a dict {name: [values]}",
+                         found=type(grid).__name__)
+    out = {}
+    for k, vals in grid.items():
+        if not isinstance(k, str) or not k:
+            raise SweepError(f"grid names must be non-empty strings, found {k!r}")
+        if k == "seed":
+            raise SweepError("'seed' is not a grid name", hint="use seeds=20 or "
+                             "seeds=[1, 2, 3]")
+        if isinstance(vals, str | bytes) or np.ndim(vals) == 0:
+            vals = [vals]
+        vals = [_jsonable_value(v, k) for v in list(vals)]
+        if not vals:
+            raise SweepError(f"grid '{k}' has no values")
+        if len({repr(v) for v in vals}) != len(vals):
+            raise SweepError(f"grid '{k}' repeats a value: {vals}")
+        out[k] = vals
+    return out
+
+
+def normalise_seeds(seeds) -> list:
+    if isinstance(seeds, bool):
+        raise SweepError("seeds must be a count or a list of integers", found=seeds)
+    if isinstance(seeds, int | np.integer):
+        if seeds < 1:
+            raise SweepError("seeds must be >= 1", found=seeds)
+        return list(range(int(seeds)))
+    try:
+        out = [int(s) for s in seeds]
+    except (TypeError, ValueError):
+        raise SweepError("seeds must be a count or a list of integers",
+                         found=repr(seeds)) from None
+    if not out or len(set(out)) != len(out):
+        raise SweepError("seeds must be a non-empty list of distinct integers",
+                         found=out)
+    return out
+
+
+def scenario_source(scenario) -> dict:
+    """How workers get the scenario: a built-in by name, or the file's text
+    (so a remote worker and a later resume need no copy of the file)."""
+    from ..scenarios import builtin_scenarios
+    p = Path(str(scenario))
+    builtin = builtin_scenarios()
+    if not p.is_file() and str(scenario) in builtin:
+        return {"name": str(scenario), "kind": "builtin"}
+    if not p.is_file():
+        raise SweepError(f"no built-in scenario or file named '{scenario}'",
+                         hint=f"built-in scenarios: {sorted(builtin)}")
+    kind = {".py": "py", ".yaml": "yaml", ".yml": "yaml", ".toml": "toml"}.get(p.suffix)
+    if kind is None:
+        raise SweepError(f"unknown scenario file type '{p.suffix}'",
+                         hint="use a .yaml, .yml, .toml or .py scenario")
+    return {"name": p.stem, "kind": kind, "path": str(p), "text": p.read_text()}
+
+
+def _namespace_of(src):
+    ns = {}
+    code = compile(src["text"], src["path"], "exec")
+    ns["__name__"] = "avblocks_scenario"
+    ns["__file__"] = src["path"]
+    exec(code, ns)  # noqa: S102 - the user's own scenario file, as `avblocks run` does
+    return ns
+
+
+def _accepts_seed(src, ns=None) -> bool:
+    if src["kind"] == "builtin":
+        from ..scenarios import builtin_scenarios
+        path = builtin_scenarios()[src["name"]]
+        if path.suffix == ".py":
+            import importlib
+            mod = importlib.import_module(f"avblocks.scenarios.{src['name']}")
+            ns = vars(mod)
+        else:
+            from ..scenarios import load_scenario
+            return "seed" in (load_scenario(src["name"]).data.get("parameters") or {})
+    if src["kind"] in ("yaml", "toml"):
+        return "seed" in (_data_of(src).get("parameters") or {})
+    fn = (ns or {}).get("make_diagram")
+    if fn is None:
+        return False
+    sig = inspect.signature(fn)
+    return "seed" in sig.parameters or any(p.kind == p.VAR_KEYWORD
+                                           for p in sig.parameters.values())
+
+
+def _data_of(src):
+    if src["kind"] == "toml":
+        import tomllib
+        return tomllib.loads(src["text"])
+    import yaml
+    return yaml.safe_load(src["text"]) or {}
+
+
+def split_overrides(values: dict):
+    """``(scenario overrides, block parameters)`` from override names."""
+    scen, blocks = {}, {}
+    for k, v in values.items():
+        if "." in k and not k.startswith("simulation."):
+            blocks[k] = v
+        else:
+            scen[k] = v
+    return scen, blocks
+
+
+def build_case(src, values: dict, seed: int):
+    """``(diagram, simulate kwargs)`` of one case: the scenario with its
+    overrides; the seed goes to the scenario's ``seed`` parameter when it
+    has one and to ``simulate(seed=)`` always; block parameters go to
+    ``simulate(params=)``."""
+    from ..cli import _from_namespace
+    scen, blocks = split_overrides(values)
+    ns = _namespace_of(src) if src["kind"] == "py" else None
+    if _accepts_seed(src, ns):
+        scen = {**scen, "seed": int(seed)}
+    if src["kind"] == "builtin":
+        from ..cli import load_any
+        d, sim, _name, _movie = load_any(src["name"], scen)
+    elif src["kind"] == "py":
+        d, sim, _movie = _from_namespace(ns, scen, src["path"])
+    else:
+        from ..scenarios import Scenario
+        sc = Scenario(_data_of(src), src["path"])
+        sc.validate()
+        d, sim = sc.with_overrides(scen).build()
+    sim = dict(sim)
+    sim["seed"] = int(seed)
+    if blocks:
+        sim["params"] = {**dict(sim.get("params") or {}), **blocks}
+    return d, sim
+
+
+def pickle_callables(fns: dict) -> str:
+    import cloudpickle
+    return base64.b64encode(cloudpickle.dumps(fns)).decode("ascii")
+
+
+def unpickle_callables(blob: str) -> dict:
+    import cloudpickle
+    return cloudpickle.loads(base64.b64decode(blob.encode("ascii")))
+
+
+class Spec:
+    """A sweep's definition; cheap to ship to workers."""
+
+    def __init__(self, data: dict):
+        self.data = data
+        self.grid = data["grid"]
+        self.seeds = data["seeds"]
+        self.dims = list(self.grid) + ["seed"]
+        self.shape = tuple(len(v) for v in self.grid.values()) + (len(self.seeds),)
+        self.n_cases = int(np.prod(self.shape))
+        self._metric_fns = None
+
+    def case(self, case_id: int):
+        """``(values {grid name: value}, seed)`` of case ``case_id``."""
+        idx = np.unravel_index(int(case_id), self.shape)
+        values = {k: v[i] for (k, v), i in zip(self.grid.items(), idx[:-1])}
+        return {**self.data["fixed"], **values}, self.seeds[idx[-1]]
+
+    def label(self, case_id: int) -> str:
+        values, seed = self.case(case_id)
+        grid = {k: values[k] for k in self.grid}
+        return ", ".join(f"{k}={v}" for k, v in {**grid, "seed": seed}.items())
+
+    def metric_fns(self) -> dict:
+        if self._metric_fns is None:
+            from .metrics import METRICS
+            custom = (unpickle_callables(self.data["metrics_pickle"])
+                      if self.data.get("metrics_pickle") else {})
+            self._metric_fns = {n: custom.get(n) or METRICS[n]
+                                for n in self.data["metrics"]}
+        return self._metric_fns
+
+    def build(self, case_id: int):
+        values, seed = self.case(case_id)
+        return build_case(self.data["scenario"], values, seed)

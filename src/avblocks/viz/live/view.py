@@ -97,6 +97,10 @@ class LiveView:
         Seconds of history in the plots.
     trail : float
         Seconds of trail behind each agent (0: none).
+    trail_segments : int
+        At most this many trail segments in all (fat lines are costly in a
+        browser without a GPU): long trails get coarser with more agents,
+        and none are drawn above this many agents.
     colors : colour or (N, 3), optional
         Agent colours of the first drawn signal (default: tab10 cycle).
     agent_size : float
@@ -126,6 +130,7 @@ class LiveView:
                  token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
                  agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
                  camera=None, obstacles=None, end_on_close=True, close_grace=2.0,
+                 trail_segments=6000,
                  hold=True, verbose=True, title=None):
         from ...core.simulator import Simulator
         if isinstance(diagram, Diagram):
@@ -161,6 +166,7 @@ class LiveView:
         self.host, self.port, self.token = str(host), int(port), token
         self.title = title or "avblocks live"
         self.plot_window, self.trail = float(plot_window), float(trail)
+        self.trail_segments = int(trail_segments)
         self.points_above = int(points_above)
         self.fps, self.fps_points = float(fps), float(fps_points)
         self.end_on_close, self.close_grace = bool(end_on_close), float(close_grace)
@@ -402,9 +408,12 @@ class LiveView:
         L = int(min(k_end + 1, self.trail / per + 1))
         if L < 2:
             return None
-        stride = max(1, L // 30)
+        per_agent = min(30, self.trail_segments // s["n"] + 1)     # points per trail
+        if per_agent < 2:
+            return None
+        stride = max(1, math.ceil((L - 1) / (per_agent - 1)))
         ks = np.arange(k_end - (L - 1), k_end + 1)[::-1][::stride][::-1]
-        if len(ks) < 2 or s["n"] * (len(ks) - 1) > 120_000:
+        if len(ks) < 2:
             return None
         a = np.asarray(self.bufs[s["name"]][ks], dtype=np.float32)   # (L, N, c)
         pts = np.zeros((len(ks), s["n"], 3), np.float32)
@@ -469,7 +478,7 @@ class LiveView:
         self._stop_btn.on_click(lambda _e: self._cmds.put(("stop",)))
         self._speed.on_update(lambda _e: self._cmds.put(("speed", self._speed.value)))
         self._scrub.on_update(lambda _e: self._cmds.put(("scrub", self._scrub.value)))
-        self._param_inputs = {}
+        self._param_inputs, self._param_kinds = {}, {}
         params = self.compiled.parameters()
         if params:
             with gui.add_folder("Parameters"):
@@ -490,14 +499,23 @@ class LiveView:
                         scales={"x": uplot.Scale(time=False, auto=True)}))
 
     def _param_input(self, gui, path, spec):
+        """One control for a numeric parameter: a slider (both bounds finite)
+        or a number field for a scalar, or for an array whose entries are
+        all equal (per-agent gains: the value is set for every agent);
+        vector fields for other 2/3-vectors; JSON text otherwise."""
+        import json
         val = np.asarray(self.sim.get_param(path), float)
         lo, hi = spec.bounds
         lo = None if lo is None or not np.isfinite(lo) else float(lo)
         hi = None if hi is None or not np.isfinite(hi) else float(hi)
         label = path + (f" [{spec.unit}]" if spec.unit else "")
         hint = spec.doc or None
-        if val.size == 1:
-            v = float(val.reshape(()))
+        uniform = val.size >= 1 and np.all(val == val.flat[0]) and np.isfinite(val.flat[0])
+        if uniform:
+            v = float(val.flat[0])
+            if val.size > 1:
+                label += " (all)"
+                hint = (hint + "; " if hint else "") + f"one value for all {val.size} entries"
             if lo is not None and hi is not None and hi > lo:
                 h = gui.add_slider(label, min=lo, max=hi, step=(hi - lo) / 1000,
                                    initial_value=min(max(v, lo), hi), hint=hint)
@@ -505,14 +523,26 @@ class LiveView:
                 mag = abs(v) if v else 1.0
                 h = gui.add_number(label, initial_value=v, min=lo, max=hi,
                                    step=10 ** math.floor(math.log10(mag)) / 100, hint=hint)
-        elif val.size in (2, 3):
+            kind = "scalar"
+        elif val.size in (2, 3) and np.all(np.isfinite(val)):
             add = gui.add_vector2 if val.size == 2 else gui.add_vector3
             h = add(label, initial_value=tuple(val.ravel().tolist()), hint=hint)
+            kind = "vector"
         else:
-            import json
             h = gui.add_text(label, initial_value=json.dumps(val.tolist()), hint=hint)
+            kind = "json"
+        self._param_kinds[path] = kind
         h.on_update(lambda _e, p=path, hh=h: self._cmds.put(("param", p, hh.value)))
         return h
+
+    def _param_value_for(self, path, cur):
+        import json
+        kind = self._param_kinds[path]
+        if kind == "scalar":
+            return float(cur.flat[0])
+        if kind == "vector":
+            return tuple(cur.ravel().tolist())
+        return json.dumps(cur.tolist())
 
     def _plot_labels(self, n):
         p = self.specs[n]
@@ -601,15 +631,15 @@ class LiveView:
             try:
                 spec = self.compiled.parameters()[path]
                 v = np.asarray(value if not isinstance(value, str) else
-                               __import__("json").loads(value), float).reshape(spec.shape)
+                               __import__("json").loads(value), float)
+                v = np.broadcast_to(v, spec.shape) if v.size == 1 else v.reshape(spec.shape)
                 self.sim.set_param(path, v)
             except (AvError, ValueError, TypeError) as e:
                 self._notify(f"{path} not changed", str(e))
-                h = self._param_inputs[path]
-                cur = np.asarray(self.sim.get_param(path), float)
-                h.value = (float(cur.reshape(())) if cur.size == 1 else
-                           tuple(cur.ravel().tolist()) if cur.size in (2, 3) else
-                           __import__("json").dumps(cur.tolist()))
+                h = self._param_inputs.get(path)
+                if h is not None:
+                    h.value = self._param_value_for(path, np.asarray(self.sim.get_param(path),
+                                                                  float))
         elif kind == "restart":
             self._restart()
         elif kind == "stop":

@@ -587,7 +587,8 @@ class LiveView:
         agents = sum(s["n"] for s in self.sources)
         rate = getattr(self, "_draw_rate", 0.0)
         return (f"**t = {t:.2f} s** of {self.sim.t0 + self.nsteps * sim.dt:g} s  \n"
-                f"{state} · speed {_speed_label(self.speed)} · seed {self.seed}  \n"
+                f"{state} · speed {'max' if self.speed is None else f'x{self.speed:g}'}"
+                f" · seed {self.seed}  \n"
                 f"{agents} agents · {rate:.0f} draws/s")
 
     # -------------------------------------------------------------- loop

@@ -258,6 +258,8 @@ def _guarded_run(args, guard, load_any):
         from .interfaces.ros2.cli import apply as _robots
         _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
+    if getattr(args, "live", False):  # live view in the browser (avblocks.viz.live)
+        sim["live"] = {"host": args.live_host, "port": args.live_port}
     out = prepare_output(args.out or Path("avblocks-out") / safe_name(name))
     movie_path = None
     if args.movie:

@@ -472,7 +472,7 @@ def _progress_wanted(progress):
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
              max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
-             **backend_options):
+             live=False, **backend_options):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -516,6 +516,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         solvers and traceable blocks only, no ``realtime``; it takes the
         option ``dtype="float32"`` (default ``"float64"``). A second run of
         the same structure with other numeric values does not recompile.
+    live : bool or dict
+        Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
+        (URL printed, with a token) that draws and steers the run; a dict
+        passes options to :class:`avblocks.viz.live.LiveView`. Paced to real
+        time unless ``realtime`` says otherwise. NumPy backend only.
 
     Returns
     -------
@@ -523,6 +528,15 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
+    if live:  # --- live view hook (avblocks.viz.live owns the loop) ---
+        if backend != "numpy" or backend_options:
+            raise ParameterError("live=True runs the NumPy backend step by step",
+                                 param="backend", expected="'numpy'", found=backend)
+        from ..viz.live import simulate_live
+        return simulate_live(diagram, t_final, dt, solver, live=live, log=log,
+                             log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                             check_finite=check_finite, max_log_bytes=max_log_bytes,
+                             params=params, x0=x0)
     if backend != "numpy":
         if backend != "jax":
             raise ParameterError("unknown backend", param="backend",

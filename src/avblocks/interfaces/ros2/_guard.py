@@ -34,6 +34,10 @@ def _stop_all():
 
 def _handler(signum, frame):
     _stop_all()
+    prev = _previous.get(signum)
+    if callable(prev) and prev is not signal.default_int_handler:
+        prev(signum, frame)     # e.g. the CLI's SignalGuard: names the signal, and
+        return                  # defers later ones while the results are written
     raise KeyboardInterrupt(f"signal {signum}")
 
 

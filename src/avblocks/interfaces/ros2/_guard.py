@@ -2,7 +2,9 @@
 
 The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
 the handler first commands every registered robot to zero velocity, then
-raises :class:`KeyboardInterrupt` in the main thread, so that
+hands the signal to the handler that was there before (the CLI's guard
+raises its own interrupt), or raises :class:`KeyboardInterrupt` in the
+main thread, so that
 ``simulate()`` takes its interrupted path: it returns the results logged so
 far (the CLI saves them) after calling every block's ``on_stop`` (which
 stops the robots again). An ``atexit`` hook stops any block still
@@ -35,10 +37,10 @@ def _stop_all():
 def _handler(signum, frame):
     _stop_all()
     prev = _previous.get(signum)
-    if callable(prev) and prev is not signal.default_int_handler:
-        prev(signum, frame)     # e.g. the CLI's SignalGuard: names the signal, and
-        return                  # defers later ones while the results are written
-    raise KeyboardInterrupt(f"signal {signum}")
+    if callable(prev):          # e.g. the CLI's guard: it raises its own interrupt
+        prev(signum, frame)
+    if prev is not signal.SIG_IGN:
+        raise KeyboardInterrupt(f"signal {signum}")
 
 
 def register(block):

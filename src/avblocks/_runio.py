@@ -171,6 +171,49 @@ def say(msg):
         print(msg, file=sys.stderr, flush=True)
 
 
+def estimate_bytes(compiled, sim) -> int:
+    """Memory a run needs, estimated from the declared ports before anything
+    is allocated: states and outputs (about six copies of the states for
+    the solver stages and two of the outputs) plus the log."""
+    import numpy as np
+    state = sum(np.asarray(v).nbytes for b in compiled.blocks for v in b._init.values())
+    outs = sum(int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize
+               for b in compiled.blocks for p in b._outputs.values()
+               if p.shape is not None)
+    need = 6 * state + 2 * outs
+    try:
+        dt = float(sim.get("dt", 0.01))
+        steps = (float(sim.get("t_final", 10.0)) - float(sim.get("t0", 0.0))) / dt
+        every = max(1, int(sim.get("log_every", 1)))
+        if np.isfinite(steps) and steps > 0:
+            from .core.simulator import default_log
+            log = sim.get("log") or default_log(compiled)
+            log = [log] if isinstance(log, str) else list(log)
+            per = 0
+            for r in log:
+                i, o = compiled.resolve(r)
+                p = compiled.blocks[i]._outputs[o]
+                per += int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize
+            need += int(steps // every + 1) * per
+    except (TypeError, ValueError, OverflowError, AvError):
+        pass            # simulate() names the bad setting itself
+    return int(need)
+
+
+def check_memory(diagram, sim):
+    """Refuse, before simulating, a run whose estimate passes the memory
+    limit (``AVBLOCKS_MAX_MEMORY``), with the figure."""
+    from .scenarios.loader import memory_limit
+    need = estimate_bytes(diagram.build(), sim)
+    lim = memory_limit()
+    if need > lim:
+        raise AvError(f"this run would need about {need / 1e9:.3g} GB "
+                      f"(states, outputs and log)",
+                      expected=f"<= {lim / 1e9:.3g} GB (AVBLOCKS_MAX_MEMORY)",
+                      hint="use fewer agents, a shorter run, or decimate the log "
+                           "(--set simulation.log_every=10)")
+
+
 def safe_name(name) -> str:
     """A scenario name made safe as one folder name (no separators, no
     leading dots): it names ``avblocks-out/<name>`` when ``--out`` is not given."""
@@ -220,6 +263,7 @@ def _guarded_run(args, guard, load_any, trajectory_png):
             raise AvError(f"--movie '{args.movie}': unknown movie format",
                           expected=".mp4 or .gif", found=movie_path.suffix or "no suffix")
         prepare_output(movie_path.parent if str(movie_path.parent) else Path("."))
+    check_memory(d, sim)
     t0 = time.perf_counter()
     failed = None
     res = None

@@ -43,6 +43,7 @@ import time as _time
 
 import numpy as np
 
+from . import codegen
 from . import rng as _rng
 from .diagram import CompiledDiagram, Diagram, PortRef
 from .engine import Engine
@@ -125,6 +126,7 @@ class Simulator:
                            for nm, p in diagram.blocks[i]._dstates.items()
                            if np.issubdtype(np.dtype(p.dtype), np.inexact)]
         self._side = [i for i, b in enumerate(diagram.blocks) if b.side_effects]
+        self._fcheck = self.check_finite and bool(self._fx_state or self._fx_dstate)
         # variable-step solvers may integrate across several major steps when
         # only periodic blocks have discrete states and nothing has side effects
         self._span = (not self.solver.fixed_step and hasattr(self.solver, "integrate")
@@ -137,10 +139,15 @@ class Simulator:
         #: ``[(t, "block.name", value as list)]``: changes made during the run.
         self.param_changes = []
         self._queue = []
+        self._fast = None       # generated major step (see codegen), set by init()
         self.k = 0
         self.X = None
         self.Y = None
         self._Yprev = None
+
+    #: Use the major step generated once per diagram (:mod:`.codegen`) for
+    #: Euler and RK4; ``False`` runs the generic engine (same results).
+    use_codegen = True
 
     # --------------------------------------------------------------- state
     @property
@@ -225,6 +232,9 @@ class Simulator:
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
+        self._fast = None
+        if self.use_codegen and codegen.supported(self.solver):
+            self._fast = codegen.make_step(self.eng, self.solver)
         self._check_declared()
         self._check(self.t0)
         self.check_outputs(self.t0)
@@ -334,6 +344,20 @@ class Simulator:
             self.Y = self._guard(eng.major_outputs, self.t, self.X, self.Y, eng.hits(k))
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
+        fast = self._fast
+        if fast is not None:
+            try:
+                self.X, self.Y = fast(self.X, self.Y, t, t1, k, h)
+            except AvError:
+                raise
+            except Exception as e:  # noqa: BLE001 - add the block context
+                raise self._wrap(e, t) from e
+            self.k = k + 1
+            if self._fcheck:
+                self._check(t1)
+            if self._side:
+                self._side_effects()
+            return
         try:
             if self._queue:                  # inside a span: no discrete event
                 X = self._queue.pop()
@@ -540,6 +564,10 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+#: Most major steps one run may take (beyond it: refused, not hung).
+MAX_STEPS = 10**10
+
+
 def _seed(seed):
     from .params import integer
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
@@ -569,6 +597,11 @@ def whole_steps(t0, t_final, dt):
         raise ParameterError("t_final must be >= t0", param="t_final",
                              expected=f">= {t0:g}", found=t_final)
     steps = span / dt
+    if not steps <= MAX_STEPS:
+        raise ParameterError(f"the run would take {steps:.3g} major steps",
+                             param="dt", expected=f"<= {MAX_STEPS:.0e} steps",
+                             found=f"(t_final - t0) / dt = {steps:.3g}",
+                             hint="a larger dt or a shorter run")
     n = int(round(steps))
     if abs(steps - n) > 1e-9 * max(1.0, steps):
         lo, hi = math.floor(steps), math.ceil(steps)
@@ -632,8 +665,13 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
             expected=f"<= {max_log_bytes / 1e9:.2f} GB",
             found=f"{len(specs)} signals x {nlog} samples",
             hint="log fewer signals or decimate with log_every")
-    bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
-    tlog = np.empty(nlog)
+    try:
+        bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
+        tlog = np.empty(nlog)
+    except (MemoryError, ValueError):
+        raise ParameterError(f"the log ({need / 1e9:.3g} GB) does not fit in memory",
+                             param="log", hint="log fewer signals or decimate with "
+                                                "log_every") from None
     meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": sim.seed,
             "t0": sim.t0, "t_final": sim.t0 + nsteps * sim.dt,
             "log_every": log_every, "steps": nsteps,

@@ -4,7 +4,9 @@ The major step
 --------------
 With major step ``h`` and ``t_k = t0 + k h``, the simulator does::
 
-    init:   X <- initial states (random keys seeded from seed and block path)
+    init:   on_start of side-effect blocks (an interface block connects and
+               may set its initial state from the robots' first poses)
+            X <- initial states (random keys seeded from seed and block path)
             Y <- outputs of every block at t0          (initial outputs)
             side effects at t0; log k = 0
     repeat for k = 0 .. K-1:

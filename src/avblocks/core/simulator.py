@@ -345,13 +345,15 @@ class Simulator:
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         fast = self._fast
-        if fast is not None:
+        if fast is not None:                 # the generated step (codegen)
             try:
-                self.X, self.Y = fast(self.X, self.Y, t, t1, k, h)
-            except AvError:
-                raise
+                X, Y = fast(self.X, self.Y, t, t1, k, h)
+            except AvError as e:
+                raise self._enrich(e, t) from e
             except Exception as e:  # noqa: BLE001 - add the block context
                 raise self._wrap(e, t) from e
+            self._Yprev = self.Y        # the outputs that drove this step (for blame)
+            self.X, self.Y = X, Y
             self.k = k + 1
             if self._fcheck:
                 self._check(t1)

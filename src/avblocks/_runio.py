@@ -184,7 +184,7 @@ def estimate_bytes(compiled, sim) -> int:
     try:
         dt = float(sim.get("dt", 0.01))
         steps = (float(sim.get("t_final", 10.0)) - float(sim.get("t0", 0.0))) / dt
-        every = max(1, int(sim.get("log_every", 1)))
+        every = max(1, int(sim.get("log_every") or 1))
         if np.isfinite(steps) and steps > 0:
             from .core.simulator import default_log
             log = sim.get("log") or default_log(compiled)
@@ -194,7 +194,10 @@ def estimate_bytes(compiled, sim) -> int:
                 i, o = compiled.resolve(r)
                 p = compiled.blocks[i]._outputs[o]
                 per += int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize
-            need += int(steps // every + 1) * per
+            log_bytes = int(steps // every + 1) * per
+            if sim.get("log_every") is None:     # simulate() decimates to the cap
+                log_bytes = min(log_bytes, int(sim.get("max_log_bytes", 2 * 1024**3)))
+            need += log_bytes
     except (TypeError, ValueError, OverflowError, AvError):
         pass            # simulate() names the bad setting itself
     return int(need)
@@ -222,21 +225,21 @@ def safe_name(name) -> str:
     return s[:100] or "scenario"
 
 
-def guarded_run(args, load_any, trajectory_png):
+def guarded_run(args, load_any):
     """``avblocks run``: load, prove the output writable, simulate under a
     :class:`SignalGuard`, then write every file atomically. Exit status: 0
     done, 2 bad input, 3 the run failed (partial results saved when any),
     128 + signal number when a signal stopped it."""
     with SignalGuard() as guard:
         try:
-            return _guarded_run(args, guard, load_any, trajectory_png)
+            return _guarded_run(args, guard, load_any)
         except Interrupted as e:
             say(f"avblocks: interrupted by {e.signal_name} before anything was "
                 "simulated; nothing was written")
             return 128 + e.signum
 
 
-def _guarded_run(args, guard, load_any, trajectory_png):
+def _guarded_run(args, guard, load_any):
     import json
     import time
 
@@ -244,7 +247,7 @@ def _guarded_run(args, guard, load_any, trajectory_png):
     from .core.errors import SimulationError
     from .core.simulator import simulate
     overrides = _parse_sets(args.set)
-    d, sim, name, movie = load_any(args.target, overrides, args.out)
+    d, sim, name, movie, hooks = load_any(args.target, overrides, args.out)
     if args.realtime is not None:
         sim["realtime"] = args.realtime
     if args.t_final is not None:
@@ -255,14 +258,17 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         from .interfaces.ros2.cli import apply as _robots
         _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
+    if getattr(args, "live", False):  # live view in the browser (avblocks.viz.live)
+        sim["live"] = {"host": args.live_host, "port": args.live_port}
     out = prepare_output(args.out or Path("avblocks-out") / safe_name(name))
     movie_path = None
     if args.movie:
+        from .viz.movie import check_movie_path
         movie_path = Path(args.movie)
-        if movie_path.suffix.lower() not in (".mp4", ".gif"):
-            raise AvError(f"--movie '{args.movie}': unknown movie format",
-                          expected=".mp4 or .gif", found=movie_path.suffix or "no suffix")
-        prepare_output(movie_path.parent if str(movie_path.parent) else Path("."))
+        if not movie_path.is_absolute() and movie_path.parts[:len(out.parts)] != out.parts:
+            movie_path = out / movie_path      # movies land under the output folder
+        check_movie_path(movie_path)           # suffix and extra, before simulating
+        prepare_output(movie_path.parent)
     check_memory(d, sim)
     t0 = time.perf_counter()
     failed = None
@@ -290,14 +296,12 @@ def _guarded_run(args, guard, load_any, trajectory_png):
             files.append(saved_results)
         except AvError as e:
             write_errors.append(str(e))
-        try:
-            with atomic_path(out / "trajectories.png") as tmp:
-                png = trajectory_png(res, tmp, movie)
-            if png:
-                files.append(out / "trajectories.png")
+        from .scenarios.report import default_figures
+        try:        # the scenario's own figures, else its trajectories
+            if hooks is not None and hooks.figures is not None:
+                files += [Path(f) for f in hooks.figures(res, out)]
             else:
-                with contextlib.suppress(OSError):
-                    (out / "trajectories.png").unlink()
+                files += default_figures(res, out, movie)
         except AvError as e:
             write_errors.append(str(e))
         if movie_path is not None and interrupted is None and guard.signum is None:
@@ -308,11 +312,14 @@ def _guarded_run(args, guard, load_any, trajectory_png):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
-    outcome = None
+    from .scenarios.report import _jsonable
+    outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:
-        from .scenarios._hooks import run_report
-        extra_files, outcome = run_report(args.target, res, out)
-        files += extra_files
+        from .scenarios.report import default_outcome
+        if hooks is not None and hooks.outcome is not None:
+            outcome, numbers = hooks.outcome(res)
+        else:
+            outcome, numbers = default_outcome(res)
     if interrupted is None and guard.signum is not None:
         interrupted = guard.signal_name
     summary = {
@@ -323,6 +330,8 @@ def _guarded_run(args, guard, load_any, trajectory_png):
         "simulated_s": float(res.t[-1] - res.t[0]) if has_samples else 0.0,
         "wall_s": round(wall, 3),
         "realtime_factor": None,
+        "outcome": outcome,
+        "numbers": _jsonable(numbers),
         "files": [str(f) for f in files],
     }
     if interrupted:

@@ -52,10 +52,12 @@ def _from_namespace(ns, overrides, source):
         takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
         unknown = [k for k in params if k not in sig.parameters and not takes_any]
         if unknown:
+            from .core.errors import did_you_mean
             raise ScenarioError(f"unknown parameter(s) {unknown}", file=source,
                                 entry="--set",
-                                hint=f"this scenario's parameters: {list(sig.parameters)} "
-                                     "(or simulation.t_final, simulation.dt, ...)")
+                                hint=did_you_mean(unknown[0], sig.parameters)
+                                + f"this scenario's parameters: {list(sig.parameters)} "
+                                  "(or simulation.t_final, simulation.dt, ...)")
         try:
             out = ns["make_diagram"](**params)
         except AvError as e:
@@ -82,6 +84,11 @@ def _from_namespace(ns, overrides, source):
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
+def _hooks(ns, overrides):
+    from .scenarios.report import hooks_from_namespace
+    return hooks_from_namespace(ns, overrides)
+
+
 def _load_python(path: Path, overrides):
     """Run a user's Python scenario file (it may import anything it likes)."""
     import runpy
@@ -93,13 +100,14 @@ def _load_python(path: Path, overrides):
         raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
                             file=str(path)) from e
     d, sim, movie = _from_namespace(ns, overrides, str(path))
-    return d, sim, path.stem, movie
+    return d, sim, path.stem, movie, _hooks(ns, overrides)
 
 
 def load_any(target, overrides, out=None):
-    """(diagram, simulate kwargs, name, movie options) from a built-in name,
-    a YAML/TOML file or a .py file (``out``: the output folder a scenario
-    file's blocks may write to)."""
+    """(diagram, simulate kwargs, name, movie options, hooks) from a built-in
+    name, a YAML/TOML file or a .py file (``out``: the output folder a
+    scenario file's blocks may write to); ``hooks`` holds the scenario's
+    ``outcome`` and ``figures`` (see :mod:`avblocks.scenarios.report`)."""
     import importlib
 
     from .scenarios import builtin_scenarios, load_scenario
@@ -108,52 +116,33 @@ def load_any(target, overrides, out=None):
     if not p.is_file() and target in builtin and builtin[target].suffix == ".py":
         mod = importlib.import_module(f"avblocks.scenarios.{target}")
         d, sim, movie = _from_namespace(vars(mod), overrides, target)
-        return d, sim, target, movie
+        return d, sim, target, movie, _hooks(vars(mod), overrides)
     if p.suffix == ".py":
         if not p.is_file():
             raise ScenarioError("no such file", file=target)
         return _load_python(p, overrides)
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build(output_dir=sc.output_dir(out))
-    return d, sim, sc.name, sc.movie_options()
-
-
-def _trajectory_png(res, path, options=None):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    try:
-        from .viz import plot_trajectories
-    except ImportError:
-        plot_trajectories = None
-    options = options or {}
-    poses = [k for k in res.keys() if k.endswith(".pose") or k.endswith(".position")]
-    if options.get("pose") in res:
-        poses.insert(0, options["pose"])
-    if not poses:
-        return None
-    fig, ax = plt.subplots(figsize=(6.5, 6))
-    if plot_trajectories is not None:
-        plot_trajectories(res, pose=poses[0], ax=ax, obstacles=options.get("obstacles"))
-    else:  # pragma: no cover - viz is part of the package
-        P = res[poses[0]]
-        ax.plot(P[:, :, 0], P[:, :, 1], lw=0.8)
-        ax.set_aspect("equal")
-    ax.set_title(f"{poses[0]}: {_agents_label(res[poses[0]])}, t = 0..{res.t[-1]:g} s")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def _agents_label(a):
-    return f"{a.shape[1]} agents" if a.ndim >= 2 else ""
+    from .scenarios.report import hooks_from_data, hooks_from_report
+    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
+    if sc.data.get("report"):
+        hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
+    movie = sc._value(sc.movie_options(), "movie")      # generators too
+    return d, sim, sc.name, movie, hooks
 
 
 def cmd_run(args):
-    # signals, the output folder and atomic writes: see _runio
+    # signals, the output folder and atomic writes: see _runio; what the
+    # scenario reports (outcome, figures): see scenarios.report
     from ._runio import guarded_run
-    return guarded_run(args, load_any, _trajectory_png)
+    return guarded_run(args, load_any)
+
+
+def _summary(cls) -> str:
+    """A class's one-line summary: its docstring's first sentence."""
+    para = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
+    cut = para.find(". ")
+    return para[:cut + 1] if cut >= 0 else para
 
 
 def cmd_list(args):
@@ -162,9 +151,8 @@ def cmd_list(args):
 
     from .scenarios import block_registry, builtin_scenarios, load_scenario
     if args.blocks:
-        for k, cls in sorted(block_registry().items()):
-            doc = (cls.__doc__ or "").strip().splitlines()
-            print(f"{k:40s} {doc[0] if doc else ''}")
+        for k, cls in sorted(block_registry(code_blocks=True).items()):
+            print(f"{k:40s} {_summary(cls)}")
         return 0
     for name, path in builtin_scenarios().items():
         if path.suffix == ".py":
@@ -183,7 +171,7 @@ def cmd_list(args):
 
 def cmd_diagram(args):
     from .viz.diagram import draw_diagram
-    d, _sim, name, _movie = load_any(args.target, _parse_sets(args.set))
+    d, _sim, name, _movie, _hooks = load_any(args.target, _parse_sets(args.set))
     out = args.output or f"{name}-diagram.svg"
     path = draw_diagram(d, out)
     print(f"wrote {path}")
@@ -207,6 +195,11 @@ def build_parser():
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--live", action="store_true",
+                   help="draw and steer the run in the browser (prints the URL)")
+    r.add_argument("--live-host", default="127.0.0.1",
+                   help="interface for --live (default 127.0.0.1 only)")
+    r.add_argument("--live-port", type=int, default=0, help="port for --live (0: free)")
     r.add_argument("--backend", choices=("numpy", "jax"),
                    help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)

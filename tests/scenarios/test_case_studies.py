@@ -131,6 +131,6 @@ def test_cli_runs_a_case_study(tmp_path):
     rc = main(["run", "swap", "--set", "agents=6", "--set", "t_final=3",
                "--out", str(tmp_path), "--quiet"])
     assert rc == 0
-    assert (tmp_path / "trajectories.png").stat().st_size > 5000
+    assert (tmp_path / "swap.png").stat().st_size > 5000
     res = av.Results.load(tmp_path / "results.nc")
-    assert res["view.pose"].shape[1:] == (6, 3)
+    assert res["fleet.position"].shape[1:] == (6, 2)

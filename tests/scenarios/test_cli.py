@@ -21,7 +21,7 @@ def test_builtin_scenario_run_writes_its_files(tmp_path, capsys):
     res = av.Results.load(tmp_path / "results.nc")
     assert res["fleet.pose"].shape[1:] == (6, 3)
     assert res.t[-1] == pytest.approx(5.0)
-    png = (tmp_path / "trajectories.png").read_bytes()
+    png = (tmp_path / "waypoints.png").read_bytes()
     assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 5000
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["agents"] == 6 and summary["simulated_s"] == pytest.approx(5.0)
@@ -151,7 +151,7 @@ def test_builtin_python_scenario_with_simulation_override_and_movie(tmp_path, mo
     pytest.importorskip("imageio_ffmpeg")
     (tmp_path / "formation").mkdir()          # a folder named like the scenario
     monkeypatch.chdir(tmp_path)
-    rc = main(["run", "formation", "--set", "simulation.t_final=3", "--set", "followers=2",
+    rc = main(["run", "formation", "--set", "simulation.t_final=3", "--set", "agents=3",
                "--out", "o", "--movie", "o/f.gif", "--quiet"])
     assert rc == 0
     res = av.Results.load(tmp_path / "o" / "results.nc")

@@ -491,6 +491,42 @@ class Block:
         """Called once after a run, also when it failed (close resources)."""
 
     def __repr__(self):
-        ins = ", ".join(self._inputs)
-        outs = ", ".join(self._outputs)
-        return f"{type(self).__name__}(in: [{ins}], out: [{outs}])"
+        def short(ports):
+            return ", ".join(f"{k} {_shape_text(p)}" for k, p in ports.items())
+        return (f"{type(self).__name__}(in: [{short(self._inputs)}], "
+                f"out: [{short(self._outputs)}])")
+
+    def __str__(self):
+        """A table of the block's ports, states and parameters."""
+        rows = []
+        for kind, ports in (("in", self._inputs), ("out", self._outputs),
+                            ("state", {**self._cstates, **self._dstates})):
+            for k, p in ports.items():
+                extra = " ".join(x for x in (
+                    p.dtype if p.dtype != "float64" else "",
+                    f"[{p.unit}]" if p.unit else "",
+                    f"({', '.join(p.labels)})" if p.labels else "") if x)
+                rows.append((kind, k, _shape_text(p), extra))
+        for k, prm in self._params.items():
+            v = np.asarray(self.__dict__.get(k, np.nan))
+            val = f"{v.item():g}" if v.size == 1 else f"array{v.shape}"
+            unit = getattr(prm, "unit", "") or ""
+            rows.append(("param", k, val, f"[{unit}]" if unit else ""))
+        if not rows:
+            return repr(self)
+        w1 = max(len(r[1]) for r in rows)
+        w2 = max(len(r[2]) for r in rows)
+        st = self.sample_time
+        rate = ("continuous" if isinstance(st, Continuous) else
+                f"every {st.period:g} s" + (f" from {st.offset:g} s" if st.offset else "")
+                if isinstance(st, Periodic) else "rate of its inputs")
+        lines = [f"{type(self).__name__} ({rate})"]
+        lines += [f"  {a:<6}{b:<{w1}}  {c:<{w2}}  {d}".rstrip() for a, b, c, d in rows]
+        return "\n".join(lines)
+
+
+def _shape_text(p) -> str:
+    """``(N, 3)``-style shape text (``(any)`` for inherited shapes)."""
+    if p.shape is None:
+        return "(any)"
+    return "(" + ", ".join(str(s) for s in p.shape) + ("," if len(p.shape) == 1 else "") + ")"

@@ -71,10 +71,12 @@ class BlockHandle:
             raise AttributeError(name)
         if name in self._ports():
             return PortRef(self, name)
+        from .errors import did_you_mean
         raise WiringError(
             "unknown port", block=self.name, port=name,
             expected=f"one of inputs {sorted(_inputs_of(self.block))} or "
-                     f"outputs {sorted(_outputs_of(self.block))}", found=name)
+                     f"outputs {sorted(_outputs_of(self.block))}", found=name,
+            hint=did_you_mean(name, self._ports()).strip() or None)
 
     def port(self, name) -> PortRef:
         """The port called ``name`` (for names that are not identifiers)."""

@@ -129,3 +129,12 @@ class OutputShapeError(SimulationError, ShapeError):
 class CompileError(AvError):
     """A diagram cannot be compiled (a block that cannot be traced by JAX, a
     side-effect block, a variable-step solver): names the block and the fix."""
+
+
+def did_you_mean(name, options) -> str:
+    """``"did you mean 'x'? "`` for the closest of ``options`` to ``name``
+    (an empty string when none is close)."""
+    import difflib
+    close = difflib.get_close_matches(str(name), [str(o) for o in options], n=1,
+                                      cutoff=0.6)
+    return f"did you mean '{close[0]}'? " if close else ""

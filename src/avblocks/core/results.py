@@ -98,6 +98,26 @@ class Results:
         return (f"Results({runs}{len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
                 f", {self.t[-1] if len(self.t) else 0}]: {sigs})")
 
+    # ---------------------------------------------------------------- plots
+    def plot(self, *signals, ax=None, **options):
+        """Quick look, Matplotlib-style: with no ``signals`` the x-y paths
+        (:func:`avblocks.viz.plot_trajectories`, into ``ax`` if given), else
+        time plots of those signals (:func:`avblocks.viz.plot_signals`).
+        Returns the Figure (also pyplot's current figure)."""
+        from ..viz import plot_signals, plot_trajectories
+        if not signals:
+            return plot_trajectories(self, ax=ax, **options)
+        if ax is not None:
+            raise AvError("plot(signals...) draws one subplot per component: pass "
+                          "fig=... instead of ax=")
+        return plot_signals(self, list(signals), **options)
+
+    def animate(self, **options):
+        """:func:`avblocks.viz.animate` of these results (shows inline in a
+        notebook; ``.save("run.gif")``)."""
+        from ..viz import animate
+        return animate(self, **options)
+
     # --------------------------------------------------------------- xarray
     def to_xarray(self):
         """The results as an :class:`xarray.Dataset`.

@@ -4,7 +4,9 @@ The major step
 --------------
 With major step ``h`` and ``t_k = t0 + k h``, the simulator does::
 
-    init:   X <- initial states (random keys seeded from seed and block path)
+    init:   on_start of side-effect blocks (an interface block connects and
+               may set its initial state from the robots' first poses)
+            X <- initial states (random keys seeded from seed and block path)
             Y <- outputs of every block at t0          (initial outputs)
             side effects at t0; log k = 0
     repeat for k = 0 .. K-1:
@@ -497,10 +499,10 @@ def _progress_wanted(progress):
     return sys.stderr.isatty() and not os.environ.get("CI")
 
 
-def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
+def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
              max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
-             **backend_options):
+             live=False, **backend_options):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -517,8 +519,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         or a :class:`~avblocks.core.solvers.Solver`.
     log : list of port handles or ``"block.port"`` strings, optional
         What to record. Default: every ``pose``/``position`` output (else all).
-    log_every : int
-        Record every ``log_every``-th major step (decimation).
+    log_every : int, optional
+        Record every ``log_every``-th major step (decimation). Default:
+        every step, unless the log would exceed ``max_log_bytes`` (e.g.
+        30,000 agents for 30 s at dt = 0.01): then the smallest decimation
+        that fits, with a warning and ``res.meta["log_every"]`` saying so.
     seed : int
         Seed for every random block.
     realtime : float, optional
@@ -541,6 +546,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         solvers and traceable blocks only, no ``realtime``; it takes the
         option ``dtype="float32"`` (default ``"float64"``). A second run of
         the same structure with other numeric values does not recompile.
+    live : bool or dict
+        Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
+        (URL printed, with a token) that draws and steers the run; a dict
+        passes options to :class:`avblocks.viz.live.LiveView`. Paced to real
+        time unless ``realtime`` says otherwise. NumPy backend only.
 
     Returns
     -------
@@ -548,13 +558,23 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
+    if live:  # --- live view hook (avblocks.viz.live owns the loop) ---
+        if backend != "numpy" or backend_options:
+            raise ParameterError("live=True runs the NumPy backend step by step",
+                                 param="backend", expected="'numpy'", found=backend)
+        from ..viz.live import simulate_live
+        return simulate_live(diagram, t_final, dt, solver, live=live, log=log,
+                             log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                             check_finite=check_finite, max_log_bytes=max_log_bytes,
+                             params=params, x0=x0)
     if backend != "numpy":
         if backend != "jax":
             raise ParameterError("unknown backend", param="backend",
                                  expected="'numpy' or 'jax'", found=backend)
         from .compiled import simulate_compiled
         return simulate_compiled(diagram, t_final, dt, solver, log=log,
-                                 log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                                 log_every=1 if log_every is None else log_every,
+                                 seed=seed, t0=t0, realtime=realtime,
                                  progress=progress, check_finite=check_finite,
                                  max_log_bytes=max_log_bytes, params=params, x0=x0,
                                  backend=backend, **backend_options)
@@ -644,11 +664,21 @@ def whole_steps(t0, t_final, dt):
     return n
 
 
+def _log_every_that_fits(per_sample, nsteps, max_log_bytes):
+    """The smallest decimation whose log (``nsteps // k + 1`` samples of
+    ``per_sample`` bytes) fits in ``max_log_bytes``, or None."""
+    samples = int(max_log_bytes // max(int(per_sample), 1))
+    if samples < 2:
+        return None
+    return max(1, math.ceil(nsteps / (samples - 1)))
+
+
 def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params):
     from .params import integer
     t_final = _finite(t_final, "t_final")
     nsteps = whole_steps(sim.t0, t_final, sim.dt)
-    log_every = integer(log_every, None, "log_every", lo=1)
+    auto_log = log_every is None       # default: every step, unless too big
+    log_every = 1 if auto_log else integer(log_every, None, "log_every", lo=1)
     if realtime is not None and not (_finite(realtime, "realtime") > 0):
         raise ParameterError("realtime factor must be > 0", param="realtime",
                              expected="> 0", found=realtime)
@@ -686,11 +716,23 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
     nlog = nsteps // log_every + 1
     need = sum(nlog * int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize for p in specs)
     if need > max_log_bytes:
-        raise ParameterError(
-            f"the log would take {need / 1e9:.2f} GB", param="log",
-            expected=f"<= {max_log_bytes / 1e9:.2f} GB",
-            found=f"{len(specs)} signals x {nlog} samples",
-            hint="log fewer signals or decimate with log_every")
+        fit = _log_every_that_fits(need // nlog, nsteps, max_log_bytes)
+        if auto_log and fit is not None:
+            import warnings
+            warnings.warn(f"logging every step would take {need / 1e9:.2f} GB (more than "
+                          f"max_log_bytes = {max_log_bytes / 1e9:.2f} GB): logging one step in "
+                          f"{fit} instead (log_every={fit}; pass log_every= or "
+                          "max_log_bytes= to choose)", stacklevel=3)
+            log_every = fit
+            nlog = nsteps // log_every + 1
+        else:
+            raise ParameterError(
+                f"the log would take {need / 1e9:.2f} GB", param="log",
+                expected=f"<= {max_log_bytes / 1e9:.2f} GB",
+                found=f"{len(specs)} signals x {nlog} samples",
+                hint=(f"log_every={fit} fits (or log fewer signals, or raise "
+                      "max_log_bytes)" if fit is not None else
+                      "log fewer signals: even two samples do not fit"))
     try:
         bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
         tlog = np.empty(nlog)

@@ -73,3 +73,53 @@ def make_diagram(agents=50, d=7.0, spread=50.0, v0=2.0, target=(25.0, 25.0),
            "log": [view.pose, flock.position, flock.velocity, view.order],
            "log_every": int(log_every), "seed": int(seed)}
     return dg, sim
+
+
+def _nearest(position):
+    from scipy.spatial import cKDTree
+    dist, _ = cKDTree(position).query(position, k=2)
+    return dist[:, 1]
+
+
+def _order(res):
+    if "view.order" in res:
+        return np.asarray(res["view.order"]).reshape(len(res.t))
+    v = np.asarray(res["flock.velocity"])
+    return np.array([order_parameter(v[k], np) for k in range(len(v))], float)
+
+
+def outcome(res, params):
+    """Order parameter at the end, nearest-neighbour spacing against ``d``,
+    closest approach over the run."""
+    from avblocks.scenarios.report import min_pairwise_distance
+    order = _order(res)
+    nn = _nearest(np.asarray(res["flock.position"])[-1])
+    dmin, _ = min_pairwise_distance(res["flock.position"])
+    d = float(params["d"])
+    nums = {"order_end": float(order[-1]), "nearest_median_m": float(np.median(nn)),
+            "d_m": d, "closest_approach_m": dmin}
+    return (f"order {order[-1]:.3f} at {res.t[-1]:.3g} s, nearest neighbours "
+            f"{np.median(nn):.2f} m apart (median; d = {d:g} m), closest approach "
+            f"{dmin:.2f} m"), nums
+
+
+def figures(res, out, params):
+    """flocking.png: paths (colour per agent) and the order parameter."""
+    import matplotlib.pyplot as plt
+
+    from avblocks.scenarios.report import save_figure
+    from avblocks.viz import plot_trajectories
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11.0, 5.0),
+                               gridspec_kw={"width_ratios": [1.2, 1]})
+    key = "view.pose" if "view.pose" in res else "flock.position"
+    n = np.asarray(res[key]).shape[1]
+    plot_trajectories(res, key, ax=a,
+                      title=f"{n} double integrators flocking after a moving target")
+    order = _order(res)
+    b.plot(res.t, order, color="tab:blue", lw=1.5)
+    b.set_ylim(0, 1.05)
+    b.set_xlabel("t [s]")
+    b.set_ylabel("order |sum v| / sum |v|  (1: aligned)")
+    b.set_title("alignment of the velocities")
+    b.grid(True, alpha=0.3)
+    return [save_figure(fig, f"{out}/flocking.png")]

@@ -52,9 +52,16 @@ from avblocks.vehicles import Unicycle
 CORRIDOR = (24.0, 32.0, 2.0)
 #: Leader waypoints (x, y).
 WAYPOINTS = np.array([[12.0, 0.0], [42.0, 0.0], [48.0, 1.0], [53.0, 3.0], [58.0, 6.0]])
+
+
+def corridor_world(x0=CORRIDOR[0], x1=CORRIDOR[1], width=CORRIDOR[2], wall=4.0):
+    """Two walls ``wall`` thick from x0 to x1, ``width`` apart around y = 0."""
+    return World([rectangle(x0, width / 2, x1, width / 2 + wall),
+                  rectangle(x0, -width / 2 - wall, x1, -width / 2)])
+
+
 #: The two walls of the corridor.
-WORLD = World([rectangle(CORRIDOR[0], CORRIDOR[2] / 2, CORRIDOR[1], CORRIDOR[2] / 2 + 4.0),
-               rectangle(CORRIDOR[0], -CORRIDOR[2] / 2 - 4.0, CORRIDOR[1], -CORRIDOR[2] / 2)])
+WORLD = corridor_world()
 #: Options for ``viz.save_movie`` (``avblocks run formation --movie f.mp4``).
 MOVIE = {"obstacles": WORLD.geoms, "trail": 8.0}
 STATES = ("wedge", "column")
@@ -76,19 +83,33 @@ def switch_points(n, spacing, lead_in=10.0, margin=2.0):
     return x_in, x_out
 
 
+def start_poses(n, spacing, offset, seed):
+    """The wedge's slots, followers perturbed by up to ``offset`` (and
+    +-0.3 rad); the leader at the origin heading along x."""
+    rng = np.random.default_rng([int(seed), 5])
+    start = formation_offsets("wedge", int(n), float(spacing)) + rng.uniform(
+        -float(offset), float(offset), (int(n), 2))
+    start[0] = 0.0
+    pose0 = np.column_stack([start, rng.uniform(-0.3, 0.3, int(n))])
+    pose0[0, 2] = 0.0
+    return pose0
+
+
 def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radius=0.25,
                  ref_rate=(0.3, 0.15), offset=0.6, seed=1, t_final=100.0, dt=0.02,
-                 log_every=5, tree="star"):
-    """The formation-switching diagram and its simulation settings."""
-    n = int(followers) + 1
+                 log_every=5, tree="star", agents=None):
+    """The formation-switching diagram and its simulation settings
+    (``agents``, when given, is ``followers + 1``: the name every scenario
+    shares)."""
+    n = int(followers) + 1 if agents is None else int(agents)
+    if n < 2:
+        from avblocks.core.errors import ParameterError
+        raise ParameterError("a formation needs a leader and a follower", param="agents",
+                             expected=">= 2", found=n)
     spacing = float(spacing)
     leader, refs = formation_references(n, spacing, float(d), tree)
     x_in, x_out = switch_points(n, spacing)
-    rng = np.random.default_rng([int(seed), 5])
-    start = formation_offsets("wedge", n, spacing) + rng.uniform(-offset, offset, (n, 2))
-    start[0] = 0.0
-    pose0 = np.column_stack([start, rng.uniform(-0.3, 0.3, n)])
-    pose0[0, 2] = 0.0
+    pose0 = start_poses(n, spacing, offset, seed)
 
     dg = Diagram("formation")
     fleet = dg.add(Unicycle(pose0=pose0), name="fleet")
@@ -122,3 +143,65 @@ def make_diagram(followers=4, spacing=1.5, speed=0.6, gain=1.5, d=0.2, body_radi
            "log": [fleet.pose, lf.error, sup.mode, col.hit_obstacle, col.hit_agent],
            "log_every": int(log_every), "seed": int(seed)}
     return dg, sim
+
+
+def _switches(res):
+    mode = np.asarray(res["supervisor.mode"]).reshape(len(res.t))
+    return mode, np.flatnonzero(np.diff(mode) != 0) + 1
+
+
+def outcome(res, params):
+    """States visited, formation error just before each switch, closest
+    approach between agents, contacts with the walls."""
+    from avblocks.scenarios.report import min_pairwise_distance
+    mode, sw = _switches(res)
+    err = np.abs(np.asarray(res["lf.error"]))[..., 0].max(axis=1)     # max |l error|
+    seq = [STATES[int(mode[0])]] + [STATES[int(mode[i])] for i in sw]
+    before = [float(err[max(i - 2, 0)]) for i in sw] + [float(err[-1])]
+    dmin, kmin = min_pairwise_distance(res["fleet.pose"])
+    walls = int(np.asarray(res["collision.hit_obstacle"]).any(axis=1).sum())
+    agents = int(np.asarray(res["collision.hit_agent"]).any(axis=1).sum())
+    nums = {"states": seq, "switch_times_s": [float(res.t[i]) for i in sw],
+            "formation_error_before_switch_m": before[:-1],
+            "formation_error_end_m": before[-1], "closest_approach_m": dmin,
+            "samples_touching_wall": walls, "samples_touching_agent": agents}
+    line = (f"{' -> '.join(seq)}; formation error {max(before):.2g} m before each "
+            f"switch and at the end, closest approach {dmin:.2f} m, "
+            f"{'no contact' if walls + agents == 0 else f'{walls + agents} samples in contact'}")
+    return line, nums
+
+
+def figures(res, out, params):
+    """formation.png: the paths through the corridor with the formation at
+    three moments, and the formation error over time (log scale)."""
+    import matplotlib.pyplot as plt
+
+    from avblocks.scenarios.report import save_figure
+    from avblocks.viz import plot_trajectories
+    mode, sw = _switches(res)
+    pose = np.asarray(res["fleet.pose"])
+    fig, (a, b) = plt.subplots(2, 1, figsize=(9.0, 7.0),
+                               gridspec_kw={"height_ratios": [1.6, 1]})
+    plot_trajectories(res, "fleet.pose", ax=a, obstacles=WORLD, waypoints=WAYPOINTS,
+                      title="formation: wedge -> column before the corridor -> "
+                            "wedge after it")
+    marks = [max(sw[0] - 1, 0) // 2] + [(sw[0] + sw[1]) // 2] + [len(res.t) - 1] \
+        if len(sw) >= 2 else [len(res.t) - 1]
+    for i in marks:
+        a.scatter(pose[i, :, 0], pose[i, :, 1], s=14, c="k", zorder=5)
+        a.annotate(f"{STATES[int(mode[i])]} (t = {res.t[i]:.0f} s)",
+                   (pose[i, :, 0].mean(), pose[i, :, 1].max() + 0.6), ha="center",
+                   fontsize=8)
+    err = np.abs(np.asarray(res["lf.error"])).max(axis=1)
+    b.semilogy(res.t, np.maximum(err[:, 0], 1e-6), label="max |distance error| [m]")
+    b.semilogy(res.t, np.maximum(err[:, 1], 1e-6), label="max |bearing error| [rad]")
+    for i in sw:
+        b.axvline(res.t[i], color="0.4", ls=":")
+        b.annotate(f"-> {STATES[int(mode[i])]}", (res.t[i], 0.5), xytext=(3, 0),
+                   textcoords="offset points", fontsize=8)
+    b.set_ylim(1e-6, 3.0)
+    b.set_xlabel("t [s]")
+    b.set_ylabel("follower error")
+    b.legend(fontsize=8, loc="upper right")
+    b.grid(True, alpha=0.3)
+    return [save_figure(fig, f"{out}/formation.png")]

@@ -20,6 +20,11 @@ A scenario file has five sections::
     simulation: {t_final: 60, dt: 0.01, solver: rk4, log: [fleet.pose], seed: $seed}
     params: {drive.gain: 2.0}   # optional: numeric block parameters (block.param)
     movie: {trail: 5.0}    # optional: options for `avblocks run ... --movie`
+    outcome: [{metric: all_true, signal: drive.done, what: done}]   # optional
+    figures: [{plot: trajectories, file: paths.png, waypoints: drive}]  # optional
+
+(``outcome`` and ``figures`` name built-in metrics and plots, see
+:mod:`avblocks.scenarios.report`.)
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), or a one-key mapping naming one of
@@ -39,15 +44,21 @@ from pathlib import Path
 import numpy as np
 
 from ..core.diagram import Diagram
-from ..core.errors import AvError, ParameterError, ScenarioError
+from ..core.errors import AvError, ParameterError, ScenarioError, did_you_mean
 from ..core.params import count as _count
 from ..core.params import integer as _integer
 from ._numeric import is_numeric_key, resolve
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie", "params"}
+             "movie", "params", "outcome", "figures", "report"}
+#: Case studies whose outcome and figures a scenario file can ask for by name
+#: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
+#: ``--set`` names that go to the simulation settings when the scenario has
+#: no parameter of that name (the same names as the Python scenarios').
+_SIM_SHORTCUTS = {"t_final", "dt", "log_every", "solver"}
 #: Block arguments (and movie options) naming files a scenario writes: they
 #: must stay inside the output folder.
 WRITE_KEYS = {"path", "movie", "file", "filename", "output", "save", "save_path"}
@@ -181,7 +192,123 @@ def _arange(n, dtype="int64"):
     return np.arange(n).astype(dtype)
 
 
+def _multiply(a, b):
+    return np.asarray(a, float) * np.asarray(b, float) if np.ndim(a) or np.ndim(b) \
+        else float(a) * float(b)
+
+
+def _uniform(low, high, shape, seed=0, stream=0):
+    """Uniform draws from ``numpy.random.default_rng([seed, stream])``."""
+    rng = np.random.default_rng([int(seed), int(stream)])
+    return rng.uniform(float(low), float(high), tuple(int(s) for s in shape))
+
+
+def _first_true(n, k):
+    m = np.zeros(int(n), dtype=bool)
+    m[:min(int(k), int(n))] = True
+    return m
+
+
+def _nest_hexagon(agents, density):
+    from .nest import hexagon, hexagon_radius
+    return hexagon(hexagon_radius(int(agents), float(density)))
+
+
+def _nest_poses(agents, density, scouts, seed):
+    from .nest import hexagon_radius, nest_poses
+    return nest_poses(int(agents), hexagon_radius(int(agents), float(density)), scouts, seed)
+
+
+def _circle_swap(n, radius, jitter=0.0, seed=1, which="start"):
+    from .swap import circle_swap
+    start, goal = circle_swap(int(n), float(radius), float(jitter), seed)
+    if which == "start":
+        return start
+    if which == "goal":
+        return goal[:, None, :]
+    raise ValueError(f"which must be 'start' or 'goal', got {which!r}")
+
+
+def _speed_caps(n, v_max, spread, seed=1, stream=10):
+    rng = np.random.default_rng([int(seed), int(stream)])
+    return float(v_max) * (1.0 - float(spread) * rng.uniform(0.0, 1.0, int(n)))
+
+
+def _formation_start(n, spacing, offset, seed):
+    from .formation import start_poses
+    return start_poses(int(n), float(spacing), float(offset), seed)
+
+
+def _formation_refs(n, spacing, d, tree="star", state="wedge"):
+    from .formation import formation_references
+    leader, refs = formation_references(int(n), float(spacing), float(d), tree)
+    if state == "leader":
+        return leader
+    if state not in refs:
+        raise ValueError(f"state must be one of {sorted(refs)} or 'leader', got {state!r}")
+    return refs[state]
+
+
+def _formation_switch(n, spacing, which="in"):
+    from .formation import switch_points
+    x_in, x_out = switch_points(int(n), float(spacing))
+    return {"in": x_in, "out": x_out}[which]
+
+
+def _corridor(x0, x1, width, wall=4.0):
+    from .formation import corridor_world
+    return corridor_world(float(x0), float(x1), float(width), float(wall))
+
+
+def _disc(radius):
+    from ..environment import Disc
+    return Disc(float(radius))
+
+
+_OPS = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
+        "==": np.equal, "!=": np.not_equal}
+
+
+def _guard(input=None, index=(), op=">=", value=0.0, all=None):
+    """A transition guard from data: ``u[input][index] <op> value``, or the
+    conjunction of several (``all: [{input, index, op, value}, ...]``)."""
+    if all is not None:
+        parts = [_guard(**g) for g in all]
+
+        def both(u, xp):
+            out = parts[0](u, xp)
+            for g in parts[1:]:
+                out = out & g(u, xp)
+            return out
+        return both
+    if op not in _OPS:
+        raise ValueError(f"op must be one of {sorted(_OPS)}, got {op!r}")
+    if input is None:
+        raise ValueError("a guard names its 'input' (an input port of the block)")
+    idx = tuple(int(i) for i in np.atleast_1d(index)) if np.size(index) else ()
+    name, v, opname = str(input), float(value), op
+
+    def guard(u, xp):
+        x = u[name][idx] if idx else u[name]
+        return {"<": x < v, "<=": x <= v, ">": x > v, ">=": x >= v, "==": x == v,
+                "!=": x != v}[opname]
+    return guard
+
+
 GENERATORS = {
+    "formation_start": _formation_start,
+    "formation_references": _formation_refs,
+    "formation_switch": _formation_switch,
+    "corridor": _corridor,
+    "disc": _disc,
+    "guard": _guard,
+    "multiply": _multiply,
+    "uniform": _uniform,
+    "first_true": _first_true,
+    "nest_hexagon": _nest_hexagon,
+    "nest_poses": _nest_poses,
+    "circle_swap": _circle_swap,
+    "speed_caps": _speed_caps,
     "random_poses": _random_poses,
     "random_positions": _random_positions,
     "random_waypoints": _random_waypoints,
@@ -194,8 +321,10 @@ GENERATORS = {
 
 
 # ------------------------------------------------------------------ registry
-def block_registry() -> dict:
-    """``{"vehicles.Unicycle": class, ...}`` for every public block class."""
+def block_registry(code_blocks=False) -> dict:
+    """``{"vehicles.Unicycle": class, ...}`` for every public block class
+    that a scenario file can name (``code_blocks=True``: also those that
+    take Python code, such as ``blocks.Function``)."""
     import importlib
 
     from ..core.block import Block
@@ -209,7 +338,7 @@ def block_registry() -> dict:
         for name in getattr(mod, "__all__", dir(mod)):
             obj = getattr(mod, name, None)
             if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
-                if name == "Function":   # takes Python code: not from files
+                if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
     return reg
@@ -343,7 +472,8 @@ class Scenario:
                 if key not in self.params:
                     raise ScenarioError(f"unknown parameter reference '${key}'",
                                         file=self.source, entry=where,
-                                        hint=f"known parameters: {sorted(self.params)}")
+                                        hint=did_you_mean(key, self.params)
+                                        + f"known parameters: {sorted(self.params)}")
                 return self.params[key]
             return v
         if isinstance(v, list):
@@ -392,17 +522,22 @@ class Scenario:
                 if sub not in _SIM_KEYS:
                     raise ScenarioError(f"unknown simulation setting '{sub}'",
                                         file=self.source, entry=f"--set {key}",
-                                        hint=f"known: {sorted(_SIM_KEYS)}")
+                                        hint=did_you_mean(sub, _SIM_KEYS)
+                                        + f"known: {sorted(_SIM_KEYS)}")
                 data.setdefault("simulation", {})[sub] = val
             elif is_numeric_key(key):          # block.param: checked on build
                 data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
+            elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
+                data.setdefault("simulation", {})[key] = val
             else:
                 raise ScenarioError(f"unknown parameter '{key}'", file=self.source,
                                     entry=f"--set {key}",
-                                    hint=f"this scenario's parameters: {sorted(params)} "
-                                         "(or simulation.t_final, block.param, ...)")
+                                    hint=did_you_mean(key, params)
+                                    + f"this scenario's parameters: {sorted(params)} "
+                                      "(or t_final, dt, log_every, simulation.<setting>, "
+                                      "block.param)")
         data["parameters"] = params
         return Scenario(data, self.source)
 
@@ -419,6 +554,11 @@ class Scenario:
         if not isinstance(d.get("movie") or {}, dict):
             raise ScenarioError("'movie' must be a mapping of movie options",
                                 file=self.source, entry="movie")
+        if d.get("report") is not None and d["report"] not in REPORTS:
+            raise ScenarioError(f"unknown report '{d['report']}'", file=self.source,
+                                entry="report",
+                                hint=did_you_mean(d["report"], REPORTS)
+                                + f"reports: {list(REPORTS)}")
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")
@@ -516,7 +656,8 @@ class Scenario:
                 if k not in accepted and not has_var:
                     raise ScenarioError(f"unknown parameter '{k}' for {typ}",
                                         file=self.source, entry=f"{where}.{k}",
-                                        hint=f"{typ} takes {accepted}")
+                                        hint=did_you_mean(k, accepted)
+                                        + f"{typ} takes {accepted}")
             kwargs = self._confine(kwargs, where, out)
             try:
                 block = cls(**kwargs)
@@ -545,7 +686,8 @@ class Scenario:
                 if b not in d.blocks:
                     raise ScenarioError(f"wire names unknown block '{b}'",
                                         file=self.source, entry=where,
-                                        hint=f"blocks: {sorted(d.blocks)}")
+                                        hint=did_you_mean(b, d.blocks)
+                                        + f"blocks: {sorted(d.blocks)}")
                 try:
                     refs.append(d[b].port(p))
                 except AvError as e:
@@ -717,12 +859,14 @@ def builtin_dir() -> Path:
 
 def builtin_scenarios() -> dict:
     """``{name: path}`` of the scenarios shipped with avblocks: YAML files,
-    and Python modules (``make_diagram(**params)``) for the case studies
-    whose set-up is computed."""
-    files = list(builtin_dir().glob("*.yaml")) + [
-        p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
-        and p.stem not in ("loader",)]
-    return {p.stem: p for p in sorted(files)}
+    and Python modules (``make_diagram(**params)``) for those with no YAML
+    form. Where both exist the YAML file is the scenario (the module is its
+    Python-API twin)."""
+    py = [p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
+          and p.stem not in ("loader", "report")]
+    out = {p.stem: p for p in sorted(py)}
+    out.update({p.stem: p for p in sorted(builtin_dir().glob("*.yaml"))})
+    return dict(sorted(out.items()))
 
 
 def load_scenario(name_or_path) -> Scenario:
@@ -740,7 +884,8 @@ def load_scenario(name_or_path) -> Scenario:
         else:
             raise ScenarioError("no such scenario file or built-in scenario",
                                 file=str(name_or_path),
-                                hint=f"built-in scenarios: {sorted(b)}")
+                                hint=did_you_mean(name_or_path, b)
+                                + f"built-in scenarios: {sorted(b)}")
     data = _read(p)
     sc = Scenario(data if data is not None else {}, str(p))
     sc.validate()

@@ -89,3 +89,43 @@ def make_diagram(agents=20, radius=5.0, safety=0.6, v_max=1.0, gain=1.0, gamma=2
            "log": [view.pose, fleet.position, drive.done], "log_every": int(log_every),
            "seed": int(seed)}
     return dg, sim
+
+
+def outcome(res, params):
+    """Arrival time, closest approach against the safety radius."""
+    from avblocks.scenarios.report import first_time_all, min_pairwise_distance
+    done = np.asarray(res["drive.done"])
+    t_all = first_time_all(res.t, done)
+    dmin, kmin = min_pairwise_distance(res["fleet.position"])
+    safety = float(params["safety"])
+    n = done.shape[1]
+    nums = {"all_at_goal_s": t_all, "at_goal_end": int(done[-1].sum()),
+            "closest_approach_m": dmin, "safety_m": safety}
+    head = (f"all {n} at their goals at {t_all:.3g} s" if t_all is not None else
+            f"{int(done[-1].sum())} of {n} at their goals by t = {res.t[-1]:.3g} s")
+    return f"{head}, closest approach {dmin:.3f} m (safety radius {safety:g} m)", nums
+
+
+def figures(res, out, params):
+    """swap.png: paths and the closest pair distance against the safety radius."""
+    import matplotlib.pyplot as plt
+    from scipy.spatial.distance import pdist
+
+    from avblocks.scenarios.report import save_figure
+    from avblocks.viz import plot_trajectories
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11.0, 5.0),
+                               gridspec_kw={"width_ratios": [1.1, 1]})
+    p = np.asarray(res["fleet.position"])
+    plot_trajectories(res, "view.pose" if "view.pose" in res else "fleet.position", ax=a,
+                      title=f"{p.shape[1]} agents swap sides through a safety filter")
+    dmin = np.array([pdist(p[k]).min() for k in range(len(res.t))])
+    safety = float(params["safety"])
+    b.plot(res.t, dmin, color="tab:blue", lw=1.5, label="closest pair")
+    b.axhline(safety, color="tab:red", ls="--", lw=1.2, label=f"safety radius {safety:g} m")
+    b.set_xlabel("t [s]")
+    b.set_ylabel("distance [m]")
+    b.set_ylim(0, max(float(dmin.max()) * 1.05, 1.5 * safety))
+    b.set_title("closest pair of agents")
+    b.legend(fontsize=8)
+    b.grid(True, alpha=0.3)
+    return [save_figure(fig, f"{out}/swap.png")]

@@ -5,7 +5,7 @@ Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
 ``movie`` extra (imageio-ffmpeg), GIFs only Pillow.
 """
 
-from .animation import Animation, Animation2D, animate, find_pose, save_movie
+from .animation import Animation, Animation2D, animate, find_pose, plot_frame, save_movie
 from .diagram import draw_diagram, to_dot
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
@@ -14,7 +14,7 @@ from .shapes import DRAWINGS, Drawing, drawing
 from .view3d import Animation3D, animate3d, quat_to_matrix
 
 __all__ = [
-    "animate", "save_movie", "Animation", "Animation2D", "Scene2D", "Group",
+    "animate", "save_movie", "plot_frame", "Animation", "Animation2D", "Scene2D", "Group",
     "Drawing", "DRAWINGS", "drawing", "obstacle_paths", "MovieWriter", "write_movie",
     "read_video", "find_pose", "Scope", "plot_signals", "plot_trajectories",
     "animate3d", "Animation3D", "quat_to_matrix",

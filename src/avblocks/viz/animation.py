@@ -56,6 +56,38 @@ def _per_agent(results, spec, shape_tn, name):
     return a
 
 
+def find_pose_or_position(results, pose=None) -> str:
+    """:func:`find_pose`, falling back to the first ``*.position`` signal."""
+    try:
+        return find_pose(results, pose)
+    except ParameterError:
+        if pose is not None:
+            raise
+    try:
+        return find_pose(results, None, suffix=".position")
+    except ParameterError:
+        raise ParameterError("no logged signal ends in '.pose' or '.position'; name one",
+                             param="pose", expected=f"one of {sorted(results.keys())}",
+                             found=None) from None
+
+
+def pose_from_positions(p):
+    """(T, N, 3) poses from (T, N, 2) positions: the heading is the
+    direction of motion (kept while an agent stands still; 0 before it
+    first moves)."""
+    p = np.asarray(p, float)
+    d = np.diff(p, axis=0, prepend=p[:1])
+    moving = np.hypot(d[..., 0], d[..., 1]) > 1e-9
+    th = np.where(moving, np.arctan2(d[..., 1], d[..., 0]), np.nan)
+    if th.shape[0] > 1:
+        th[0] = np.where(np.isnan(th[0]), th[1], th[0])
+    # forward-fill the heading through samples without motion
+    idx = np.where(~np.isnan(th), np.arange(th.shape[0])[:, None], 0)
+    np.maximum.accumulate(idx, axis=0, out=idx)
+    th = np.nan_to_num(np.take_along_axis(th, idx, axis=0))
+    return np.concatenate([p, th[..., None]], axis=2)
+
+
 def is_interactive_backend() -> bool:
     """True when Matplotlib's backend can open windows."""
     from matplotlib.backends import BackendFilter, backend_registry
@@ -120,8 +152,10 @@ class Animation(_Frames):
                  collision=None, steer=None, world=None, obstacles=None, extent=None,
                  **scene_options):
         self.results = results
-        self.key = find_pose(results, pose)
+        self.key = find_pose_or_position(results, pose)
         self.pose = np.asarray(results[self.key], float)
+        if self.pose.ndim == 3 and self.pose.shape[2] == 2:
+            self.pose = pose_from_positions(self.pose)
         if self.pose.ndim != 3 or self.pose.shape[2] < 3:
             raise ParameterError("pose signal must have shape (T, N, 3)", param="pose",
                                  expected="(T, N, 3)", found=self.pose.shape)
@@ -224,6 +258,32 @@ def animate(results, pose=None, **options) -> Animation:
     return Animation(results, pose, **options)
 
 
+def plot_frame(results, t=None, pose=None, ax=None, *, figsize=(6.0, 6.0), **options):
+    """One frame of :func:`animate` as a still plot: the agents at time ``t``
+    (default: the last sample), drawn into ``ax`` (default: a new pyplot
+    figure, so ``plt.savefig`` works).
+
+    ``options`` are those of :func:`animate` (``color``, ``trail``,
+    ``obstacles``, ``title``, ``drawing``, ``size``...). Returns the Figure.
+
+    >>> import numpy as np, avblocks as av, avblocks.viz
+    >>> t = np.linspace(0, 1, 5)
+    >>> pose = np.zeros((5, 2, 3)); pose[:, 1, 0] = t
+    >>> fig = av.viz.plot_frame(av.Results(t, {"fleet.pose": pose}), t=0.5)
+    >>> fig.axes[0].texts[0].get_text()
+    't =    0.50 s'
+    """
+    if ax is None:
+        import matplotlib.pyplot as plt
+        fig = plt.figure(figsize=figsize)
+        ax = fig.add_subplot(1, 1, 1)
+    anim = Animation(results, pose, ax=ax, **options)
+    ts = np.asarray(results.t, float)
+    k = len(ts) - 1 if t is None else int(np.argmin(np.abs(ts - float(t))))
+    anim.update(k)
+    return ax.figure
+
+
 def _check_options(options, target, block):
     """Unknown drawing options fail at construction, not at the first frame."""
     import inspect
@@ -237,15 +297,43 @@ def _check_options(options, target, block):
             expected=f"one of {sorted(known - {'self', 'n'})}")))
 
 
-def save_movie(results, path, pose=None, fps=None, every=1, *, progress=None,
+#: GIF defaults of :func:`save_movie`: at most this many frames, this frame
+#: rate at most, this resolution (dots per inch of the 6-inch figure).
+GIF_MAX_FRAMES, GIF_FPS, GIF_DPI = 200, 10.0, 60
+
+
+def save_movie(results, path, pose=None, fps=None, every=None, *, progress=None,
                **options) -> Path:
     """Write a movie of a run to ``path`` (``.mp4`` or ``.gif``).
 
-    ``pose`` defaults to the first logged signal ending in ``.pose``; ``fps``
-    defaults to real time (clipped to 1..50); ``every`` keeps every k-th
-    sample; ``options`` are those of :func:`animate`.
+    ``pose`` defaults to the first logged signal ending in ``.pose``;
+    ``options`` are those of :func:`animate` (``color=`` a logged signal,
+    ``title=``, ``trail=``, ``obstacles=``...).
+
+    Frame rate and decimation: for MP4, ``every`` defaults to 1 and ``fps``
+    to real time (clipped to 1..50). For GIF (large and slow to write per
+    frame) the defaults keep a movie small and quick: at most
+    :data:`GIF_MAX_FRAMES` frames at up to :data:`GIF_FPS` frames per second
+    (a long run plays faster than real time), 360 x 360 pixels
+    (``dpi=60``); a 60 s, 15-agent GIF takes about 3 s and 1 MB. Give
+    ``every``, ``fps`` or ``dpi`` to choose yourself.
     """
-    anim = Animation(results, pose, every=every, **options)
+    from .movie import check_movie_path
+    path = check_movie_path(path)
+    if path.suffix.lower() == ".gif":
+        T = len(results.t)
+        dt = float(np.median(np.diff(results.t))) if T > 1 else 0.1
+        if every is None:
+            every = max(1, math.ceil(1.0 / (GIF_FPS * dt)) if dt > 0 else 1,
+                        math.ceil(T / GIF_MAX_FRAMES))
+        if fps is None:
+            frames = math.ceil(T / every)
+            span = max(float(results.t[-1] - results.t[0]), 1e-9) if T > 1 else 1.0
+            fps = float(np.clip(frames / span, 1.0, GIF_FPS))
+            if frames / fps > 20.0:     # play long runs in at most ~20 s
+                fps = float(min(GIF_FPS, frames / 20.0))
+        options.setdefault("dpi", GIF_DPI)
+    anim = Animation(results, pose, every=1 if every is None else every, **options)
     try:
         return anim.save(path, fps, progress=progress)
     finally:

@@ -37,6 +37,21 @@ def _ffmpeg():
     return imageio_ffmpeg
 
 
+def check_movie_path(path) -> Path:
+    """Check a movie file name before anything is simulated: a known suffix
+    (``.gif``, ``.mp4``...) and, for video, the ``movie`` extra. Returns the
+    path."""
+    path = Path(path)
+    suf = path.suffix.lower()
+    if suf != ".gif" and suf not in VIDEO_SUFFIXES:
+        raise ParameterError("unknown movie format", param="movie",
+                             expected=sorted(VIDEO_SUFFIXES | {".gif"}),
+                             found=suf or f"no suffix in '{path}'")
+    if suf in VIDEO_SUFFIXES:
+        _ffmpeg()
+    return path
+
+
 def progress_bar(total, progress=None, desc="frames"):
     """A tqdm bar, shown when ``progress`` is True, or when it is None and
     stderr is a terminal."""

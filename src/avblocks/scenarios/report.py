@@ -1,0 +1,319 @@
+"""What a scenario shows: its one-line outcome and its figures.
+
+The scenario contract
+---------------------
+A Python scenario module (or a ``.py`` file run by ``avblocks run``) may
+define, next to ``make_diagram(**params)``:
+
+``outcome(res, params) -> (line, numbers)``
+    ``line`` is one sentence with numbers ("all 500 informed at 78.7 s");
+    ``numbers`` a flat dict of the same figures (JSON-able) for
+    ``summary.json``.
+``figures(res, out, params) -> list of paths``
+    Writes the scenario's figures into the folder ``out`` and returns their
+    paths.
+
+``params`` (optional in both) are ``make_diagram``'s arguments as the run
+used them (defaults updated with ``--set`` values).
+
+A YAML/TOML scenario declares the same as data, naming built-in metrics
+(:data:`METRICS`) and plots (:data:`PLOTS`)::
+
+    outcome:
+      - {metric: all_true, signal: drive.done, what: reached all their waypoints}
+      - {metric: min_distance, signal: fleet.pose}
+    figures:
+      - {plot: trajectories, file: waypoints.png, waypoints: drive,
+         title: 15 unicycles through random waypoints}
+      - {plot: fraction, signal: drive.done, file: done.png}
+
+Without any of these, ``avblocks run`` draws the trajectories of the first
+logged pose and reports the run's size.
+"""
+
+from __future__ import annotations
+
+import difflib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import ScenarioError
+
+
+# ------------------------------------------------------------------ numbers
+def first_time_all(t, flags):
+    """First time at which every agent's flag (T, N) is true, or None."""
+    flags = np.asarray(flags).reshape(len(t), -1).astype(bool)
+    allk = flags.all(axis=1)
+    return float(t[int(np.argmax(allk))]) if allk.any() else None
+
+
+def min_pairwise_distance(positions):
+    """Smallest distance between two agents over the run, and its time
+    index: ``(d, k)``. Uses a k-d tree per sample."""
+    from scipy.spatial import cKDTree
+    p = np.asarray(positions, float)[..., :2]
+    best, kbest = np.inf, 0
+    for k in range(p.shape[0]):
+        if p.shape[1] < 2:
+            break
+        dist, _ = cKDTree(p[k]).query(p[k], k=2)
+        m = float(dist[:, 1].min())
+        if m < best:
+            best, kbest = m, k
+    return best, kbest
+
+
+def _fmt(x, unit="s"):
+    return f"{x:.3g} {unit}".strip() if x is not None else "never"
+
+
+def _all_true(res, signal, what=None):
+    a = np.asarray(res[signal]).reshape(len(res.t), -1).astype(bool)
+    n = a.shape[1]
+    what = what or f"{signal.rsplit('.', 1)[-1]}"
+    t_all = first_time_all(res.t, a)
+    key = signal.replace(".", "_")
+    if t_all is not None:
+        return f"all {n} {what} at {t_all:.3g} s", {f"{key}_all_at_s": t_all,
+                                                    f"{key}_count": n}
+    c = int(a[-1].sum())
+    return (f"{c} of {n} {what} by t = {res.t[-1]:.3g} s",
+            {f"{key}_all_at_s": None, f"{key}_count": c})
+
+
+def _min_distance(res, signal, label="closest approach"):
+    d, k = min_pairwise_distance(res[signal])
+    return (f"{label} {d:.3g} m (t = {res.t[k]:.3g} s)",
+            {"closest_approach_m": d, "closest_approach_t_s": float(res.t[k])})
+
+
+def _final_mean(res, signal, label=None, unit="", component=None):
+    a = np.asarray(res[signal], float)[-1]
+    if component is not None:
+        a = a[..., int(component)]
+    v = float(np.mean(a))
+    label = label or f"final mean {signal}"
+    return f"{label} {v:.3g}{' ' + unit if unit else ''}", {
+        signal.replace(".", "_") + "_final_mean": v}
+
+
+#: Built-in outcome metrics for scenario files: ``{metric: name, ...args}``.
+METRICS = {"all_true": _all_true, "min_distance": _min_distance,
+           "final_mean": _final_mean}
+
+
+# -------------------------------------------------------------------- plots
+def plot_fraction(res, signal, ax=None, *, label=None, title=None):
+    """Fraction (and count) of agents whose bool signal is true over time,
+    with the time everyone is marked; returns the Figure."""
+    import matplotlib.pyplot as plt
+    a = np.asarray(res[signal]).reshape(len(res.t), -1).astype(bool)
+    n = a.shape[1]
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6.0, 3.6))
+    count = a.sum(axis=1)
+    label = label or signal.rsplit(".", 1)[-1]
+    ax.plot(res.t, count, color="tab:red", lw=1.5)
+    ax.axhline(n, color="0.5", ls="--", lw=1)
+    t_all = first_time_all(res.t, a)
+    if t_all is not None:
+        ax.axvline(t_all, color="0.3", ls=":", lw=1.2)
+        right = t_all > res.t[0] + 0.6 * (res.t[-1] - res.t[0])
+        ax.annotate(f"all {n} {label}\nat t = {t_all:.3g} s", (t_all, 0.05 * n),
+                    xytext=(-4 if right else 4, 0), textcoords="offset points",
+                    fontsize=8, ha="right" if right else "left")
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel(f"{label} agents")
+    ax.grid(True, alpha=0.3)
+    ax.set_title(title or f"{label} agents over time")
+    return ax.figure
+
+
+def _block_waypoints(diagram, name):
+    if diagram is None or name not in getattr(diagram, "blocks", {}):
+        raise ScenarioError(f"'waypoints' names no block '{name}'", entry="figures")
+    b = diagram.blocks[name]
+    b = getattr(b, "block", b)
+    for attr in ("wps", "waypoints", "goals"):
+        if hasattr(b, attr):
+            return np.asarray(getattr(b, attr), float)[..., :2]
+    raise ScenarioError(f"block '{name}' has no waypoints", entry="figures")
+
+
+def _plot_trajectories(res, diagram=None, waypoints=None, obstacles=None, **kw):
+    from ..viz import plot_trajectories
+    if isinstance(waypoints, str):
+        waypoints = _block_waypoints(diagram, waypoints)
+    return plot_trajectories(res, waypoints=waypoints, obstacles=obstacles, **kw)
+
+
+def _plot_signals(res, diagram=None, signals=(), **kw):
+    from ..viz import plot_signals
+    return plot_signals(res, signals, **kw)
+
+
+def _plot_fraction(res, diagram=None, **kw):
+    return plot_fraction(res, **kw)
+
+
+#: Built-in plots for scenario files: ``{plot: name, file: x.png, ...args}``.
+PLOTS = {"trajectories": _plot_trajectories, "signals": _plot_signals,
+         "fraction": _plot_fraction}
+
+
+def save_figure(fig, path, dpi=110):
+    """Save and close a figure; returns the path."""
+    import matplotlib.pyplot as plt
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        fig.tight_layout()
+    except Exception:  # noqa: BLE001 - colour bars can refuse; the file is still fine
+        pass
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+# ------------------------------------------------------------------ hooks
+@dataclass
+class Hooks:
+    """A scenario's ``outcome(res)`` and ``figures(res, out)`` (either None)."""
+
+    outcome: object = None
+    figures: object = None
+
+
+def _suggest(name, known):
+    close = difflib.get_close_matches(str(name), list(known), n=1, cutoff=0.5)
+    return f"did you mean '{close[0]}'? " if close else ""
+
+
+def _n_positional(fn):
+    import inspect
+    try:
+        ps = inspect.signature(fn).parameters.values()
+    except (TypeError, ValueError):
+        return 1
+    return sum(p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD) for p in ps)
+
+
+def scenario_params(ns, overrides):
+    """The parameters a Python scenario runs with: ``make_diagram``'s
+    defaults updated with the ``--set`` values."""
+    import inspect
+    params = {}
+    if callable(ns.get("make_diagram")):
+        for k, p in inspect.signature(ns["make_diagram"]).parameters.items():
+            if p.default is not p.empty:
+                params[k] = p.default
+    params.update({k: v for k, v in (overrides or {}).items()
+                   if not k.startswith("simulation.")})
+    return params
+
+
+def hooks_from_namespace(ns, overrides=None) -> Hooks:
+    """The hooks a Python scenario module defines. ``outcome(res)`` or
+    ``outcome(res, params)``; ``figures(res, out)`` or
+    ``figures(res, out, params)``: ``params`` are the run's parameters."""
+    out, figs = ns.get("outcome"), ns.get("figures")
+    params = scenario_params(ns, overrides)
+    o = f = None
+    if callable(out):
+        o = (lambda res: out(res, params)) if _n_positional(out) >= 2 else out
+    if callable(figs):
+        f = (lambda res, d: figs(res, d, params)) if _n_positional(figs) >= 3 else figs
+    return Hooks(o, f)
+
+
+def hooks_from_report(name, params, base=None) -> Hooks:
+    """Hooks of the built-in case study ``name`` (``report: nest`` in a
+    scenario file) called with the file's parameters; the file's own
+    ``outcome``/``figures`` sections, if any, take precedence."""
+    import importlib
+    mod = importlib.import_module(f"avblocks.scenarios.{name}")
+    full = scenario_params(vars(mod), {})
+    full.update(params)
+    h = hooks_from_namespace(vars(mod), {})
+    o = (lambda res: mod.outcome(res, full)) if h.outcome else None
+    f = (lambda res, out: mod.figures(res, out, full)) if h.figures else None
+    base = base or Hooks()
+    return Hooks(base.outcome or o, base.figures or f)
+
+
+def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>"):
+    """Hooks from a scenario file's ``outcome:`` and ``figures:`` sections
+    (checked now, before any simulation)."""
+    outcome_spec = outcome_spec or []
+    figures_spec = figures_spec or []
+    for sec, spec, reg, key in (("outcome", outcome_spec, METRICS, "metric"),
+                                ("figures", figures_spec, PLOTS, "plot")):
+        if not isinstance(spec, list):
+            raise ScenarioError(f"'{sec}' must be a list of {{{key}: ...}} entries",
+                                file=source, entry=sec)
+        for i, item in enumerate(spec):
+            if not isinstance(item, dict) or key not in item:
+                raise ScenarioError(f"each '{sec}' entry needs '{key}'", file=source,
+                                    entry=f"{sec}[{i}]",
+                                    hint=f"e.g. {{{key}: {next(iter(reg))}, ...}}")
+            if item[key] not in reg:
+                raise ScenarioError(f"unknown {key} '{item[key]}'", file=source,
+                                    entry=f"{sec}[{i}]",
+                                    hint=_suggest(item[key], reg) + f"known: {sorted(reg)}")
+            if sec == "figures" and "file" not in item:
+                raise ScenarioError("each figure needs a 'file' (e.g. trajectories.png)",
+                                    file=source, entry=f"{sec}[{i}]")
+
+    def outcome(res):
+        lines, numbers = [], {}
+        for item in outcome_spec:
+            args = {k: v for k, v in item.items() if k != "metric"}
+            line, nums = METRICS[item["metric"]](res, **args)
+            lines.append(line)
+            numbers.update(nums)
+        return ", ".join(lines), numbers
+
+    def figures(res, out):
+        paths = []
+        for item in figures_spec:
+            args = {k: v for k, v in item.items() if k not in ("plot", "file")}
+            fig = PLOTS[item["plot"]](res, diagram=diagram, **args)
+            paths.append(save_figure(fig, Path(out) / item["file"]))
+        return paths
+
+    return Hooks(outcome if outcome_spec else None, figures if figures_spec else None)
+
+
+def default_figures(res, out, movie_options=None):
+    """The trajectory plot of the first logged pose (or position)."""
+    from ..viz import plot_trajectories
+    options = movie_options or {}
+    keys = [k for k in res.keys() if k.endswith(".pose") or k.endswith(".position")]
+    pose = options.get("pose") if options.get("pose") in res else (keys[0] if keys else None)
+    if pose is None:
+        return []
+    fig = plot_trajectories(res, pose=pose, obstacles=options.get("obstacles"))
+    return [save_figure(fig, Path(out) / "trajectories.png")]
+
+
+def default_outcome(res):
+    n = res.meta.get("agents")
+    return (f"{n} agents simulated for {float(res.t[-1] - res.t[0]):.3g} s",
+            {"agents": n})
+
+
+def _jsonable(o):
+    if isinstance(o, dict):
+        return {str(k): _jsonable(v) for k, v in o.items()}
+    if isinstance(o, (list, tuple)):
+        return [_jsonable(v) for v in o]
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, float) and not np.isfinite(o):
+        return None
+    return o

@@ -1,0 +1,54 @@
+"""The case studies as scenario files give the same runs as their Python
+twins (the modules in avblocks.scenarios)."""
+
+import importlib
+
+import numpy as np
+import pytest
+
+import avblocks as av
+from avblocks.cli import load_any
+from avblocks.scenarios import builtin_scenarios, load_scenario
+
+
+@pytest.mark.parametrize("name, sets", [
+    ("nest", {"agents": 60, "t_final": 8.0}),
+    ("swap", {"agents": 8, "t_final": 8.0}),
+    ("flocking", {"agents": 12, "t_final": 4.0}),
+    ("formation", {"agents": 4, "t_final": 30.0, "dt": 0.05}),   # through the 1st switch
+])
+def test_yaml_and_python_forms_give_the_same_run(name, sets):
+    assert builtin_scenarios()[name].suffix == ".yaml"     # the file is what runs
+    mod = importlib.import_module(f"avblocks.scenarios.{name}")
+    d1, s1 = mod.make_diagram(**sets)
+    r1 = av.simulate(d1, progress=False, **s1)
+    d2, s2, *_ = load_any(name, sets)
+    r2 = av.simulate(d2, progress=False, **s2)
+    np.testing.assert_allclose(r2.t, r1.t)
+    if name == "formation":
+        assert np.ptp(np.asarray(r2["supervisor.mode"])) == 1          # it switched
+    assert len(r2.keys()) >= 2
+    for k in r2.keys():
+        np.testing.assert_allclose(np.asarray(r2[k], float), np.asarray(r1[k], float),
+                                   rtol=0, atol=1e-9, err_msg=k)
+
+
+def test_yaml_scenario_parameters_are_the_python_defaults():
+    import inspect
+    for name in ("nest", "swap", "flocking", "formation"):
+        mod = importlib.import_module(f"avblocks.scenarios.{name}")
+        defaults = {k: p.default for k, p in
+                    inspect.signature(mod.make_diagram).parameters.items()}
+        params = load_scenario(name).data["parameters"]
+        for k, v in params.items():
+            if isinstance(v, str) or defaults[k] is None:
+                assert k in ("tree", "agents") and (defaults[k] in (v, None)), (name, k)
+                continue
+            assert np.allclose(np.asarray(v, float), np.asarray(defaults[k], float)), (name, k)
+
+
+def test_unknown_report_name():
+    sc = load_scenario("nest")
+    sc.data["report"] = "nets"
+    with pytest.raises(av.ScenarioError, match="did you mean 'nest'"):
+        sc.validate()

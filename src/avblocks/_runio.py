@@ -315,13 +315,10 @@ def _guarded_run(args, guard, load_any):
     from .scenarios.report import _jsonable
     outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:
-        from .scenarios._hooks import run_report
         from .scenarios.report import default_outcome
-        extra_files, outcome = run_report(args.target, res, out)
-        files += extra_files
         if hooks is not None and hooks.outcome is not None:
             outcome, numbers = hooks.outcome(res)
-        elif outcome is None:
+        else:
             outcome, numbers = default_outcome(res)
     if interrupted is None and guard.signum is not None:
         interrupted = guard.signal_name

@@ -6,7 +6,7 @@ across runs and resumes (``case_id = ravel_multi_index(index, shape)``).
 
 Override names follow ``avblocks run --set``:
 
-- ``name`` (no dot): a scenario parameter (``followers``, ``gain``, ...);
+- ``name`` (no dot): a scenario parameter (``agents``, ``gain``, ...);
 - ``simulation.<key>``: a simulation setting (``simulation.t_final``);
 - ``block.param`` (any other dotted name): a numeric block parameter, handed
   to ``simulate(params={...})`` (``drive.gain``, ``lf.k_l``).

@@ -32,8 +32,8 @@ import avblocks as av  # noqa: E402
 iterations = int(sys.argv[1]) if len(sys.argv) > 1 else 25
 small = bool(os.environ.get("AVBLOCKS_EXAMPLE_SMALL"))
 if small:
-    iterations = min(iterations, 6)
-n, dt, t_final, rho = 5, 0.02, 10.0 if small else 20.0, 0.05
+    iterations = min(iterations, 4)
+n, dt, t_final, rho = 5, 0.02, 6.0 if small else 20.0, 0.05
 
 leader, l_ref, alpha_ref = av.controllers.formation("wedge", n, 1.5)
 follower = leader >= 0

@@ -171,6 +171,52 @@ def say(msg):
         print(msg, file=sys.stderr, flush=True)
 
 
+def estimate_bytes(compiled, sim) -> int:
+    """Memory a run needs, estimated from the declared ports before anything
+    is allocated: states and outputs (about six copies of the states for
+    the solver stages and two of the outputs) plus the log."""
+    import numpy as np
+    state = sum(np.asarray(v).nbytes for b in compiled.blocks for v in b._init.values())
+    outs = sum(int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize
+               for b in compiled.blocks for p in b._outputs.values()
+               if p.shape is not None)
+    need = 6 * state + 2 * outs
+    try:
+        dt = float(sim.get("dt", 0.01))
+        steps = (float(sim.get("t_final", 10.0)) - float(sim.get("t0", 0.0))) / dt
+        every = max(1, int(sim.get("log_every") or 1))
+        if np.isfinite(steps) and steps > 0:
+            from .core.simulator import default_log
+            log = sim.get("log") or default_log(compiled)
+            log = [log] if isinstance(log, str) else list(log)
+            per = 0
+            for r in log:
+                i, o = compiled.resolve(r)
+                p = compiled.blocks[i]._outputs[o]
+                per += int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize
+            log_bytes = int(steps // every + 1) * per
+            if sim.get("log_every") is None:     # simulate() decimates to the cap
+                log_bytes = min(log_bytes, int(sim.get("max_log_bytes", 2 * 1024**3)))
+            need += log_bytes
+    except (TypeError, ValueError, OverflowError, AvError):
+        pass            # simulate() names the bad setting itself
+    return int(need)
+
+
+def check_memory(diagram, sim):
+    """Refuse, before simulating, a run whose estimate passes the memory
+    limit (``AVBLOCKS_MAX_MEMORY``), with the figure."""
+    from .scenarios.loader import memory_limit
+    need = estimate_bytes(diagram.build(), sim)
+    lim = memory_limit()
+    if need > lim:
+        raise AvError(f"this run would need about {need / 1e9:.3g} GB "
+                      f"(states, outputs and log)",
+                      expected=f"<= {lim / 1e9:.3g} GB (AVBLOCKS_MAX_MEMORY)",
+                      hint="use fewer agents, a shorter run, or decimate the log "
+                           "(--set simulation.log_every=10)")
+
+
 def safe_name(name) -> str:
     """A scenario name made safe as one folder name (no separators, no
     leading dots): it names ``avblocks-out/<name>`` when ``--out`` is not given."""
@@ -214,6 +260,8 @@ def _guarded_run(args, guard, load_any):
         from .interfaces.ros2.cli import apply as _robots
         _robots(args, d, sim)
     sim.setdefault("t_final", 10.0)
+    if getattr(args, "live", False):  # live view in the browser (avblocks.viz.live)
+        sim["live"] = {"host": args.live_host, "port": args.live_port}
     out = prepare_output(args.out or Path("avblocks-out") / safe_name(name))
     movie_path = None
     if args.movie:
@@ -223,6 +271,7 @@ def _guarded_run(args, guard, load_any):
             movie_path = out / movie_path      # movies land under the output folder
         check_movie_path(movie_path)           # suffix and extra, before simulating
         prepare_output(movie_path.parent)
+    check_memory(d, sim)
     t0 = time.perf_counter()
     failed = None
     res = None
@@ -268,13 +317,10 @@ def _guarded_run(args, guard, load_any):
     from .scenarios.report import _jsonable
     outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:
-        from .scenarios._hooks import run_report
         from .scenarios.report import default_outcome
-        extra_files, outcome = run_report(args.target, res, out)
-        files += extra_files
         if hooks is not None and hooks.outcome is not None:
             outcome, numbers = hooks.outcome(res)
-        elif outcome is None:
+        else:
             outcome, numbers = default_outcome(res)
     if interrupted is None and guard.signum is not None:
         interrupted = guard.signal_name

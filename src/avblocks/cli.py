@@ -207,6 +207,11 @@ def build_parser():
     r.add_argument("--t-final", type=float, dest="t_final", help="simulated time [s]")
     r.add_argument("--realtime", type=float, help="pace to the wall clock (1.0 = real time)")
     r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--live", action="store_true",
+                   help="draw and steer the run in the browser (prints the URL)")
+    r.add_argument("--live-host", default="127.0.0.1",
+                   help="interface for --live (default 127.0.0.1 only)")
+    r.add_argument("--live-port", type=int, default=0, help="port for --live (0: free)")
     r.add_argument("--backend", choices=("numpy", "jax"),
                    help="engine: numpy (default) or jax (compiled; pure blocks only)")
     r.set_defaults(fn=cmd_run)

@@ -353,3 +353,56 @@ def test_gossip_reads_radius_and_loss_live(cls):
     assert informed() == [True, True]
     b.set_parameter("p_loss", 1.0)
     assert informed() == [True, False]
+
+
+# blocks whose functions use NumPy-only libraries (k-d trees, shapely,
+# ray casting): their parameters change NumPy runs only
+NUMPY_ONLY = {"controllers.Coverage", "environment.Broadcast", "environment.Collision",
+              "environment.CommChannel", "environment.Gossip", "environment.Neighbors",
+              "environment.RangeSensor", "environment.TargetDetection"}
+TRACEABLE = [n for n in WITH_PARAMS if n not in NUMPY_ONLY]
+
+
+@pytest.mark.slow
+@pytest.mark.jax
+@pytest.mark.parametrize("name", TRACEABLE)
+def test_parameters_trace_as_jax_arguments(name):
+    """With every parameter handed in as a traced argument of ``jax.jit``
+    (``bound_parameters``), outputs, derivatives and updates equal the
+    NumPy ones at the same values: nothing was baked in at construction."""
+    jax = pytest.importorskip("jax")
+    jax.config.update("jax_enable_x64", True)
+    import jax.numpy as jnp
+
+    from avblocks.core.params import bound_parameters
+    d, blk = _diagram(name)
+    d.build()                       # configure shape-polymorphic blocks
+    u = _inputs_for(name, blk)
+    x = blk.initial_state()
+    vals = {p: _perturbed(s, blk.get_parameter(p)) for p, s in blk.parameters.items()}
+
+    def fns(xp, xx, uu):
+        out = {"y": blk.output(0.1, xx, {k: uu[k] for k in blk.feedthrough}, xp)}
+        if blk.has_derivative:
+            out["dx"] = blk.derivative(0.1, xx, uu, xp)
+        if blk.has_update:
+            kw = {"y": out["y"]} if blk.update_uses_outputs else {}
+            out["up"] = blk.update(0.1, xx, uu, xp, **kw)
+        return out
+
+    @jax.jit
+    def traced(v):
+        with bound_parameters([(blk, v)]):
+            return fns(jnp, jax.tree_util.tree_map(jnp.asarray, x),
+                       jax.tree_util.tree_map(jnp.asarray, u))
+
+    got = traced({k: jnp.asarray(v) for k, v in vals.items()})
+    with bound_parameters([(blk, vals)]):
+        want = fns(np, x, u)
+    for part in want:
+        for k, v in want[part].items():
+            if part == "up" and blk.random_states:
+                continue    # random draws differ between backends by design
+            np.testing.assert_allclose(np.asarray(got[part][k], dtype=float),
+                                       np.asarray(v, dtype=float), rtol=1e-9, atol=1e-12,
+                                       err_msg=f"{name} {part}.{k}")

@@ -12,7 +12,10 @@ import pytest
 import avblocks as av
 from avblocks.core.errors import CompileError, ParameterError, SimulationError
 
-jax = pytest.importorskip("jax")
+if os.environ.get("CI"):
+    import jax  # in CI the jax extra is installed: never skip
+else:
+    jax = pytest.importorskip("jax")
 jnp = jax.numpy
 pytestmark = pytest.mark.jax
 
@@ -309,7 +312,7 @@ def _fd(fun, x, h):
 def test_gradients_match_central_differences_of_the_numpy_engine():
     d, p0 = goto(n=3)
     goal = d.build().blocks[d.build().index("law")].goal
-    kw = dict(t_final=2.0, dt=0.01, solver="rk4", log=["fleet.pose"], log_every=10)
+    kw = dict(t_final=1.0, dt=0.01, solver="rk4", log=["fleet.pose"], log_every=10)
 
     def cost_np(res):
         P = res["fleet.pose"]

@@ -238,3 +238,19 @@ def test_huge_generated_arrays_are_refused_with_the_figure(tmp_path, monkeypatch
     with pytest.raises(ScenarioError, match=r"zeros would take 2.4e-06 GB.*<= 1e-06 GB"):
         load_scenario(write(tmp_path, BASE.replace("parameters: {n: 2}",
                                                    "parameters: {n: 100}"))).build()
+
+
+def test_cli_estimates_the_run_memory_before_simulating(tmp_path, capsys, monkeypatch):
+    from avblocks._runio import estimate_bytes
+    sc = load_scenario("waypoints").with_overrides({"agents": 200})
+    d, sim = sc.build()
+    need = estimate_bytes(d.build(), sim)
+    # the log alone: 200 poses x 3 float64 per sample, t_final / dt + 1 samples
+    samples = round(sim["t_final"] / sim["dt"]) // sim.get("log_every", 1) + 1
+    assert need >= samples * 200 * 3 * 8
+    assert need < 1.5 * samples * 200 * 3 * 8 + 1e6
+    monkeypatch.setenv("AVBLOCKS_MAX_MEMORY", str(need // 2))
+    rc, _o, err = run(["waypoints", "--set", "agents=200", "--out", str(tmp_path / "o")],
+                      capsys)
+    assert rc == 2 and f"about {need / 1e9:.3g} GB" in err
+    assert not (tmp_path / "o" / "results.nc").exists()

@@ -33,6 +33,7 @@ def ut():
     return uav_tracking
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("physics", ["mujoco", "model"])
 def test_drone_keeps_the_vehicle_in_view(ut, physics):
     d, sim = ut.make_diagram(t_final=12.0, physics=physics, scene_view=False)

@@ -128,7 +128,7 @@ def test_signal_mid_run_stops_every_robot_and_saves_results(router, tmp_path, si
         stdout, stderr = p.communicate(timeout=30)
         time.sleep(0.3)
         recs = read_log(log)
-    assert p.returncode == 0, stderr
+    assert p.returncode == 128 + sig, stderr          # the CLI's convention
     for r in ("tb1", "tb2", "tb3"):
         last = commands(recs, r)[-1]
         assert last["v"] == 0 and last["w"] == 0 and last["wall"] > t_sig

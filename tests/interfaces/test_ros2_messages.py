@@ -11,6 +11,8 @@ import time
 import numpy as np
 import pytest
 
+import avblocks as av
+
 from .conftest import _need
 
 
@@ -102,3 +104,39 @@ def test_rmw_zenoh_attachment_and_liveliness_tokens(router):
         if link is not None:
             link.close()
         peer.close()
+
+
+def test_bad_arguments_are_named():
+    from avblocks.interfaces.ros2 import Robots
+    for kw, word in (({"kind": "tank"}, "kind"), ({"transport": "dds"}, "transport"),
+                     ({"arena": (1, 0, 0, 1)}, "arena"), ({"timeout": 0.0}, "timeout"),
+                     ({"mocap_transform": (1, 2)}, "mocap_transform")):
+        with pytest.raises(av.AvError, match=word):
+            Robots(["tb1"], **kw)
+    with pytest.raises(av.AvError, match="unique"):
+        Robots(["tb1", "tb1"])
+
+
+def test_rclpy_transport_without_ros2_fails_cleanly_at_start():
+    from avblocks.interfaces.ros2 import _rclpy, robots
+    if _rclpy.available():
+        pytest.skip("rclpy is installed here: the clean-failure path does not apply")
+    b = robots.Robots(["tb1"], transport="rclpy")
+    with pytest.raises(av.AvError, match="rclpy is not importable"):
+        b.on_start()
+
+
+def test_swap_checks_ports():
+    from avblocks.interfaces.ros2 import Robots, replace_block, robots_like
+    from avblocks.scenarios import formation
+    d, _ = formation.make_diagram(followers=2, dt=0.05)
+    with pytest.raises(av.AvError, match="3 vehicles but 2 robot names"):
+        robots_like(d["fleet"].block, "tb1,tb2")
+    with pytest.raises(av.AvError, match="cmd"):
+        replace_block(d, "fleet", Robots(["a", "b", "c"], kind="holonomic2d"))
+    with pytest.raises(av.AvError, match="estop"):
+        replace_block(d, "fleet", Robots(["a", "b", "c"], estop=True))
+    r = robots_like(d["fleet"].block, "a,b,c", v_max=0.3)
+    replace_block(d, None, r)
+    assert d["fleet"].block is r and r.v_max.tolist() == [0.3] * 3
+    d.build()

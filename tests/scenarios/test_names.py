@@ -10,7 +10,6 @@ import avblocks as av
 from avblocks.cli import load_any, main
 from avblocks.scenarios import builtin_scenarios, load_scenario
 
-
 #: one drone tracking one robot: no agent count to change
 SINGLE = {"uav_tracking"}
 

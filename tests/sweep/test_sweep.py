@@ -311,3 +311,38 @@ def test_builtin_metrics_against_direct_computation():
     assert M["path_length"](res) == pytest.approx(steps.sum(0).mean())
     with pytest.raises(av.sweep.MetricError, match="needs a logged signal named"):
         M["final_order"](res)
+
+
+@pytest.mark.slow          # JAX compiles in each worker process
+def test_ensemble_sweep_matches_numpy_runs(client, serial, tmp_path):
+    if not os.environ.get("CI"):
+        pytest.importorskip("jax")
+    out = tmp_path / "e.zarr"
+    grid = {"ctl.k": [0.5, 2.0], "goal": [1.0]}
+    study = av.sweep(SCEN, grid=grid, seeds=SEEDS, metrics=metrics(), out=str(out),
+                     fixed=FIXED, scheduler=client, ensemble=True, summary=False,
+                     plot=False)
+    assert study.counts() == {"done": 8, "failed": 0, "missing": 0}
+    recs = study.records()
+    assert {r["ensemble"] for r in recs.values()} == {SEEDS}     # one task per grid point
+    ds = study.to_xarray()
+    for k in grid["ctl.k"]:
+        for s in range(SEEDS):
+            fd, gap, fx = serial[(k, 1.0, s)]
+            case = ds.sel({"ctl.k": k, "goal": 1.0, "seed": s})
+            np.testing.assert_allclose(case["final_x"].values, fx, rtol=0, atol=1e-12)
+            assert abs(float(case["final_distance"]) - fd) < 1e-12
+    # a scenario JAX cannot trace is refused before any task
+    with pytest.raises(SweepError, match="traceable"):
+        av.sweep("formation", grid={"gain": [1.0]}, fixed={"followers": 1},
+                 out=str(tmp_path / "no.zarr"), scheduler=client, ensemble=True)
+
+
+def test_progress_is_silent_off_a_terminal(capsys):
+    from avblocks.sweep.runner import _Progress
+    bar = _Progress(5, None)              # pytest's stderr is not a terminal
+    for s in ("done", "failed", "done"):
+        bar.update(s)
+    bar.close()
+    assert bar.bar is None and (bar.done, bar.failed) == (2, 1)
+    assert capsys.readouterr().err == ""

@@ -57,32 +57,57 @@ def min_norm_qp(u_nom, a, b, mask, xp=np, tol=1e-9):
     """Exact ``argmin |u - u_nom|^2 s.t. a_k . u <= b_k`` (k where ``mask``).
 
     ``u_nom`` (N, D), ``a`` (N, K, D), ``b`` (N, K), ``mask`` (N, K) bool.
-    Enumerates active sets of size <= D (see the module docstring).
+    Enumerates active sets of size <= D (see the module docstring). A set of
+    ``D`` constraints is solved as the square system ``A_s u = b_s`` itself
+    (the vertex), not through its Gram matrix, whose condition number is
+    the square of it: nearly antiparallel constraints (the corner of a thin
+    wedge) stay exact. Feasibility is tested to ``tol`` relative to the size
+    of each constraint (``|a_k| |u| + |b_k|``).
     """
     n, k, dim = a.shape
     big = 1e300
     bm = xp.where(mask, b, big)
     a = xp.where(mask[..., None], a, 0.0)
+    b0 = xp.where(mask, b, 0.0)
     cands, valid = [u_nom], [xp.ones(n, dtype=bool)]
     for s in _subsets(k, dim):
         a_s = a[:, s, :]                                   # (N, m, D)
-        r = xp.sum(a_s * u_nom[:, None, :], axis=-1) - xp.where(mask[:, s], b[:, s], 0.0)
+        b_s = b0[:, s]
+        m = len(s)
+        if m == dim:
+            # the vertex: A_s u = b_s (condition number of A_s, not A_s A_s^T)
+            if dim == 2:
+                det = a_s[:, 0, 0] * a_s[:, 1, 1] - a_s[:, 0, 1] * a_s[:, 1, 0]
+                scale = (xp.sqrt(xp.sum(a_s[:, 0] ** 2, -1))
+                         * xp.sqrt(xp.sum(a_s[:, 1] ** 2, -1)))
+                det_ok = xp.abs(det) > 1e-13 * scale
+                dd = xp.where(det_ok, det, 1.0)
+                u = xp.stack([(a_s[:, 1, 1] * b_s[:, 0] - a_s[:, 0, 1] * b_s[:, 1]) / dd,
+                              (a_s[:, 0, 0] * b_s[:, 1] - a_s[:, 1, 0] * b_s[:, 0]) / dd],
+                             axis=-1)
+            else:
+                det = xp.linalg.det(a_s)
+                scale = xp.prod(xp.sqrt(xp.sum(a_s ** 2, -1)), axis=-1)
+                det_ok = xp.abs(det) > 1e-13 * scale
+                as_ = xp.where(det_ok[:, None, None], a_s, xp.eye(m))
+                u = xp.linalg.solve(as_, b_s[..., None])[..., 0]
+            # a vertex is the optimum of its set only when the multipliers
+            # are >= 0; the nearest-feasible choice below settles that
+            good = xp.all(mask[:, s], axis=1) & det_ok
+            cands.append(xp.where(good[:, None], u, u_nom))
+            valid.append(good)
+            continue
+        r = xp.sum(a_s * u_nom[:, None, :], axis=-1) - b_s
         g = xp.einsum("nid,njd->nij", a_s, a_s)             # (N, m, m)
-        if len(s) == 1:
-            det_ok = g[:, 0, 0] > 1e-12
+        if m == 1:
+            det_ok = g[:, 0, 0] > 1e-300
             lam = (r[:, 0] / xp.where(det_ok, g[:, 0, 0], 1.0))[:, None]
-        elif len(s) == 2:                                  # 2x2 in closed form
+        else:                                              # m = 2 < D = 3
             det = g[:, 0, 0] * g[:, 1, 1] - g[:, 0, 1] * g[:, 1, 0]
-            det_ok = xp.abs(det) > 1e-9 * g[:, 0, 0] * g[:, 1, 1]
+            det_ok = xp.abs(det) > 1e-13 * g[:, 0, 0] * g[:, 1, 1]
             dd = xp.where(det_ok, det, 1.0)
             lam = xp.stack([(g[:, 1, 1] * r[:, 0] - g[:, 0, 1] * r[:, 1]) / dd,
                             (g[:, 0, 0] * r[:, 1] - g[:, 1, 0] * r[:, 0]) / dd], axis=-1)
-        else:
-            det = xp.linalg.det(g)
-            scale = xp.prod(xp.diagonal(g, axis1=1, axis2=2), axis=-1)
-            det_ok = xp.abs(det) > 1e-9 * scale
-            gs = xp.where(det_ok[:, None, None], g, xp.eye(len(s)))
-            lam = xp.linalg.solve(gs, r[..., None])[..., 0]
         good = xp.all(mask[:, s], axis=1) & det_ok
         cands.append(xp.where(good[:, None], u_nom - xp.sum(lam[..., None] * a_s, axis=1),
                               u_nom))
@@ -90,7 +115,11 @@ def min_norm_qp(u_nom, a, b, mask, xp=np, tol=1e-9):
     c = xp.stack(cands, axis=1)                            # (N, C, D)
     ok = xp.stack(valid, axis=1)                           # (N, C)
     viol = xp.einsum("nkd,ncd->nck", a, c) - bm[:, None, :]   # (N, C, K)
-    worst = xp.max(xp.where(mask[:, None, :], viol, -big), axis=-1)
+    anorm = xp.sqrt(xp.sum(a * a, axis=-1))                # (N, K)
+    cnorm = xp.sqrt(xp.sum(c * c, axis=-1))                # (N, C)
+    size = anorm[:, None, :] * cnorm[:, :, None] + xp.abs(b0)[:, None, :] + 1.0
+    rel = viol / size
+    worst = xp.max(xp.where(mask[:, None, :], rel, -big), axis=-1)
     worst = xp.where(ok, worst, big)
     dist = xp.sum((c - u_nom[:, None, :]) ** 2, axis=-1)
     dist = xp.where(ok & (worst <= tol), dist, xp.inf)

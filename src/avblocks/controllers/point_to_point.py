@@ -98,7 +98,12 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     e2 = ex * ex + ey * ey
     k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
     wx, wy = k * ex, k * ey
-    cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
+    if xp is np:                        # same values, fewer temporaries
+        cmd = np.empty((th.shape[0], 2))
+        np.add(c * wx, s * wy, out=cmd[:, 0])
+        np.multiply(c * wy - s * wx, 1.0 / d, out=cmd[:, 1])
+    else:
+        cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
     if radius is None:
         return cmd
     return cmd, e2 <= radius * radius
@@ -203,6 +208,8 @@ class PointToPoint(Block):
 
     def update(self, t, x, u, xp, y):
         wp, reached = x["wp"], y["arrived"]
+        if self._single:                # one waypoint: it is the last one
+            return {"wp": wp, "done": x["done"] | reached}
         last = wp == self._last
         return {"wp": xp.where(reached & ~last, wp + 1, wp),
                 "done": x["done"] | (reached & last)}

@@ -4,7 +4,9 @@ The major step
 --------------
 With major step ``h`` and ``t_k = t0 + k h``, the simulator does::
 
-    init:   X <- initial states (random keys seeded from seed and block path)
+    init:   on_start of side-effect blocks (an interface block connects and
+               may set its initial state from the robots' first poses)
+            X <- initial states (random keys seeded from seed and block path)
             Y <- outputs of every block at t0          (initial outputs)
             side effects at t0; log k = 0
     repeat for k = 0 .. K-1:
@@ -41,6 +43,7 @@ import time as _time
 
 import numpy as np
 
+from . import codegen
 from . import rng as _rng
 from .diagram import CompiledDiagram, Diagram, PortRef
 from .engine import Engine
@@ -123,6 +126,7 @@ class Simulator:
                            for nm, p in diagram.blocks[i]._dstates.items()
                            if np.issubdtype(np.dtype(p.dtype), np.inexact)]
         self._side = [i for i, b in enumerate(diagram.blocks) if b.side_effects]
+        self._fcheck = self.check_finite and bool(self._fx_state or self._fx_dstate)
         # variable-step solvers may integrate across several major steps when
         # only periodic blocks have discrete states and nothing has side effects
         self._span = (not self.solver.fixed_step and hasattr(self.solver, "integrate")
@@ -135,10 +139,15 @@ class Simulator:
         #: ``[(t, "block.name", value as list)]``: changes made during the run.
         self.param_changes = []
         self._queue = []
+        self._fast = None       # generated major step (see codegen), set by init()
         self.k = 0
         self.X = None
         self.Y = None
         self._Yprev = None
+
+    #: Use the major step generated once per diagram (:mod:`.codegen`) for
+    #: Euler and RK4; ``False`` runs the generic engine (same results).
+    use_codegen = True
 
     # --------------------------------------------------------------- state
     @property
@@ -223,6 +232,9 @@ class Simulator:
         self.X = self.initial_states()
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
+        self._fast = None
+        if self.use_codegen and codegen.supported(self.solver):
+            self._fast = codegen.make_step(self.eng, self.solver)
         self._check_declared()
         self._check(self.t0)
         self.check_outputs(self.t0)
@@ -332,6 +344,20 @@ class Simulator:
             self.Y = self._guard(eng.major_outputs, self.t, self.X, self.Y, eng.hits(k))
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
+        fast = self._fast
+        if fast is not None:
+            try:
+                self.X, self.Y = fast(self.X, self.Y, t, t1, k, h)
+            except AvError:
+                raise
+            except Exception as e:  # noqa: BLE001 - add the block context
+                raise self._wrap(e, t) from e
+            self.k = k + 1
+            if self._fcheck:
+                self._check(t1)
+            if self._side:
+                self._side_effects()
+            return
         try:
             if self._queue:                  # inside a span: no discrete event
                 X = self._queue.pop()
@@ -448,7 +474,7 @@ def _progress_wanted(progress):
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,
              seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
              max_log_bytes=2 * 1024**3, params=None, x0=None, backend="numpy",
-             **backend_options):
+             live=False, **backend_options):
     """Simulate ``diagram`` from ``t0`` to ``t_final`` and return :class:`Results`.
 
     Parameters
@@ -492,6 +518,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         solvers and traceable blocks only, no ``realtime``; it takes the
         option ``dtype="float32"`` (default ``"float64"``). A second run of
         the same structure with other numeric values does not recompile.
+    live : bool or dict
+        Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
+        (URL printed, with a token) that draws and steers the run; a dict
+        passes options to :class:`avblocks.viz.live.LiveView`. Paced to real
+        time unless ``realtime`` says otherwise. NumPy backend only.
 
     Returns
     -------
@@ -499,6 +530,15 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         Logged signals; on failure the :class:`SimulationError` carries the
         results logged so far in ``err.results``.
     """
+    if live:  # --- live view hook (avblocks.viz.live owns the loop) ---
+        if backend != "numpy" or backend_options:
+            raise ParameterError("live=True runs the NumPy backend step by step",
+                                 param="backend", expected="'numpy'", found=backend)
+        from ..viz.live import simulate_live
+        return simulate_live(diagram, t_final, dt, solver, live=live, log=log,
+                             log_every=log_every, seed=seed, t0=t0, realtime=realtime,
+                             check_finite=check_finite, max_log_bytes=max_log_bytes,
+                             params=params, x0=x0)
     if backend != "numpy":
         if backend != "jax":
             raise ParameterError("unknown backend", param="backend",
@@ -542,6 +582,10 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+#: Most major steps one run may take (beyond it: refused, not hung).
+MAX_STEPS = 10**10
+
+
 def _seed(seed):
     from .params import integer
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
@@ -571,6 +615,11 @@ def whole_steps(t0, t_final, dt):
         raise ParameterError("t_final must be >= t0", param="t_final",
                              expected=f">= {t0:g}", found=t_final)
     steps = span / dt
+    if not steps <= MAX_STEPS:
+        raise ParameterError(f"the run would take {steps:.3g} major steps",
+                             param="dt", expected=f"<= {MAX_STEPS:.0e} steps",
+                             found=f"(t_final - t0) / dt = {steps:.3g}",
+                             hint="a larger dt or a shorter run")
     n = int(round(steps))
     if abs(steps - n) > 1e-9 * max(1.0, steps):
         lo, hi = math.floor(steps), math.ceil(steps)
@@ -656,8 +705,13 @@ def _run(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params
                 hint=(f"log_every={fit} fits (or log fewer signals, or raise "
                       "max_log_bytes)" if fit is not None else
                       "log fewer signals: even two samples do not fit"))
-    bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
-    tlog = np.empty(nlog)
+    try:
+        bufs = [np.empty((nlog, *p.shape), dtype=p.dtype) for p in specs]
+        tlog = np.empty(nlog)
+    except (MemoryError, ValueError):
+        raise ParameterError(f"the log ({need / 1e9:.3g} GB) does not fit in memory",
+                             param="log", hint="log fewer signals or decimate with "
+                                                "log_every") from None
     meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": sim.seed,
             "t0": sim.t0, "t_final": sim.t0 + nsteps * sim.dt,
             "log_every": log_every, "steps": nsteps,

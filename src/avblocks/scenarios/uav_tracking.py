@@ -275,18 +275,32 @@ def movie_frames(res):
         yield np.concatenate([v, np.full((v.shape[0], 4, 3), 255, np.uint8), pad], axis=1)
 
 
-def report(res, out):
-    """Write the plot and the movie; return (files, outcome line).
+def outcome(res, params=None):
+    """One line and its numbers: horizontal tracking error, frames with the
+    blob found, frames with the vehicle in view (``avblocks run`` prints it
+    and writes it to summary.json)."""
+    err = tracking_error(res)
+    seen = res["tracker.found"][:, 0]
+    height, width = res["camera.image"].shape[2:4]
+    vis, _ = in_view(res, width, height)
+    rms = float(np.sqrt(np.mean(err**2)))
+    line = (f"tracking: max horizontal error {err.max():.2f} m, RMS {rms:.2f} m, blob "
+            f"found in {seen.mean() * 100:.0f} % of frames, vehicle in view in "
+            f"{vis.mean() * 100:.0f} %")
+    return line, {"max_error_m": float(err.max()), "rms_error_m": rms,
+                  "found_fraction": float(seen.mean()), "in_view_fraction": float(vis.mean())}
 
-    ``avblocks run`` calls it after the run (see :mod:`avblocks.scenarios._hooks`)."""
+
+def figures(res, out, params=None):
+    """Write ``tracking_error.png`` and ``tracking.mp4`` (scene view | drone
+    camera, tracked blob boxed; needs the movie extra) under ``out``; return
+    the paths."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     out = Path(out)
     err = tracking_error(res)
     seen = res["tracker.found"][:, 0]
-    height, width = res["camera.image"].shape[2:4]
-    vis, _ = in_view(res, width, height)
     fig, ax = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
     ax[0].plot(res.t, err, label="horizontal error |p_uav - p_vehicle|")
     est_err = np.linalg.norm(res["follow.estimate"][:, 0, :2] - res["target.pose"][:, 0, :2],
@@ -313,7 +327,9 @@ def report(res, out):
         files.append(mp4)
     except Exception as e:  # noqa: BLE001 - the movie is optional (ffmpeg extra)
         print(f"(no movie: {e})")
-    line = (f"tracking: max horizontal error {err.max():.2f} m, RMS {np.sqrt(np.mean(err**2)):.2f}"
-            f" m, blob found in {seen.mean() * 100:.0f} % of frames, vehicle in view in "
-            f"{vis.mean() * 100:.0f} %")
-    return files, line
+    return files
+
+
+def report(res, out):
+    """``(files, outcome line)``: :func:`figures` and :func:`outcome` together."""
+    return figures(res, out), outcome(res)[0]

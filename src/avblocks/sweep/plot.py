@@ -48,15 +48,20 @@ def plot_study(study, folder=None) -> list:
             N = n_ok.transpose(b, a).values
             finite = M[np.isfinite(M)]
             mid = (finite.min() + finite.max()) / 2 if finite.size else 0
+            n_done = (ds["status"] == "done").sum("seed").transpose(b, a).values
             for j in range(M.shape[0]):
                 for i in range(M.shape[1]):
-                    txt = (f"{M[j, i]:.3g}\n±{S[j, i]:.2g}" if np.isfinite(M[j, i])
-                           else "failed")
+                    if np.isfinite(M[j, i]):
+                        txt = f"{M[j, i]:.3g}\n±{S[j, i]:.2g}"
+                    elif n_done[j, i] == 0:
+                        txt = "failed"
+                    else:                   # ran, but the metric is NaN (never done)
+                        txt = f"NaN\n(0/{len(sp.seeds)})"
                     if np.isfinite(M[j, i]) and N[j, i] < len(sp.seeds):
                         txt += f"\n({N[j, i]}/{len(sp.seeds)})"
+                    dark = np.isfinite(M[j, i]) and M[j, i] <= mid
                     ax.text(i, j, txt, ha="center", va="center", fontsize=8,
-                            color="black" if np.isfinite(M[j, i]) and M[j, i] > mid
-                            else "white")
+                            color="white" if dark else "black")
             fig.colorbar(im, ax=ax, label=f"{m} (mean over {len(sp.seeds)} seeds)")
         elif len(gdims) == 0:
             v = da.astype(float).values.ravel()

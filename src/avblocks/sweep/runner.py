@@ -206,7 +206,9 @@ def execute(spec: Spec, todo, out, client, progress=None, on_result=None) -> dic
         bar.close()
         counts["wall_s"] = 0.0
         return counts
-    [spec_f] = client.scatter([spec.data], broadcast=True, hash=False)
+    # the definition (a few kB) travels inside each task rather than scattered
+    # once: a scattered copy dies with the workers that hold it
+    spec_f = spec.data
     threads = sum(client.nthreads().values()) or 1
     window = max(4, 3 * threads)
     inflight = {}

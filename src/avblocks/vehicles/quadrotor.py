@@ -31,7 +31,19 @@ gives::
 ``"x"`` frame: a = (45, 135, 225, 315) deg (front-left, back-left,
 back-right, front-right). In both, s = (-1, +1, -1, +1): rotors 1 and 3
 spin counter-clockwise seen from above (reaction torque -z), 2 and 4
-clockwise. Rotor thrusts are clipped to ``[0, rotor_max]``.
+clockwise. Body axes: x forward, y left, z up.
+
+Real airframes number their motors differently; name them to use their
+order directly (rotor i of ``f`` is that airframe's motor i):
+
+* ``"crazyflie"`` (Bitcraze Crazyflie 2.x): M1 front-right, M2 back-right,
+  M3 back-left, M4 front-left, a = (315, 225, 135, 45) deg; M1 and M3
+  counter-clockwise, M2 and M4 clockwise, s = (-1, +1, -1, +1).
+* ``"px4"`` (PX4 "Generic Quadrotor x"): 1 front-right, 2 back-left,
+  3 front-left, 4 back-right, a = (315, 135, 45, 225) deg; 1 and 2
+  counter-clockwise, 3 and 4 clockwise, s = (-1, -1, +1, +1).
+
+Rotor thrusts are clipped to ``[0, rotor_max]``.
 
 References
 ----------
@@ -64,13 +76,25 @@ from ._rotations import (
 )
 
 _ANGLES = {"+": np.deg2rad([0.0, 90.0, 180.0, 270.0]),
-           "x": np.deg2rad([45.0, 135.0, 225.0, 315.0])}
-_SPIN = np.array([-1.0, 1.0, -1.0, 1.0])
+           "x": np.deg2rad([45.0, 135.0, 225.0, 315.0]),
+           # Bitcraze Crazyflie 2.x: M1 front-right, M2 back-right, M3 back-left,
+           # M4 front-left; M1 and M3 counter-clockwise, M2 and M4 clockwise
+           "crazyflie": np.deg2rad([315.0, 225.0, 135.0, 45.0]),
+           # PX4 "Generic Quadrotor x": 1 front-right, 2 back-left, 3 front-left,
+           # 4 back-right; 1 and 2 counter-clockwise, 3 and 4 clockwise
+           "px4": np.deg2rad([315.0, 135.0, 45.0, 225.0])}
+# s_i: -1 counter-clockwise seen from above (reaction torque -z), +1 clockwise
+_SPINS = {"+": np.array([-1.0, 1.0, -1.0, 1.0]),
+          "x": np.array([-1.0, 1.0, -1.0, 1.0]),
+          "crazyflie": np.array([-1.0, 1.0, -1.0, 1.0]),
+          "px4": np.array([-1.0, -1.0, 1.0, 1.0])}
+_SPIN = _SPINS["x"]
 
 
 def _unit_mixer(frame):
     a = _ANGLES[frame]
-    b = np.stack([np.ones(4), np.round(np.sin(a), 15), -np.round(np.cos(a), 15), _SPIN])
+    b = np.stack([np.ones(4), np.round(np.sin(a), 15), -np.round(np.cos(a), 15),
+                  _SPINS[frame]])
     inv = np.linalg.inv(b)
     mats = (b, np.where(np.abs(inv) < 1e-12, 0.0, inv))
     for m in mats:
@@ -85,7 +109,7 @@ def mixer_matrix(frame="x"):
     """The 4x4 unit mixer B: ``(T, tau_x/l, tau_y/l, tau_z/k_m) = B f`` (read-only)."""
     if frame not in _MIXERS:
         raise ParameterError("unknown rotor frame", block="Quadrotor", param="frame",
-                             expected="'x' or '+'", found=frame)
+                             expected=f"one of {sorted(_MIXERS)}", found=frame)
     return _MIXERS[frame][0]
 
 
@@ -196,8 +220,8 @@ class Quadrotor(Block):
     gravity : float
         [m/s^2], default 9.81.
     input : {"wrench", "rotors"}
-    frame : {"x", "+"}
-        Rotor layout (``input="rotors"``).
+    frame : {"x", "+", "crazyflie", "px4"}
+        Rotor layout and motor order (``input="rotors"``; see the module notes).
     arm_length : float or (N,)
         Rotor distance from the centre l [m], default 0.2.
     yaw_coeff : float or (N,)

@@ -28,7 +28,28 @@ def unicycle_rhs(pose, cmd, xp=np):
     """Pose derivative of N unicycles: ``pose`` (N, 3), ``cmd`` (N, 2) -> (N, 3)."""
     th = pose[:, 2]
     v = cmd[:, 0]
+    if xp is np:                        # same values, fewer temporaries
+        out = np.empty((th.shape[0], 3))
+        np.multiply(v, np.cos(th), out=out[:, 0])
+        np.multiply(v, np.sin(th), out=out[:, 1])
+        out[:, 2] = cmd[:, 1]
+        return out
     return columns(xp, v * xp.cos(th), v * xp.sin(th), cmd[:, 1])
+
+
+def wrapped_pose(p, xp=np):
+    """``(x, y, wrap_angle(theta))`` of poses (N, 3)."""
+    if xp is np:
+        th = p[:, 2]
+        if th.max() <= np.pi and th.min() > -np.pi:
+            # already in (-pi, pi]: wrapping is the identity there, bit for
+            # bit; the state array itself is returned (nothing writes into
+            # states or outputs)
+            return p
+        out = p.copy()
+        out[:, 2] = th - (2 * np.pi) * np.ceil((th - np.pi) * (0.5 / np.pi))
+        return out
+    return columns(xp, p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp))
 
 
 def clip_cmd(cmd, v_max, omega_max, xp=np):
@@ -97,8 +118,7 @@ class Unicycle(Block):
                                 doc="command exceeds the limit (cmd is feedthrough)")
 
     def output(self, t, x, u, xp):
-        p = x["pose"]
-        y = {"pose": columns(xp, p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp))}
+        y = {"pose": wrapped_pose(x["pose"], xp)}
         if self.saturation_output:
             lim = xp.stack([self.v_max, self.omega_max], axis=-1)
             y["saturated"] = xp.abs(u["cmd"]) > lim

@@ -96,7 +96,7 @@ class Program:
         self.log_idx = list(log_idx)
         self.solver = solver
         self.x64 = bool(x64)
-        with jax.enable_x64(self.x64):
+        with _jax.x64(self.x64):
             canon = jax.dtypes.canonicalize_dtype
             self.eng = TracedEngine(compiled, dt, jax.numpy, canon)
         self.slots = [(f"{n}.{k}", i, k) for i, (n, b) in
@@ -181,7 +181,7 @@ class Program:
                     diagram_key(self.cd) != self.struct:
                 self._rebind(compiled)
             t = time.perf_counter()
-            with jax.enable_x64(self.x64):
+            with _jax.x64(self.x64):
                 exe = jax.jit(build()).lower(*args).compile()
             spent = time.perf_counter() - t
         with self._lock:
@@ -191,6 +191,6 @@ class Program:
     def _rebind(self, compiled):
         jax = _jax.jax()
         self.cd = compiled
-        with jax.enable_x64(self.x64):
+        with _jax.x64(self.x64):
             self.eng = TracedEngine(compiled, self.dt, jax.numpy,
                                     jax.dtypes.canonicalize_dtype)

@@ -319,7 +319,7 @@ class Runner:
         exe, compile_s = prog.executable("run", lambda: prog.run, (theta, X0),
                                          self.compiled)
         t = time.perf_counter()
-        with jax.enable_x64(prog.x64):
+        with _jax.x64(prog.x64):
             logs, XF = exe(theta, X0)
             jax.block_until_ready((logs, XF))
         wall = time.perf_counter() - t
@@ -407,7 +407,7 @@ class Runner:
                                                   _axes_key(x_axes)), build, (th, xs),
                                                  self.compiled)
             t = time.perf_counter()
-            with jax.enable_x64(prog.x64):
+            with _jax.x64(prog.x64):
                 logs, XF = exe(th, xs)
                 jax.block_until_ready((logs, XF))
             wall += time.perf_counter() - t
@@ -500,7 +500,7 @@ class Runner:
         exe, _ = prog.executable(("grad", cost, tuple(pw), tuple(w for w, *_ in sw),
                                   bool(checkpoint)), build, (diff, theta, X0),
                                  self.compiled)
-        with jax.enable_x64(prog.x64):
+        with _jax.x64(prog.x64):
             val, g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}
         grads.update({w: np.asarray(g[1][w]) for w, *_ in sw})

@@ -2,7 +2,9 @@
 
 The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
 the handler first commands every registered robot to zero velocity, then
-raises :class:`KeyboardInterrupt` in the main thread, so that
+hands the signal to the handler that was there before (the CLI's guard
+raises its own interrupt), or raises :class:`KeyboardInterrupt` in the
+main thread, so that
 ``simulate()`` takes its interrupted path: it returns the results logged so
 far (the CLI saves them) after calling every block's ``on_stop`` (which
 stops the robots again). An ``atexit`` hook stops any block still
@@ -34,7 +36,11 @@ def _stop_all():
 
 def _handler(signum, frame):
     _stop_all()
-    raise KeyboardInterrupt(f"signal {signum}")
+    prev = _previous.get(signum)
+    if callable(prev):          # e.g. the CLI's guard: it raises its own interrupt
+        prev(signum, frame)
+    if prev is not signal.SIG_IGN:
+        raise KeyboardInterrupt(f"signal {signum}")
 
 
 def register(block):

@@ -11,7 +11,7 @@ frame; REP 105).
 from __future__ import annotations
 
 import math
-from functools import lru_cache
+from functools import cache
 
 from ...core.errors import ParameterError
 
@@ -23,7 +23,7 @@ POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 DISTROS = ("jazzy", "humble")
 
 
-@lru_cache(maxsize=None)
+@cache
 def typestore(distro="jazzy"):
     """The rosbags typestore of a ROS 2 distribution (cached)."""
     try:

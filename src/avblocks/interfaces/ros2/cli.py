@@ -48,11 +48,10 @@ def apply(args, diagram, sim):
 
 
 def report(res):
-    """One line about pacing: achieved factor, overruns, worst lateness."""
+    """One line about pacing: overruns and worst lateness of a paced run."""
     m = res.meta
     if "overruns" not in m:
         return None
     steps = max(int(m.get("steps", 0)), 1)
-    return (f"real time     x{m.get('realtime_factor', float('nan')):.2f} achieved, "
-            f"{m['overruns']} of {steps} steps overran, worst lateness "
+    return (f"paced         {m['overruns']} of {steps} steps overran, worst lateness "
             f"{1e3 * m['max_lateness']:.1f} ms")

@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import heapq
 import json
-import math
 import threading
 import time
 
@@ -290,4 +289,25 @@ def add_parser(sub):
     e.add_argument("--log", help="JSON-lines log of received commands")
     e.add_argument("--seed", type=int, default=0)
     e.set_defaults(fn=main)
+    ro = rs.add_parser("router", help="run a Zenoh router (when no zenohd or bridge runs)")
+    ro.add_argument("--listen", default="tcp/127.0.0.1:7447", help="endpoint to listen on")
+    ro.set_defaults(fn=run_router)
     return r
+
+
+def run_router(args):
+    """``avblocks robots router``: a Zenoh router until Ctrl-C or SIGTERM."""
+    import signal
+
+    from ._zenoh import open_router
+    session, ep = open_router(args.listen)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *a: stop.set())
+    print(f"Zenoh router listening on {ep}", flush=True)
+    try:
+        stop.wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        session.close()
+    return 0

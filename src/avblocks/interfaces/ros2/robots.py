@@ -143,8 +143,12 @@ class Robots(Block):
         How long ``on_start`` waits for the first pose of every robot.
     cmd_topic, pose_topic : str, optional
         Topic format strings (``"{name}/cmd_vel"``).
+    cmd_frame : {"body", "world"}
+        Holonomic kinds: frame of the sent velocity.
     domain, distro, node, mode
         ROS domain id, message set ("jazzy"/"humble"), node name, Zenoh mode.
+    stop_repeats : int
+        Zero commands sent when stopping (20 ms apart), for lossy links.
 
     Equations
     ---------
@@ -352,8 +356,8 @@ class Robots(Block):
         if missing:
             raise PreflightError(
                 f"no pose received within {self.wait:g} s from robot(s) {missing} "
-                f"(topic '{self.pose_topic.format(name=missing[0])}', transport '{self.transport}', "
-                f"router {self.router})",
+                f"(topic '{self.pose_topic.format(name=missing[0])}', "
+                f"transport '{self.transport}', router {self.router})",
                 block="Robots", hint="check that the robots (or the emulator) run, "
                 "the names and the router address")
         xy = latest[:, :2]

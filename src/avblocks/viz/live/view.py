@@ -1,0 +1,899 @@
+"""The live view: a run drawn in the browser as it happens, and steered.
+
+:class:`LiveView` owns a :class:`~avblocks.core.simulator.Simulator`, steps
+it in its own loop (the caller's thread with :meth:`LiveView.run`, a
+background thread with :meth:`LiveView.start`), records what is logged, and
+serves a viser page (3D scene and GUI over a websocket, 127.0.0.1 only
+unless told otherwise, an unguessable token in the URL) that shows
+
+- every ``pose`` (N, 3) output as flat arrows on the ground plane under a
+  top-down camera, every ``position`` (N, 3) output as darts in 3D
+  (oriented by the same block's ``attitude`` when it has one), (N, 2)
+  positions as arrows without heading; above ``points_above`` agents, as
+  points drawn at a lower rate;
+- trails (the last ``trail`` seconds of the log), the obstacles and bounds
+  of every :class:`~avblocks.environment.World` a block holds;
+- a few signals as live plots (uPlot), and the simulated time, speed and
+  draw rate;
+
+and lets the user pause / resume / single-step, set the speed (x0.1 ... x10
+or as fast as possible), change every numeric parameter
+(``compiled.parameters()``; applied at the next major step through
+:meth:`Simulator.set_param`, recorded in ``meta["param_changes"]``), scrub
+back through the log while paused, restart with a new seed, and stop (which
+first sets every parameter named ``estop`` to 1 and takes one more step, so
+a robot interface sees the emergency stop before the run ends).
+
+The loop never waits for a browser: with none attached it runs (paced or
+not) and returns at ``t_final``. Once a page was attached, the run ends when
+the last page closes (after ``close_grace`` seconds), on the Stop button, on
+Ctrl-C, or on :meth:`LiveView.close`; at ``t_final`` it holds (scrub and
+restart still work) until then. Results come back in every case.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import sys
+import threading
+import time as _time
+
+import numpy as np
+
+from ...core.diagram import CompiledDiagram, Diagram, PortRef
+from ...core.errors import AvError, ParameterError, SimulationError
+from ...core.results import Results
+from . import _scene
+from ._server import LiveViewError, open_server
+
+#: Speed choices offered in the page (``None``: as fast as possible).
+SPEEDS = {"x0.1": 0.1, "x0.2": 0.2, "x0.5": 0.5, "x1": 1.0, "x2": 2.0, "x5": 5.0,
+          "x10": 10.0, "max": None}
+
+
+def _speed_label(speed):
+    if speed is None:
+        return "max"
+    best = min((k for k, v in SPEEDS.items() if v is not None),
+               key=lambda k: abs(math.log(SPEEDS[k] / speed)))
+    return best
+
+
+def _in_notebook():
+    ip = sys.modules.get("IPython")
+    if ip is None:
+        return False
+    try:
+        shell = ip.get_ipython()
+    except Exception:  # noqa: BLE001 - not in IPython
+        return False
+    return shell is not None and hasattr(shell, "kernel")
+
+
+class LiveView:
+    """Run a diagram live in the browser (see the module docstring).
+
+    Parameters
+    ----------
+    diagram : Diagram or CompiledDiagram
+    t_final, dt, solver, seed, t0, log, log_every, check_finite, x0, params,
+    max_log_bytes
+        As in :func:`avblocks.simulate`.
+    realtime : float or None
+        Initial speed: 1.0 is real time (default), ``None`` as fast as
+        possible; changed from the page.
+    host : str
+        Interface to bind, ``"127.0.0.1"`` unless you name another.
+    port : int
+        0 (default): a free port chosen by the system.
+    token : str, optional
+        The URL token (default: 32 random URL-safe characters).
+    plots : list of ``"block.port"``, optional
+        Signals to plot live (default: up to three logged signals that are
+        not drawn as agents). Per-agent signals are reduced to the mean and
+        max over agents of each agent's norm; small ones plot every element.
+    plot_window : float
+        Seconds of history in the plots.
+    trail : float
+        Seconds of trail behind each agent (0: none).
+    trail_segments : int
+        At most this many trail segments in all (fat lines are costly in a
+        browser without a GPU): long trails get coarser with more agents,
+        and none are drawn above this many agents.
+    colors : colour or (N, 3), optional
+        Agent colours of the first drawn signal (default: tab10 cycle).
+    agent_size : float
+        Arrow/dart length in metres (default: from the scene's extent).
+    points_above : int
+        Draw agents as points (and at ``fps_points``) above this many.
+    fps, fps_points : float
+        Maximum scene updates per second sent to the page.
+    camera : "top" or "3d", optional
+        Default: "3d" when a (N, 3) ``position`` is drawn, else "top".
+    obstacles : World or list of Worlds, optional
+        Worlds to draw besides those the diagram's blocks hold.
+    end_on_close : bool
+        End the run when the last page closes.
+    close_grace : float
+        Seconds without a page before that counts as closed (a reload
+        reconnects within it).
+    hold : bool
+        At ``t_final``, keep the page (scrub, restart) while one is open.
+    verbose : bool
+        Print the URL when the server starts.
+    """
+
+    def __init__(self, diagram, t_final=10.0, dt=0.01, solver="rk4", *, seed=0, t0=0.0,
+                 log=None, log_every=1, realtime=1.0, check_finite=True, x0=None,
+                 params=None, max_log_bytes=2 * 1024**3, host="127.0.0.1", port=0,
+                 token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
+                 agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
+                 camera=None, obstacles=None, end_on_close=True, close_grace=2.0,
+                 trail_segments=6000,
+                 hold=True, verbose=True, title=None):
+        from ...core.simulator import Simulator
+        if isinstance(diagram, Diagram):
+            diagram = diagram.build()
+        if not isinstance(diagram, CompiledDiagram):
+            raise ParameterError("LiveView needs a Diagram", param="diagram",
+                                 expected="Diagram", found=type(diagram).__name__)
+        self.compiled = diagram
+        self._sim_args = dict(dt=dt, solver=solver, t0=t0, check_finite=check_finite, x0=x0)
+        self.seed = int(seed)
+        self.sim = Simulator(diagram, dt, solver, seed=self.seed, t0=t0,
+                             check_finite=check_finite, x0=x0)
+        try:
+            span = float(t_final) - self.sim.t0
+        except (TypeError, ValueError):
+            span = float("nan")
+        if not (math.isfinite(span) and span >= 0):
+            raise ParameterError("t_final must be a number >= t0", param="t_final",
+                                 expected=f">= {self.sim.t0}", found=t_final)
+        self.nsteps = int(round(span / self.sim.dt))
+        self.log_every = int(log_every)
+        if self.log_every < 1:
+            raise ParameterError("log_every must be >= 1", param="log_every",
+                                 expected=">= 1", found=log_every)
+        if realtime is not None and not (float(realtime) > 0):
+            raise ParameterError("realtime factor must be > 0", param="realtime",
+                                 expected="> 0 or None", found=realtime)
+        self.speed = None if realtime is None else float(realtime)
+        self.params = dict(params or {})
+        for path, v in self.params.items():     # validate now, set at run()
+            i, name = diagram.param_index(path)
+            diagram.blocks[i]._params[name].validate(v, diagram.names[i])
+        self.host, self.port, self.token = str(host), int(port), token
+        self.title = title or "avblocks live"
+        self.plot_window, self.trail = float(plot_window), float(trail)
+        self.trail_segments = int(trail_segments)
+        self.points_above = int(points_above)
+        self.fps, self.fps_points = float(fps), float(fps_points)
+        self.end_on_close, self.close_grace = bool(end_on_close), float(close_grace)
+        self.hold, self.verbose = bool(hold), bool(verbose)
+        self._setup_log(log, plots, max_log_bytes)
+        self._setup_sources(colors, agent_size, camera, obstacles)
+        self.server = None
+        self.url = None
+        self._cmds = queue.Queue()
+        self._end = None            # why the run ended, once it has
+        self._thread = None
+        self._result = None
+        self._error = None
+        self.restarts = []
+        self.draws = 0
+
+    # ------------------------------------------------------------ logging
+    def _setup_log(self, log, plots, max_log_bytes):
+        from ...core.simulator import default_log
+        c = self.compiled
+        refs = default_log(c) if log is None else (
+            [log] if isinstance(log, (str, PortRef)) else list(log))
+        self.names, self.aliases, self.specs, self.idx = [], {}, {}, {}
+
+        def add(r):
+            i, o = c.resolve(r)
+            name = f"{c.names[i]}.{o}"
+            alias = r.path if isinstance(r, PortRef) else str(r)
+            if alias != name:
+                self.aliases[alias] = name
+            if name not in self.idx:
+                self.names.append(name)
+                self.idx[name] = (i, o)
+                self.specs[name] = c.blocks[i]._outputs[o]
+            return name
+
+        self.logged = [add(r) for r in refs]
+        drawn = []
+        for n in list(self.names):
+            i, o = self.idx[n]
+            p = self.specs[n]
+            if o in ("pose", "position") and p.shape and len(p.shape) == 2 \
+                    and p.shape[1] in (2, 3):
+                drawn.append(n)
+                if o == "position" and "attitude" in c.blocks[i]._outputs:
+                    add(f"{c.names[i]}.attitude")
+        # a block with a 3D position and a planar pose (UAVs) is drawn once, in 3D
+        in3d = {self.idx[n][0] for n in drawn
+                if self.idx[n][1] == "position" and self.specs[n].shape[1] == 3}
+        self.drawn = [n for n in drawn
+                      if not (self.idx[n][1] == "pose" and self.idx[n][0] in in3d)]
+        if plots is None:
+            plots = [n for n in self.names if n not in drawn
+                     and self.idx[n][1] not in ("attitude", "pose", "position")][:3]
+        self.plots = [add(r) for r in plots]
+        self.nlog = self.nsteps // self.log_every + 1
+        need = sum(self.nlog * int(np.prod(self.specs[n].shape)) *
+                   np.dtype(self.specs[n].dtype).itemsize for n in self.names)
+        if need > max_log_bytes:
+            raise ParameterError(
+                f"the log would take {need / 1e9:.2f} GB", param="log",
+                expected=f"<= {max_log_bytes / 1e9:.2f} GB",
+                hint="log fewer signals or decimate with log_every")
+        self.bufs = {n: np.empty((self.nlog, *self.specs[n].shape), self.specs[n].dtype)
+                     for n in self.names}
+        self.tlog = np.empty(self.nlog)
+        self.count = 0
+
+    def _record(self):
+        sim = self.sim
+        if self.count >= self.nlog:
+            return
+        for n in self.names:
+            i, o = self.idx[n]
+            self.bufs[n][self.count] = sim.Y[i][o]
+        self.tlog[self.count] = sim.t
+        self.count += 1
+
+    # ------------------------------------------------------------ scene
+    def _setup_sources(self, colors, agent_size, camera, obstacles):
+        from ...environment.world import World
+        worlds, seen = [], set()
+        extra = obstacles if isinstance(obstacles, (list, tuple)) else \
+            ([] if obstacles is None else [obstacles])
+        for w in list(extra) + [v for b in self.compiled.blocks for v in vars(b).values()]:
+            if isinstance(w, World) and id(w) not in seen:
+                seen.add(id(w))
+                worlds.append(w)
+        for w in extra:
+            if not isinstance(w, World):
+                raise ParameterError("obstacles must be environment.World objects",
+                                     param="obstacles", found=type(w).__name__)
+        self.worlds = worlds
+        self.sources = []
+        first = []
+        for k, n in enumerate(self.drawn):
+            i, o = self.idx[n]
+            shape = self.specs[n].shape
+            kind = "pose" if o == "pose" else ("pos3" if shape[1] == 3 else "pos2")
+            att = f"{self.compiled.names[i]}.attitude" if kind == "pos3" and \
+                f"{self.compiled.names[i]}.attitude" in self.idx else None
+            n_agents = shape[0]
+            col = _scene.agent_colors(n_agents, colors if k == 0 else None)
+            self.sources.append({"name": n, "kind": kind, "att": att, "n": n_agents,
+                                 "colors": col,
+                                 "points": n_agents > self.points_above})
+            first.append(np.asarray(self._initial_value(n), float)[:, :2])
+        self.camera = camera or ("3d" if any(s["kind"] == "pos3" for s in self.sources)
+                                 else "top")
+        if self.camera not in ("top", "3d"):
+            raise ParameterError("camera must be 'top' or '3d'", param="camera",
+                                 found=camera)
+        pts = np.concatenate(first) if first else np.zeros((0, 2))
+        self.extent = _scene.frame_extent(pts, worlds)
+        span = max(self.extent[1] - self.extent[0], self.extent[3] - self.extent[2])
+        if agent_size is None:
+            total = max([s["n"] for s in self.sources] + [1])
+            agent_size = float(np.clip(span / (1.5 * math.sqrt(total) + 40), 0.05, span / 20))
+            if self.camera == "3d":
+                agent_size *= 3.0
+        self.agent_size = float(agent_size)
+
+    def _initial_value(self, name):
+        """A drawn signal at t0, to frame the camera. A diagram with side
+        effects (robot interfaces) is not started here (that waits for
+        :meth:`run`): zeros then, and the worlds frame the view."""
+        i, o = self.idx[name]
+        if self.sim.Y is None:
+            if self.sim._side:
+                return np.zeros(self.specs[name].shape)
+            self._init_sim()
+        return self.sim.Y[i][o]
+
+    def _init_sim(self):
+        self.sim.horizon = self.nsteps
+        self.sim.init()
+        self.count = 0
+        self._record()
+
+    def _start_server(self):
+        import viser.uplot as uplot
+        if self.sim.X is None:
+            self._init_sim()
+        srv, self.token = open_server(self.host, self.port, self.token, label=self.title)
+        self.server = srv
+        self.port = srv.get_port()
+        shown = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        self.url = f"http://{shown}:{self.port}/{self.token}/"
+        srv.gui.configure_theme(show_share_button=False, control_width="medium")
+        sc = srv.scene
+        sc.set_up_direction("+z")
+        x0, x1, y0, y1 = self.extent
+        cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+        half = max(0.5 * (y1 - y0), 0.5 * (x1 - x0) / 1.6)
+        fov = math.radians(50.0)
+        srv.initial_camera.fov = fov
+        if self.camera == "top":
+            h = half / math.tan(fov / 2)
+            srv.initial_camera.position = (cx, cy - 1e-3 * h, h)
+            srv.initial_camera.look_at = (cx, cy, 0.0)
+        else:
+            r = 2.4 * half / math.tan(fov / 2)
+            srv.initial_camera.position = (cx - 0.35 * r, cy - 0.8 * r, 0.6 * r)
+            srv.initial_camera.look_at = (cx, cy, 0.0)
+        self._cam_height = half / math.tan(fov / 2)
+        sc.add_light_ambient("/light/ambient", intensity=0.4)
+        # a light grid of plain lines (viser's shader grid costs seconds per
+        # frame in software WebGL)
+        sc.add_line_segments("/grid", _scene.grid_segments(self.extent), colors=(215, 215, 215),
+                             thickness=1.0, thickness_units="screen")
+        height = 0.05 * self.agent_size if self.camera == "top" else 1.0
+        for j, w in enumerate(self.worlds):
+            for m, g in enumerate(w.geoms[: w.n_user]):
+                v, f = _scene.prism(g, height)
+                sc.add_mesh_simple(f"/world{j}/obstacle{m}", v, f, color=(110, 110, 120),
+                                   side="double", material="toon3", flat_shading=True)
+                sc.add_line_segments(f"/world{j}/outline{m}", _scene.outline_segments(g, height),
+                                     colors=(40, 40, 40), thickness=2.0,
+                                     thickness_units="screen")
+            if w.bounds is not None:
+                bx0, by0, bx1, by1 = w.bounds
+                from shapely import box
+                sc.add_line_segments(f"/world{j}/bounds",
+                                     _scene.outline_segments(box(bx0, by0, bx1, by1), 0.0),
+                                     colors=(60, 60, 60), thickness=1.5,
+                                     thickness_units="screen")
+        for s in self.sources:
+            self._add_source(s)
+        self._build_gui(uplot)
+        srv.on_client_connect(lambda _c: None)
+
+    def _add_source(self, s):
+        sc = self.server.scene
+        name = "/agents/" + s["name"].replace(".", "_")
+        P, Q = self._frame(s, None)
+        if s["points"]:
+            s["handle"] = sc.add_point_cloud(name, P.astype(np.float32), s["colors"],
+                                             point_size=self.agent_size,
+                                             point_shape="circle", point_shading="flat",
+                                             precision="float32")
+        else:
+            v, f = _scene.ARROW_2D if s["kind"] != "pos3" else _scene.DART_3D
+            s["handle"] = sc.add_batched_meshes_simple(
+                name, v * self.agent_size, f, batched_wxyzs=Q, batched_positions=P,
+                batched_colors=s["colors"], side="double", material="toon3",
+                flat_shading=True, cast_shadow=False, receive_shadow=False, lod="off")
+        s["trail"] = None
+
+    def _frame(self, s, k):
+        """Positions (N, 3) and orientations (N, 4) of a source, live
+        (``k`` None) or from log sample ``k``."""
+        val = (self.sim.Y[self.idx[s["name"]][0]][self.idx[s["name"]][1]] if k is None
+               else self.bufs[s["name"]][k])
+        val = np.asarray(val, dtype=float)
+        n = val.shape[0]
+        P = np.zeros((n, 3))
+        P[:, :2] = val[:, :2]
+        if s["kind"] == "pose":
+            Q = _scene.yaw_quaternions(val[:, 2])
+            P[:, 2] = 0.02 * self.agent_size
+        elif s["kind"] == "pos3":
+            P[:, 2] = val[:, 2]
+            if s["att"] is not None:
+                a = (self.sim.Y[self.idx[s["att"]][0]][self.idx[s["att"]][1]] if k is None
+                     else self.bufs[s["att"]][k])
+                Q = np.asarray(a, dtype=float)
+            else:
+                Q = np.tile([1.0, 0, 0, 0], (n, 1))
+        else:
+            Q = np.tile([1.0, 0, 0, 0], (n, 1))
+            P[:, 2] = 0.02 * self.agent_size
+        return P, Q
+
+    def _trails(self, s, k_end):
+        """(N * (L-1), 2, 3) trail segments up to log sample ``k_end``."""
+        if self.trail <= 0 or k_end < 1:
+            return None
+        per = self.sim.dt * self.log_every
+        L = int(min(k_end + 1, self.trail / per + 1))
+        if L < 2:
+            return None
+        per_agent = min(30, self.trail_segments // s["n"] + 1)     # points per trail
+        if per_agent < 2:
+            return None
+        stride = max(1, math.ceil((L - 1) / (per_agent - 1)))
+        ks = np.arange(k_end - (L - 1), k_end + 1)[::-1][::stride][::-1]
+        if len(ks) < 2:
+            return None
+        a = np.asarray(self.bufs[s["name"]][ks], dtype=np.float32)   # (L, N, c)
+        pts = np.zeros((len(ks), s["n"], 3), np.float32)
+        pts[..., :2] = a[..., :2]
+        if s["kind"] == "pos3":
+            pts[..., 2] = a[..., 2]
+        seg = np.stack([pts[:-1], pts[1:]], axis=2)                 # (L-1, N, 2, 3)
+        seg = np.swapaxes(seg, 0, 1).reshape(-1, 2, 3)
+        return seg
+
+    def _draw(self, k=None):
+        """Send the scene at the live state (``k`` None) or at log sample k."""
+        srv = self.server
+        kt = self.count - 1 if k is None else k
+        now = _time.perf_counter()
+        do_trails = now - getattr(self, "_last_trail", 0.0) > 0.5 or k is not None
+        with srv.atomic():
+            for s in self.sources:
+                P, Q = self._frame(s, k)
+                h = s["handle"]
+                if s["points"]:
+                    h.points = P.astype(np.float32)
+                else:
+                    h.batched_positions = P.astype(np.float32)
+                    h.batched_wxyzs = Q.astype(np.float32)
+                if do_trails:
+                    seg = self._trails(s, kt)
+                    if seg is not None:
+                        cols = np.repeat(s["colors"], len(seg) // s["n"], axis=0)
+                        cols = np.repeat(cols[:, None, :], 2, axis=1)
+                        if s["trail"] is None:
+                            s["trail"] = srv.scene.add_line_segments(
+                                "/trails/" + s["name"].replace(".", "_"), seg, cols,
+                                thickness=2.5, thickness_units="screen")
+                        else:
+                            s["trail"].points = seg
+                            if s["trail"].colors.shape != cols.shape:
+                                s["trail"].colors = cols
+            if do_trails:
+                self._last_trail = now
+        self.draws += 1
+
+    # --------------------------------------------------------------- GUI
+    def _build_gui(self, uplot):
+        gui = self.server.gui
+        self._status = gui.add_markdown(self._status_text())
+        self._pause_btn = gui.add_button("Pause")
+        self._step_btn = gui.add_button("Step")
+        self._speed = gui.add_dropdown("Speed", tuple(SPEEDS), initial_value=_speed_label(
+            self.speed))
+        self._scrub = gui.add_slider("Scrub t [s]", min=self.sim.t0,
+                                     max=self.sim.t0 + max(self.nsteps, 1) * self.sim.dt,
+                                     step=self.sim.dt * self.log_every,
+                                     initial_value=self.sim.t0, disabled=True)
+        self._restart_btn = gui.add_button("Restart (new seed)")
+        self.estops = [p for p in self.compiled.parameters() if p.rsplit(".", 1)[1] == "estop"]
+        self._stop_btn = gui.add_button("Stop (e-stop)" if self.estops else "Stop",
+                                        color="red")
+        self._pause_btn.on_click(lambda _e: self._cmds.put(("toggle",)))
+        self._step_btn.on_click(lambda _e: self._cmds.put(("step",)))
+        self._restart_btn.on_click(lambda _e: self._cmds.put(("restart",)))
+        self._stop_btn.on_click(lambda _e: self._cmds.put(("stop",)))
+        self._speed.on_update(lambda _e: self._cmds.put(("speed", self._speed.value)))
+        self._scrub.on_update(lambda _e: self._cmds.put(("scrub", self._scrub.value)))
+        self._param_inputs, self._param_kinds = {}, {}
+        params = self.compiled.parameters()
+        if params:
+            with gui.add_folder("Parameters"):
+                for path, spec in params.items():
+                    self._param_inputs[path] = self._param_input(gui, path, spec)
+        self._plot_handles = []
+        if self.plots:
+            with gui.add_folder("Signals"):
+                for n in self.plots:
+                    labels = self._plot_labels(n)
+                    data = tuple(np.zeros(1) for _ in range(len(labels) + 1))
+                    series = (uplot.Series(label="t [s]"),) + tuple(
+                        uplot.Series(label=lb, stroke=c, width=1.5)
+                        for lb, c in zip(labels, ("#1f77b4", "#d62728", "#2ca02c",
+                                                  "#ff7f0e")))
+                    self._plot_handles.append(gui.add_uplot(
+                        data, series, title=n, aspect=1.8,
+                        scales={"x": uplot.Scale(time=False, auto=True)}))
+
+    def _param_input(self, gui, path, spec):
+        """One control for a numeric parameter: a slider (both bounds finite)
+        or a number field for a scalar, or for an array whose entries are
+        all equal (per-agent gains: the value is set for every agent);
+        vector fields for other 2/3-vectors; JSON text otherwise."""
+        import json
+        val = np.asarray(self.sim.get_param(path), float)
+        lo, hi = spec.bounds
+        lo = None if lo is None or not np.isfinite(lo) else float(lo)
+        hi = None if hi is None or not np.isfinite(hi) else float(hi)
+        label = path + (f" [{spec.unit}]" if spec.unit else "")
+        hint = spec.doc or None
+        uniform = val.size >= 1 and np.all(val == val.flat[0]) and np.isfinite(val.flat[0])
+        if uniform:
+            v = float(val.flat[0])
+            if val.size > 1:
+                label += " (all)"
+                hint = (hint + "; " if hint else "") + f"one value for all {val.size} entries"
+            if lo is not None and hi is not None and hi > lo:
+                h = gui.add_slider(label, min=lo, max=hi, step=(hi - lo) / 1000,
+                                   initial_value=min(max(v, lo), hi), hint=hint)
+            else:
+                mag = abs(v) if v else 1.0
+                h = gui.add_number(label, initial_value=v, min=lo, max=hi,
+                                   step=10 ** math.floor(math.log10(mag)) / 100, hint=hint)
+            kind = "scalar"
+        elif val.size in (2, 3) and np.all(np.isfinite(val)):
+            add = gui.add_vector2 if val.size == 2 else gui.add_vector3
+            h = add(label, initial_value=tuple(val.ravel().tolist()), hint=hint)
+            kind = "vector"
+        else:
+            h = gui.add_text(label, initial_value=json.dumps(val.tolist()), hint=hint)
+            kind = "json"
+        self._param_kinds[path] = kind
+        h.on_update(lambda _e, p=path, hh=h: self._cmds.put(("param", p, hh.value)))
+        return h
+
+    def _param_value_for(self, path, cur):
+        import json
+        kind = self._param_kinds[path]
+        if kind == "scalar":
+            return float(cur.flat[0])
+        if kind == "vector":
+            return tuple(cur.ravel().tolist())
+        return json.dumps(cur.tolist())
+
+    def _plot_labels(self, n):
+        p = self.specs[n]
+        size = int(np.prod(p.shape)) if p.shape else 1
+        if p.dtype == bool or np.dtype(p.dtype) == np.bool_:
+            return ["count true"] if size > 1 else ["value"]
+        if size <= 4:
+            return [f"[{j}]" for j in range(size)] if size > 1 else ["value"]
+        return ["mean |row|", "max |row|"]
+
+    def _plot_series(self, n, k0, k1):
+        a = self.bufs[n][k0:k1]
+        m = a.shape[0]
+        if a.dtype == np.bool_:
+            flat = a.reshape(m, -1)
+            return [flat.sum(axis=1).astype(float)] if flat.shape[1] > 1 else \
+                [flat[:, 0].astype(float)]
+        flat = np.asarray(a, dtype=float).reshape(m, -1)
+        if flat.shape[1] <= 4:
+            return [flat[:, j] for j in range(flat.shape[1])]
+        rows = np.asarray(a, float).reshape(m, a.shape[1] if a.ndim > 1 else 1, -1)
+        norms = np.linalg.norm(rows, axis=2)
+        return [norms.mean(axis=1), norms.max(axis=1)]
+
+    def _update_plots(self, k_end):
+        if not self._plot_handles or k_end < 0:
+            return
+        per = self.sim.dt * self.log_every
+        k0 = max(0, k_end + 1 - int(self.plot_window / per) - 1)
+        idx = slice(k0, k_end + 1)
+        stride = max(1, (k_end + 1 - k0) // 400)
+        t = self.tlog[idx][::stride]
+        for n, h in zip(self.plots, self._plot_handles):
+            ys = [y[::stride] for y in self._plot_series(n, k0, k_end + 1)]
+            h.data = (t, *ys)
+
+    def _status_text(self):
+        sim = self.sim
+        t = sim.t if sim.X is not None else sim.t0
+        state = ("finished" if sim.k >= self.nsteps else
+                 "paused" if getattr(self, "_paused", False) else "running")
+        agents = sum(s["n"] for s in self.sources)
+        rate = getattr(self, "_draw_rate", 0.0)
+        return (f"**t = {t:.2f} s** of {self.sim.t0 + self.nsteps * sim.dt:g} s  \n"
+                f"{state} · speed {'max' if self.speed is None else f'x{self.speed:g}'}"
+                f" · seed {self.seed}  \n"
+                f"{agents} agents · {rate:.0f} draws/s")
+
+    # -------------------------------------------------------------- loop
+    def _notify(self, title, body):
+        try:
+            self.server.add_notification(title, body, auto_close_seconds=6.0, color="red")
+        except Exception:  # noqa: BLE001 - notifications are a courtesy
+            pass
+
+    def _handle(self, cmd):
+        kind = cmd[0]
+        if kind == "toggle":
+            self._paused = not self._paused
+            if self.server is None:
+                return
+            self._pause_btn.label = "Resume" if self._paused else "Pause"
+            self._scrub.disabled = not self._paused
+            if self._paused:
+                self._scrub.max = max(self.tlog[max(self.count - 1, 0)], self.sim.t0 + 1e-9)
+                self._scrub.value = self._scrub.max
+            else:
+                self._anchor()
+                self._scrubbing = None
+        elif kind == "step":
+            if not self._paused:
+                self._handle(("toggle",))
+            self._steps += 1
+        elif kind == "pause":
+            if self._paused != cmd[1]:
+                self._handle(("toggle",))
+        elif kind == "speed":
+            self.speed = SPEEDS.get(cmd[1], self.speed) if isinstance(cmd[1], str) else cmd[1]
+            self._anchor()
+        elif kind == "scrub":
+            if self._paused and self.count:
+                k = int(np.clip(np.searchsorted(self.tlog[: self.count], cmd[1]), 0,
+                                self.count - 1))
+                self._scrubbing = k
+        elif kind == "param":
+            path, value = cmd[1], cmd[2]
+            try:
+                spec = self.compiled.parameters()[path]
+                v = np.asarray(value if not isinstance(value, str) else
+                               __import__("json").loads(value), float)
+                v = np.broadcast_to(v, spec.shape) if v.size == 1 else v.reshape(spec.shape)
+                self.sim.set_param(path, v)
+            except (AvError, ValueError, TypeError) as e:
+                self._notify(f"{path} not changed", str(e))
+                h = self._param_inputs.get(path)
+                if h is not None:
+                    h.value = self._param_value_for(path, np.asarray(self.sim.get_param(path),
+                                                                  float))
+        elif kind == "restart":
+            self._restart()
+        elif kind == "stop":
+            for p in self.estops:
+                self.sim.set_param(p, 1.0)
+            if self.estops and self.sim.X is not None:
+                self.sim.step()        # the stop value reaches the interfaces
+                self._record()
+            self._end = "stop button"
+        elif kind == "close":
+            self._end = cmd[1]
+
+    def _restart(self):
+        from ...core.simulator import Simulator
+        self.sim.close()
+        self.restarts.append({"at_t": self.sim.t, "old_seed": self.seed,
+                              "param_changes": list(self.sim.param_changes)})
+        self.seed += 1
+        a = self._sim_args
+        self.sim = Simulator(self.compiled, a["dt"], a["solver"], seed=self.seed,
+                             t0=a["t0"], check_finite=a["check_finite"], x0=a["x0"])
+        self._start_values = {k: np.array(v) for k, v in self.compiled.param_values().items()}
+        self._init_sim()
+        self._paused = False
+        self._pause_btn.label = "Pause"
+        self._scrub.disabled = True
+        self._scrubbing = None
+        self._anchor()
+
+    def _anchor(self):
+        self._wall_a = _time.perf_counter()
+        self._t_a = self.sim.t
+
+    def _loop(self):
+        sim = self.sim
+        self._paused, self._steps, self._scrubbing = False, 0, None
+        self._had_client, self._last_client = False, 0.0
+        if sim.X is None:
+            self._init_sim()
+        self._anchor()
+        last_key = None
+        last_draw, last_status, draws0, t_rate = 0.0, 0.0, 0, _time.perf_counter()
+        self.late = 0
+        while self._end is None:
+            while True:
+                try:
+                    self._handle(self._cmds.get_nowait())
+                except queue.Empty:
+                    break
+                if self._end is not None:
+                    return
+            sim = self.sim
+            now = _time.perf_counter()
+            clients = len(self.server.get_clients())
+            if clients:
+                self._had_client, self._last_client = True, now
+            elif self._had_client and self.end_on_close and \
+                    now - self._last_client > self.close_grace:
+                self._end = "page closed"
+                return
+            finished = sim.k >= self.nsteps
+            if finished and (not self.hold or not clients) and not (
+                    self._had_client and self.end_on_close and clients == 0
+                    and now - self._last_client <= self.close_grace):
+                self._end = "finished"
+                if clients:
+                    self._draw()
+                return
+            idle = finished or (self._paused and self._steps == 0)
+            if not idle and self.speed is not None:
+                due = self._wall_a + (sim.t - self._t_a) / self.speed
+                if now < due:
+                    idle = True
+                elif now - due > 0.25:          # late: do not try to catch up
+                    self.late += 1
+                    self._anchor()
+            if not idle:
+                if self._steps:
+                    self._steps -= 1
+                sim.step()
+                if sim.k % self.log_every == 0:
+                    self._record()
+            fps = self.fps_points if any(s["points"] for s in self.sources) else self.fps
+            key = (id(self.sim), self.sim.k, self._scrubbing if self._paused else None,
+                   self._paused, self.speed)
+            if clients and now - last_draw >= 1.0 / fps and (key != last_key or not idle
+                                                             or now - last_draw > 1.0):
+                changed, last_key = key != last_key, key
+                self._draw(self._scrubbing if self._paused else None)
+                last_draw = now
+                if now - last_status > 0.25 or (changed and (self._paused or finished)):
+                    self._draw_rate = (self.draws - draws0) / max(now - t_rate, 1e-9)
+                    draws0, t_rate = self.draws, now
+                    self._status.content = self._status_text()
+                    self._update_plots(self._scrubbing if (self._paused and
+                                                           self._scrubbing is not None)
+                                       else self.count - 1)
+                    last_status = now
+            if idle:
+                _time.sleep(0.004 if not (self._paused or finished) else 0.02)
+
+    # ------------------------------------------------------------ public
+    def run(self):
+        """Serve the page, run to the end (see the module docstring) in this
+        thread and return :class:`~avblocks.core.results.Results`."""
+        snapshot = {k: np.array(v) for k, v in self.compiled.param_values().items()}
+        for path, v in self.params.items():
+            self.compiled.set_param(path, v)
+        self._start_values = {k: np.array(v) for k, v in self.compiled.param_values().items()}
+        wall0 = _time.perf_counter()
+        try:
+            if self.server is None:
+                self._start_server()
+            if self.verbose:
+                print(f"avblocks live view: {self.url}", flush=True)
+            self._loop()
+        except KeyboardInterrupt:
+            self._end = "interrupted"
+        except SimulationError as e:
+            self._end = "error"
+            e.results = self._results(wall0, snapshot, error=str(e))
+            self._result = e.results
+            raise
+        finally:
+            try:
+                self.sim.close()
+            finally:
+                final = {k: np.array(v) for k, v in self.compiled.param_values().items()}
+                for k, v in snapshot.items():
+                    i, name = self.compiled.param_index(k)
+                    self.compiled.blocks[i].__dict__[name] = v
+                self._final_values = final
+                if self.server is not None:
+                    self.server.stop()
+        if self._result is None:
+            self._result = self._results(wall0, snapshot)
+        return self._result
+
+    def _results(self, wall0, snapshot, error=None):
+        sim = self.sim
+        wall = _time.perf_counter() - wall0
+        n = self.count
+        start = getattr(self, "_start_values", snapshot)
+        changed = {k: v.tolist() for k, v in start.items()
+                   if not np.array_equal(v, snapshot[k])}
+        meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": self.seed, "t0": sim.t0,
+                "t_final": sim.t0 + self.nsteps * sim.dt, "log_every": self.log_every,
+                "steps": sim.k, "agents": max([s["n"] for s in self.sources] + [0]),
+                "blocks": len(self.compiled.blocks), "wall_time": wall,
+                "realtime_factor": (sim.k * sim.dt / wall) if wall > 0 else math.inf,
+                "param_changes": list(sim.param_changes),
+                "live": {"url": self.url.replace(self.token, "<token>") if self.url else None,
+                         "ended_by": self._end, "restarts": self.restarts,
+                         "draws": self.draws, "late_resyncs": getattr(self, "late", 0)}}
+        if changed:
+            meta["params"] = changed
+        final = getattr(self, "_final_values", None)
+        if final is not None:
+            meta["live"]["params_final"] = {k: v.tolist() for k, v in final.items()}
+        if self._end in ("interrupted", "page closed", "stop button", "close()"):
+            meta["interrupted"] = True
+            meta["interrupted_at"] = sim.t
+        if error:
+            meta["error"] = error
+        data = {k: self.bufs[k][:n].copy() for k in self.names}
+        return Results(self.tlog[:n].copy(), data, dict(self.specs), meta, self.aliases)
+
+    def start(self):
+        """Serve the page and run in a background thread (for notebooks and
+        scripts that go on); :meth:`wait` returns the results."""
+        if self.server is None:
+            self._start_server()
+        self._thread = threading.Thread(target=self._run_bg, daemon=True,
+                                        name="avblocks-live")
+        self._thread.start()
+        return self
+
+    def _run_bg(self):
+        try:
+            self.run()
+        except BaseException as e:  # noqa: BLE001 - handed to wait()
+            self._error = e
+
+    def wait(self, timeout=None):
+        """Results once the run has ended (``None`` if ``timeout`` passed)."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+            if self._thread.is_alive():
+                return None
+        if self._error is not None:
+            raise self._error
+        return self._result
+
+    # the page's controls, for scripts and notebooks (thread-safe; they take
+    # effect in the run loop, like a click)
+    def pause(self):
+        """Pause (no-op when paused)."""
+        self._cmds.put(("pause", True))
+
+    def resume(self):
+        """Resume (no-op when running)."""
+        self._cmds.put(("pause", False))
+
+    def step(self):
+        """One major step (pauses first)."""
+        self._cmds.put(("step",))
+
+    def set_speed(self, speed):
+        """Real-time factor (``None``: as fast as possible)."""
+        if speed is not None and not float(speed) > 0:
+            raise ParameterError("speed must be > 0 or None", param="speed", found=speed)
+        self._cmds.put(("speed", speed if speed is None else float(speed)))
+
+    def restart(self):
+        """Start again from t0 with the next seed (parameters as they are)."""
+        self._cmds.put(("restart",))
+
+    def stop(self):
+        """The Stop button: set every ``estop`` parameter to 1, take one
+        more step, end the run."""
+        self._cmds.put(("stop",))
+
+    def close(self, timeout=10.0):
+        """End the run (results saved) and return them."""
+        self._cmds.put(("close", "close()"))
+        return self.wait(timeout)
+
+    def iframe(self, height=600):
+        """An IPython IFrame of the page (for notebooks)."""
+        from IPython.display import IFrame
+        if self.url is None:
+            raise LiveViewError("the view is not serving yet", hint="call start() first")
+        return IFrame(self.url, width="100%", height=height)
+
+    def _repr_html_(self):
+        if self.url is None:
+            return "<i>avblocks LiveView (not started)</i>"
+        return (f'<iframe src="{self.url}" width="100%" height="600" '
+                f'style="border:0"></iframe>')
+
+
+def simulate_live(diagram, t_final, dt=0.01, solver="rk4", *, live=True, progress=None,
+                  **kw):
+    """:func:`avblocks.simulate` with ``live=True`` (or a dict of
+    :class:`LiveView` options): serve the page, run, return the results.
+    In a notebook the page is shown in the cell's output."""
+    options = dict(live) if isinstance(live, dict) else {}
+    if kw.get("realtime", "unset") is None and "realtime" not in options:
+        kw["realtime"] = 1.0
+    kw.update(options)
+    view = LiveView(diagram, t_final, dt, solver, **kw)
+    if _in_notebook():
+        view._start_server()
+        from IPython.display import display
+        display(view.iframe())
+    return view.run()

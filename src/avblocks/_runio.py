@@ -247,7 +247,9 @@ def _guarded_run(args, guard, load_any):
     from .core.errors import SimulationError
     from .core.simulator import simulate
     overrides = _parse_sets(args.set)
-    d, sim, name, movie, hooks = load_any(args.target, overrides, args.out)
+    loaded = load_any(args.target, overrides, args.out)
+    d, sim, name, movie = loaded
+    hooks = getattr(loaded, "hooks", None)
     if args.realtime is not None:
         sim["realtime"] = args.realtime
     if args.t_final is not None:

@@ -84,6 +84,17 @@ def _from_namespace(ns, overrides, source):
     return d, sim, dict(ns.get("MOVIE") or {})
 
 
+class Loaded(tuple):
+    """``(diagram, simulate kwargs, name, movie options)``, what
+    :func:`load_any` returns, with the scenario's ``hooks`` (its
+    ``outcome`` and ``figures``) as an attribute."""
+
+    def __new__(cls, d, sim, name, movie, hooks=None):
+        self = super().__new__(cls, (d, sim, name, movie))
+        self.hooks = hooks
+        return self
+
+
 def _hooks(ns, overrides):
     from .scenarios.report import hooks_from_namespace
     return hooks_from_namespace(ns, overrides)
@@ -100,14 +111,15 @@ def _load_python(path: Path, overrides):
         raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
                             file=str(path)) from e
     d, sim, movie = _from_namespace(ns, overrides, str(path))
-    return d, sim, path.stem, movie, _hooks(ns, overrides)
+    return Loaded(d, sim, path.stem, movie, _hooks(ns, overrides))
 
 
 def load_any(target, overrides, out=None):
-    """(diagram, simulate kwargs, name, movie options, hooks) from a built-in
+    """(diagram, simulate kwargs, name, movie options) from a built-in
     name, a YAML/TOML file or a .py file (``out``: the output folder a
-    scenario file's blocks may write to); ``hooks`` holds the scenario's
-    ``outcome`` and ``figures`` (see :mod:`avblocks.scenarios.report`)."""
+    scenario file's blocks may write to), as a :class:`Loaded` whose
+    ``.hooks`` holds the scenario's ``outcome`` and ``figures`` (see
+    :mod:`avblocks.scenarios.report`)."""
     import importlib
 
     from .scenarios import builtin_scenarios, load_scenario
@@ -116,7 +128,7 @@ def load_any(target, overrides, out=None):
     if not p.is_file() and target in builtin and builtin[target].suffix == ".py":
         mod = importlib.import_module(f"avblocks.scenarios.{target}")
         d, sim, movie = _from_namespace(vars(mod), overrides, target)
-        return d, sim, target, movie, _hooks(vars(mod), overrides)
+        return Loaded(d, sim, target, movie, _hooks(vars(mod), overrides))
     if p.suffix == ".py":
         if not p.is_file():
             raise ScenarioError("no such file", file=target)
@@ -128,7 +140,7 @@ def load_any(target, overrides, out=None):
     if sc.data.get("report"):
         hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
     movie = sc._value(sc.movie_options(), "movie")      # generators too
-    return d, sim, sc.name, movie, hooks
+    return Loaded(d, sim, sc.name, movie, hooks)
 
 
 def cmd_run(args):
@@ -171,7 +183,7 @@ def cmd_list(args):
 
 def cmd_diagram(args):
     from .viz.diagram import draw_diagram
-    d, _sim, name, _movie, _hooks = load_any(args.target, _parse_sets(args.set))
+    d, _sim, name, _movie = load_any(args.target, _parse_sets(args.set))
     out = args.output or f"{name}-diagram.svg"
     path = draw_diagram(d, out)
     print(f"wrote {path}")

@@ -295,7 +295,18 @@ def _guard(input=None, index=(), op=">=", value=0.0, all=None):
     return guard
 
 
+def _team_size(agents=None, followers=None):
+    """``agents`` when given, else ``followers + 1`` (a leader and its
+    followers)."""
+    if agents is not None:
+        return int(agents)
+    if followers is None:
+        raise ValueError("give agents or followers")
+    return int(followers) + 1
+
+
 GENERATORS = {
+    "team_size": _team_size,
     "formation_start": _formation_start,
     "formation_references": _formation_refs,
     "formation_switch": _formation_switch,

@@ -125,7 +125,7 @@ class LiveView:
     """
 
     def __init__(self, diagram, t_final=10.0, dt=0.01, solver="rk4", *, seed=0, t0=0.0,
-                 log=None, log_every=1, realtime=1.0, check_finite=True, x0=None,
+                 log=None, log_every=None, realtime=1.0, check_finite=True, x0=None,
                  params=None, max_log_bytes=2 * 1024**3, host="127.0.0.1", port=0,
                  token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
                  agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
@@ -151,7 +151,8 @@ class LiveView:
             raise ParameterError("t_final must be a number >= t0", param="t_final",
                                  expected=f">= {self.sim.t0}", found=t_final)
         self.nsteps = int(round(span / self.sim.dt))
-        self.log_every = int(log_every)
+        self._auto_log = log_every is None     # as simulate(): every step unless too big
+        self.log_every = 1 if log_every is None else int(log_every)
         if self.log_every < 1:
             raise ParameterError("log_every must be >= 1", param="log_every",
                                  expected=">= 1", found=log_every)
@@ -222,9 +223,13 @@ class LiveView:
             plots = [n for n in self.names if n not in drawn
                      and self.idx[n][1] not in ("attitude", "pose", "position")][:3]
         self.plots = [add(r) for r in plots]
+        per = sum(int(np.prod(self.specs[n].shape)) * np.dtype(self.specs[n].dtype).itemsize
+                  for n in self.names)
+        if self._auto_log and (self.nsteps + 1) * per > max_log_bytes:
+            from ...core.simulator import _log_every_that_fits
+            self.log_every = _log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
         self.nlog = self.nsteps // self.log_every + 1
-        need = sum(self.nlog * int(np.prod(self.specs[n].shape)) *
-                   np.dtype(self.specs[n].dtype).itemsize for n in self.names)
+        need = self.nlog * per
         if need > max_log_bytes:
             raise ParameterError(
                 f"the log would take {need / 1e9:.2f} GB", param="log",

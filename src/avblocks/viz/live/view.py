@@ -337,6 +337,9 @@ class LiveView:
             srv.initial_camera.position = (cx - 0.35 * r, cy - 0.8 * r, 0.6 * r)
             srv.initial_camera.look_at = (cx, cy, 0.0)
         self._cam_height = half / math.tan(fov / 2)
+        # viser's default far plane (1000 m) would clip a large scene
+        srv.initial_camera.far = max(1000.0, 10.0 * self._cam_height)
+        srv.initial_camera.near = max(1e-3, 1e-4 * self._cam_height)
         sc.add_light_ambient("/light/ambient", intensity=0.4)
         # a light grid of plain lines (viser's shader grid costs seconds per
         # frame in software WebGL)
@@ -488,7 +491,9 @@ class LiveView:
         if params:
             with gui.add_folder("Parameters"):
                 for path, spec in params.items():
-                    self._param_inputs[path] = self._param_input(gui, path, spec)
+                    h = self._param_input(gui, path, spec)
+                    if h is not None:
+                        self._param_inputs[path] = h
         self._plot_handles = []
         if self.plots:
             with gui.add_folder("Signals"):
@@ -533,9 +538,11 @@ class LiveView:
             add = gui.add_vector2 if val.size == 2 else gui.add_vector3
             h = add(label, initial_value=tuple(val.ravel().tolist()), hint=hint)
             kind = "vector"
-        else:
+        elif val.size <= 64:
             h = gui.add_text(label, initial_value=json.dumps(val.tolist()), hint=hint)
             kind = "json"
+        else:                       # too big to edit in a page (still settable from Python)
+            return None
         self._param_kinds[path] = kind
         h.on_update(lambda _e, p=path, hh=h: self._cmds.put(("param", p, hh.value)))
         return h

@@ -151,7 +151,7 @@ class LiveView:
             raise ParameterError("t_final must be a number >= t0", param="t_final",
                                  expected=f">= {self.sim.t0}", found=t_final)
         self.nsteps = int(round(span / self.sim.dt))
-        self.log_every = int(log_every)
+        self.log_every = 1 if log_every is None else int(log_every)
         if self.log_every < 1:
             raise ParameterError("log_every must be >= 1", param="log_every",
                                  expected=">= 1", found=log_every)

@@ -54,7 +54,7 @@ def run_one(mode, n_cases, t_final, agents, workdir):
         kept, table = [], []
         for v in grid["speed"]:
             for s in range(seeds):
-                d, sim, _, _ = load_any("waypoints", {**fixed, "speed": v, "seed": s})
+                d, sim, *_ = load_any("waypoints", {**fixed, "speed": v, "seed": s})
                 res = av.simulate(d, progress=False, **{**sim, "seed": s})
                 table.append([METRICS[m](res) for m in metrics])
                 if mode == "serial-keep":

@@ -47,7 +47,7 @@ def main():
         shot(drv, LiveView(d, t_final=100.0, realtime=8.0, verbose=False, **sim),
              os.path.join(out, "live-formation.png"), 6.0)
         spec = importlib.util.spec_from_file_location(
-            "quads", os.path.join(HERE, "..", "examples", "03_live_quadrotors.py"))
+            "quads", os.path.join(HERE, "..", "examples", "07_live_quadrotors.py"))
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
         d, sim = mod.make_diagram()

@@ -109,3 +109,33 @@ def test_named_airframes_match_their_motor_layout(frame):
     np.testing.assert_allclose(w[:, 0], f.sum(1), atol=1e-12)
     np.testing.assert_allclose(w[:, 1:], tau, atol=1e-12)
     np.testing.assert_allclose(wrench_to_rotors(w, arm, km, frame), f, atol=1e-12)
+
+
+def _step_error(dt, te=0.33, t_final=1.0):
+    """|x(1) - truth| for x' = s(t) - x^3, x(0) = 0.5, s a Step at te."""
+    from scipy.integrate import solve_ivp
+
+    import avblocks as av
+    d = av.Diagram()
+    s = d.add(av.blocks.Step(time=te, before=[0.2], after=[1.5]), name="s")
+    x = d.add(av.blocks.Integrator(np.array([0.5])), name="x")
+    f = d.add(av.blocks.Function(lambda t, u, xs: u - xs ** 3,
+                                 inputs={"u": (1,), "xs": (1,)}, outputs={"y": (1,)}),
+              name="f")
+    d.connect(s.y, f.u)
+    d.connect(x.y, f.xs)
+    d.connect(f.y, x.u)
+    res = av.simulate(d, t_final, dt=dt, log=["x.y"])
+    # truth: two tight solves joined at te
+    a = solve_ivp(lambda t, y: 0.2 - y ** 3, (0, te), [0.5], rtol=1e-13, atol=1e-14)
+    b = solve_ivp(lambda t, y: 1.5 - y ** 3, (te, t_final), a.y[:, -1], rtol=1e-13,
+                  atol=1e-14)
+    return abs(float(res["x.y"][-1].ravel()[0]) - b.y[0, -1])
+
+
+def test_step_under_rk4_keeps_fourth_order():
+    errs = [_step_error(dt) for dt in (0.1, 0.05, 0.025)]
+    ratios = [errs[i] / errs[i + 1] for i in range(2)]
+    # 2^4 = 16 per halving (first order, the straddled switch, would give ~2)
+    assert all(12 < r < 20 for r in ratios), (errs, ratios)
+    assert errs[-1] < 1e-7

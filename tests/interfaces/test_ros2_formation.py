@@ -23,7 +23,7 @@ from avblocks.scenarios import formation
 from .conftest import commands, emulator, env, read_log
 
 SCALE = 4.0
-SETS = ["--set", "followers=2", "--set", "dt=0.05", "--set", "log_every=2"]
+SETS = ["--set", "agents=3", "--set", "dt=0.05", "--set", "log_every=2"]
 
 
 def _pose0():

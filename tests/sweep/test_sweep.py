@@ -51,7 +51,7 @@ def metrics():
 
 def serial_case(k, goal, seed, **fixed):
     """One case the plain way: the scenario loader, simulate, the metric."""
-    d, sim, _, _ = load_any(SCEN, {**FIXED, **fixed, "goal": goal, "seed": seed})
+    d, sim, *_ = load_any(SCEN, {**FIXED, **fixed, "goal": goal, "seed": seed})
     sim["seed"] = seed
     res = av.simulate(d, progress=False, params={"ctl.k": k}, **sim)
     return res
@@ -240,7 +240,7 @@ def test_default_local_cluster_is_on_loopback_and_closed():
 def test_cli_sweeps_a_builtin_scenario(client, tmp_path, capsys):
     from avblocks.cli import main
     out = tmp_path / "form.zarr"
-    rc = main(["sweep", "formation", "--grid", "gain=0.5,1.5", "--set", "followers=1",
+    rc = main(["sweep", "formation", "--grid", "gain=0.5,1.5", "--set", "agents=2",
                "--set", "t_final=3", "--seeds", "2", "--out", str(out),
                "--scheduler", client.scheduler.address,
                "--metric", "final_error", "--log", "fleet.pose", "--log-every", "5",
@@ -253,7 +253,7 @@ def test_cli_sweeps_a_builtin_scenario(client, tmp_path, capsys):
     assert ds["final_error"].dims == ("gain", "seed")
     assert ds["log.fleet.pose"].shape == (2, 2, 31 // 5 + 1, 2, 3)
     # the stored metric equals the one of the case run alone
-    d, sim, _, _ = load_any("formation", {"followers": 1, "t_final": 3, "gain": 1.5,
+    d, sim, *_ = load_any("formation", {"agents": 2, "t_final": 3, "gain": 1.5,
                                           "seed": 1})
     res = av.simulate(d, progress=False, **{**sim, "seed": 1})
     assert ds["final_error"].sel(gain=1.5, seed=1).values == \
@@ -334,7 +334,7 @@ def test_ensemble_sweep_matches_numpy_runs(client, serial, tmp_path):
             assert abs(float(case["final_distance"]) - fd) < 1e-12
     # a scenario JAX cannot trace is refused before any task
     with pytest.raises(SweepError, match="traceable"):
-        av.sweep("formation", grid={"gain": [1.0]}, fixed={"followers": 1},
+        av.sweep("formation", grid={"gain": [1.0]}, fixed={"agents": 2},
                  out=str(tmp_path / "no.zarr"), scheduler=client, ensemble=True)
 
 

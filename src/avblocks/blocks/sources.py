@@ -83,6 +83,9 @@ class Step(Block):
     Equations
     ---------
     y(t) = before + (after - before) * [t >= time]
+
+    Under a fixed-step solver a ``time`` inside a major step splits that
+    step at ``time`` (see :meth:`switch_times`), so RK4 stays fourth order.
     """
 
     def __init__(self, time=1.0, before=0.0, after=1.0, *, agents=True):
@@ -98,6 +101,11 @@ class Step(Block):
     def output(self, t, x, u, xp):
         return {"y": xp.where(t >= self.time, xp.asarray(self.after),
                               xp.asarray(self.before))}
+
+    def switch_times(self):
+        """Times where the output jumps: fixed-step solvers split the major
+        step there (RK4 keeps its fourth order across the step)."""
+        return (float(self.time),)
 
 
 class Sine(Block):

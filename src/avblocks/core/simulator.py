@@ -126,6 +126,10 @@ class Simulator:
                            for nm, p in diagram.blocks[i]._dstates.items()
                            if np.issubdtype(np.dtype(p.dtype), np.inexact)]
         self._side = [i for i, b in enumerate(diagram.blocks) if b.side_effects]
+        # blocks whose outputs jump at known times (Step): a fixed-step
+        # solver restarts there instead of straddling the jump
+        self._event_blocks = ([b for b in diagram.blocks if hasattr(b, "switch_times")]
+                              if self.solver.fixed_step else [])
         self._fcheck = self.check_finite and bool(self._fx_state or self._fx_dstate)
         # variable-step solvers may integrate across several major steps when
         # only periodic blocks have discrete states and nothing has side effects
@@ -233,7 +237,7 @@ class Simulator:
         Y0 = [dict() for _ in self.compiled.blocks]
         self.Y = self._guard(self.eng.all_outputs, self.t0, self.X, Y0)
         self._fast = None
-        if self.use_codegen and codegen.supported(self.solver):
+        if self.use_codegen and codegen.supported(self.solver) and not self._event_blocks:
             self._fast = codegen.make_step(self.eng, self.solver)
         self._check_declared()
         self._check(self.t0)
@@ -345,13 +349,15 @@ class Simulator:
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         fast = self._fast
-        if fast is not None:
+        if fast is not None:                 # the generated step (codegen)
             try:
-                self.X, self.Y = fast(self.X, self.Y, t, t1, k, h)
-            except AvError:
-                raise
+                X, Y = fast(self.X, self.Y, t, t1, k, h)
+            except AvError as e:
+                raise self._enrich(e, t) from e
             except Exception as e:  # noqa: BLE001 - add the block context
                 raise self._wrap(e, t) from e
+            self._Yprev = self.Y        # the outputs that drove this step (for blame)
+            self.X, self.Y = X, Y
             self.k = k + 1
             if self._fcheck:
                 self._check(t1)
@@ -372,7 +378,7 @@ class Simulator:
                     self._queue = states[::-1]
                     X = self._queue.pop()
                 else:
-                    X = self.solver.step(eng, t, X, self.Y, h)
+                    X = self._advance(t, X, h)
             Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
         except AvError as e:
             raise self._enrich(e, t) from e
@@ -384,6 +390,29 @@ class Simulator:
         self._check(t1)
         if self._side:
             self._side_effects()
+
+    def _advance(self, t, X, h):
+        """Integrate from ``t`` to ``t + h``; a source discontinuity strictly
+        inside the step splits it: the part before ends one ulp short of the
+        switch time (so every stage sees the value before the jump), the
+        part after starts from outputs recomputed at the switch (the value
+        after it). Fixed-step solvers then keep their order across jumps."""
+        eng, Y = self.eng, self.Y
+        if not self._event_blocks:
+            return self.solver.step(eng, t, X, Y, h)
+        t1 = t + h
+        if self._event_blocks:
+            tol = 1e-9 * h
+            ev = sorted({te for b in self._event_blocks for te in b.switch_times()
+                         if t + tol < te < t1 - tol})
+            for te in ev:
+                t_left = float(np.nextafter(te, -np.inf))
+                X = self.solver.step(eng, t, X, Y, t_left - t)
+                Y = eng.minor_outputs(te, X, Y)
+                t = t_left
+            if ev:
+                return self.solver.step(eng, t, X, Y, t1 - t)
+        return self.solver.step(eng, t, X, Y, h)
 
     def _try_span(self, t, X, times):
         """One adaptive solve across ``times``; when it fails, spans are

@@ -133,7 +133,7 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
         Built-in scenario name (``avblocks list``) or a ``.yaml``/``.toml``/
         ``.py`` scenario file (its text is stored with the sweep).
     grid : dict, optional
-        ``{name: [values]}``. A name is a scenario parameter (``followers``),
+        ``{name: [values]}``. A name is a scenario parameter (``agents``),
         a simulation setting (``simulation.t_final``) or a numeric block
         parameter (``drive.gain``), exactly as ``avblocks run --set`` names them.
     seeds : int or list of int
@@ -147,7 +147,7 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
         The Zarr store (a folder, or a URL zarr opens). It must be reachable
         by every worker (a shared filesystem or an object store on a cluster).
     fixed : dict, optional
-        Overrides applied to every case (``{"followers": 2}``).
+        Overrides applied to every case (``{"agents": 3}``).
     scheduler : None, str or dask.distributed.Client
         None: a LocalCluster of ``workers`` processes (default one per core)
         on 127.0.0.1, closed at the end. A ``"tcp://host:8786"`` address or a

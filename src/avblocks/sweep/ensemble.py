@@ -85,7 +85,7 @@ def compute_group(spec: Spec, case_ids):
                 x0.setdefault(f"{name}.{k}", []).append(v)
     try:
         runner = av.compile(d0, t_final, dt, solver, log=log,
-                            log_every=int(sim0.get("log_every", 1)), seed=int(sim0["seed"]))
+                            log_every=int(sim0.get("log_every") or 1), seed=int(sim0["seed"]))
         seeds = [int(sim["seed"]) for *_, sim in built]
         kw = {"params": {k: _stack(v) for k, v in params.items()},
               "x0": {k: _stack(v) for k, v in x0.items()}}

@@ -6,7 +6,7 @@ across runs and resumes (``case_id = ravel_multi_index(index, shape)``).
 
 Override names follow ``avblocks run --set``:
 
-- ``name`` (no dot): a scenario parameter (``followers``, ``gain``, ...);
+- ``name`` (no dot): a scenario parameter (``agents``, ``gain``, ...);
 - ``simulation.<key>``: a simulation setting (``simulation.t_final``);
 - ``block.param`` (any other dotted name): a numeric block parameter, handed
   to ``simulate(params={...})`` (``drive.gain``, ``lf.k_l``).
@@ -173,7 +173,7 @@ def build_case(src, values: dict, seed: int):
         scen = {**scen, "seed": int(seed)}
     if src["kind"] == "builtin":
         from ..cli import load_any
-        d, sim, _name, _movie = load_any(src["name"], scen)
+        d, sim, *_ = load_any(src["name"], scen)      # (the hooks ride on .hooks)
     elif src["kind"] == "py":
         d, sim, _movie = _from_namespace(ns, scen, src["path"])
     else:

@@ -35,7 +35,7 @@ def robots_like(model, names, **kw):
     if n is not None and n != len(names):
         raise ParameterError(f"the model block has {n} vehicles but {len(names)} robot "
                              f"names were given ({names})", param="robots",
-                             hint="name one robot per vehicle (e.g. --set followers=...)")
+                             hint="name one robot per vehicle (e.g. --set agents=...)")
     if cls == "Unicycle":
         for lim in ("v_max", "omega_max"):
             v = np.asarray(getattr(model, lim, np.inf), float)

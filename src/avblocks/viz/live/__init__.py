@@ -13,6 +13,7 @@ ends, and ``docs/live.md``.
 """
 
 from ._server import LiveViewError, open_server
+from .estop import EStop
 from .view import SPEEDS, LiveView, simulate_live
 
-__all__ = ["LiveView", "simulate_live", "LiveViewError", "open_server", "SPEEDS"]
+__all__ = ["LiveView", "EStop", "simulate_live", "LiveViewError", "open_server", "SPEEDS"]

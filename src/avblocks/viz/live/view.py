@@ -125,7 +125,7 @@ class LiveView:
     """
 
     def __init__(self, diagram, t_final=10.0, dt=0.01, solver="rk4", *, seed=0, t0=0.0,
-                 log=None, log_every=1, realtime=1.0, check_finite=True, x0=None,
+                 log=None, log_every=None, realtime=1.0, check_finite=True, x0=None,
                  params=None, max_log_bytes=2 * 1024**3, host="127.0.0.1", port=0,
                  token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
                  agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
@@ -151,6 +151,7 @@ class LiveView:
             raise ParameterError("t_final must be a number >= t0", param="t_final",
                                  expected=f">= {self.sim.t0}", found=t_final)
         self.nsteps = int(round(span / self.sim.dt))
+        self._auto_log = log_every is None     # as simulate(): every step unless too big
         self.log_every = 1 if log_every is None else int(log_every)
         if self.log_every < 1:
             raise ParameterError("log_every must be >= 1", param="log_every",
@@ -222,9 +223,13 @@ class LiveView:
             plots = [n for n in self.names if n not in drawn
                      and self.idx[n][1] not in ("attitude", "pose", "position")][:3]
         self.plots = [add(r) for r in plots]
+        per = sum(int(np.prod(self.specs[n].shape)) * np.dtype(self.specs[n].dtype).itemsize
+                  for n in self.names)
+        if self._auto_log and (self.nsteps + 1) * per > max_log_bytes:
+            from ...core.simulator import _log_every_that_fits
+            self.log_every = _log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
         self.nlog = self.nsteps // self.log_every + 1
-        need = sum(self.nlog * int(np.prod(self.specs[n].shape)) *
-                   np.dtype(self.specs[n].dtype).itemsize for n in self.names)
+        need = self.nlog * per
         if need > max_log_bytes:
             raise ParameterError(
                 f"the log would take {need / 1e9:.2f} GB", param="log",
@@ -332,6 +337,9 @@ class LiveView:
             srv.initial_camera.position = (cx - 0.35 * r, cy - 0.8 * r, 0.6 * r)
             srv.initial_camera.look_at = (cx, cy, 0.0)
         self._cam_height = half / math.tan(fov / 2)
+        # viser's default far plane (1000 m) would clip a large scene
+        srv.initial_camera.far = max(1000.0, 10.0 * self._cam_height)
+        srv.initial_camera.near = max(1e-3, 1e-4 * self._cam_height)
         sc.add_light_ambient("/light/ambient", intensity=0.4)
         # a light grid of plain lines (viser's shader grid costs seconds per
         # frame in software WebGL)
@@ -483,7 +491,9 @@ class LiveView:
         if params:
             with gui.add_folder("Parameters"):
                 for path, spec in params.items():
-                    self._param_inputs[path] = self._param_input(gui, path, spec)
+                    h = self._param_input(gui, path, spec)
+                    if h is not None:
+                        self._param_inputs[path] = h
         self._plot_handles = []
         if self.plots:
             with gui.add_folder("Signals"):
@@ -528,9 +538,11 @@ class LiveView:
             add = gui.add_vector2 if val.size == 2 else gui.add_vector3
             h = add(label, initial_value=tuple(val.ravel().tolist()), hint=hint)
             kind = "vector"
-        else:
+        elif val.size <= 64:
             h = gui.add_text(label, initial_value=json.dumps(val.tolist()), hint=hint)
             kind = "json"
+        else:                       # too big to edit in a page (still settable from Python)
+            return None
         self._param_kinds[path] = kind
         h.on_update(lambda _e, p=path, hh=h: self._cmds.put(("param", p, hh.value)))
         return h

@@ -1,7 +1,7 @@
 """Quadrotors circling at different heights, to watch live in 3D.
 
-    avblocks run examples/03_live_quadrotors.py --live
-    avblocks run examples/03_live_quadrotors.py --live --set n=200
+    avblocks run examples/07_live_quadrotors.py --live
+    avblocks run examples/07_live_quadrotors.py --live --set n=200
 
 Each agent is a :class:`~avblocks.vehicles.Quadrotor` flown by its velocity
 controller (``velocity_controlled_quadrotor``); a Function block commands a

@@ -173,7 +173,7 @@ def build_case(src, values: dict, seed: int):
         scen = {**scen, "seed": int(seed)}
     if src["kind"] == "builtin":
         from ..cli import load_any
-        d, sim, _name, _movie = load_any(src["name"], scen)
+        d, sim, *_ = load_any(src["name"], scen)      # (the hooks ride on .hooks)
     elif src["kind"] == "py":
         d, sim, _movie = _from_namespace(ns, scen, src["path"])
     else:

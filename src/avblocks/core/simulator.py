@@ -159,33 +159,7 @@ class Simulator:
         return self.t0 + self.k * self.dt
 
     def _check_x0(self, x0):
-        out = {}
-        if x0 is None:
-            return out
-        if not isinstance(x0, dict):
-            raise ParameterError("x0 must be a dict {'block.state': value}", param="x0",
-                                 found=type(x0).__name__)
-        for path, v in x0.items():
-            bpath, _, nm = str(path).rpartition(".")
-            i = self.compiled.index(bpath) if bpath else self.compiled.index(str(path))
-            b = self.compiled.blocks[i]
-            if nm not in b._init or nm in b._random:
-                raise ParameterError("no such state", block=bpath, param=nm,
-                                     expected=sorted(set(b._init) - b._random), found=nm)
-            old = b._init[nm]
-            try:
-                a = np.array(v, dtype=old.dtype)
-            except (TypeError, ValueError):
-                raise ParameterError("initial value must be numeric", block=bpath,
-                                     param=nm, found=repr(v)[:60]) from None
-            if a.shape != old.shape:
-                raise ParameterError("initial value has the wrong shape", block=bpath,
-                                     param=nm, expected=old.shape, found=a.shape)
-            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-                raise ParameterError("initial value must be finite", block=bpath,
-                                     param=nm)
-            out[(i, nm)] = a
-        return out
+        return initial_values(self.compiled, x0)[0]
 
     # ---------------------------------------------------------- parameters
     def get_param(self, path):
@@ -468,6 +442,41 @@ class Simulator:
             except BaseException as e:  # noqa: BLE001 - collected, reported by caller
                 failures.append((self.compiled.names[i], e))
         return failures
+
+
+def initial_values(compiled, x0, runs=None):
+    """Checked initial values ``({(block index, state): array}, batched)``
+    from ``{"block.state": value}``. With ``runs`` (an ensemble), a value of
+    shape ``(runs, *shape)`` is one per run and its key is in ``batched``."""
+    out, batched = {}, set()
+    if x0 is None:
+        return out, batched
+    if not isinstance(x0, dict):
+        raise ParameterError("x0 must be a dict {'block.state': value}", param="x0",
+                             found=type(x0).__name__)
+    for path, v in x0.items():
+        bpath, _, nm = str(path).rpartition(".")
+        i = compiled.index(bpath) if bpath else compiled.index(str(path))
+        b = compiled.blocks[i]
+        if nm not in b._init or nm in b._random:
+            raise ParameterError("no such state", block=bpath, param=nm,
+                                 expected=sorted(set(b._init) - b._random), found=nm)
+        old = b._init[nm]
+        try:
+            a = np.array(v, dtype=old.dtype)
+        except (TypeError, ValueError):
+            raise ParameterError("initial value must be numeric", block=bpath,
+                                 param=nm, found=repr(v)[:60]) from None
+        if runs is not None and a.shape == (runs, *old.shape):
+            batched.add((i, nm))
+        elif a.shape != old.shape:
+            raise ParameterError("initial value has the wrong shape", block=bpath,
+                                 param=nm, expected=old.shape if runs is None else
+                                 f"{old.shape} or {(runs, *old.shape)}", found=a.shape)
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise ParameterError("initial value must be finite", block=bpath, param=nm)
+        out[(i, nm)] = a
+    return out, batched
 
 
 def _blame(exc, compiled):

@@ -237,36 +237,8 @@ class Runner:
 
     def _x0_values(self, x0, runs=None):
         """{(block index, state): array} from ``{"block.state": value}``."""
-        out, batched = {}, set()
-        if x0 is None:
-            return out, batched
-        if not isinstance(x0, dict):
-            raise ParameterError("x0 must be a dict {'block.state': value}", param="x0",
-                                 found=type(x0).__name__)
-        cd = self.compiled
-        for path, v in x0.items():
-            bpath, _, nm = str(path).rpartition(".")
-            i = cd.index(bpath)
-            b = cd.blocks[i]
-            if nm not in b._init or nm in b._random:
-                raise ParameterError("no such state", block=bpath, param=nm,
-                                     expected=sorted(set(b._init) - b._random), found=nm)
-            old = b._init[nm]
-            try:
-                a = np.array(v, dtype=old.dtype)
-            except (TypeError, ValueError):
-                raise ParameterError("initial value must be numeric", block=bpath,
-                                     param=nm, found=repr(v)[:60]) from None
-            if runs is not None and a.shape == (runs, *old.shape):
-                batched.add((i, nm))
-            elif a.shape != old.shape:
-                raise ParameterError("initial value has the wrong shape", block=bpath,
-                                     param=nm, expected=old.shape if runs is None else
-                                     f"{old.shape} or {(runs, *old.shape)}", found=a.shape)
-            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-                raise ParameterError("initial value must be finite", block=bpath, param=nm)
-            out[(i, nm)] = a
-        return out, batched
+        from ..simulator import initial_values
+        return initial_values(self.compiled, x0, runs)
 
     def _states(self, x0vals, seeds):
         """Initial states: declared values, ``x0`` overrides, random keys from

@@ -14,6 +14,7 @@ from avblocks.scenarios import builtin_scenarios, load_scenario
 @pytest.mark.parametrize("name, sets", [
     ("nest", {"agents": 60, "t_final": 8.0}),
     ("swap", {"agents": 8, "t_final": 8.0}),
+    ("swap", {"agents": 8, "t_final": 8.0, "mode": "joint"}),
     ("flocking", {"agents": 12, "t_final": 4.0}),
     ("formation", {"agents": 4, "t_final": 30.0, "dt": 0.05}),   # through the 1st switch
 ])

@@ -19,6 +19,13 @@ the ring jams even with the bias. A ``blocks.Function`` makes planar
 poses (heading along the velocity, or towards the goal once stopped) for
 plots and movies.
 
+``mode="joint"`` (needs the ``safety`` extra, Clarabel) solves one QP over
+all agents instead of one per agent: at ``safety=0.85`` (circle / safety
+radius 5.88, Robotarium's default ratio) the per-agent filter leaves 2 of
+20 agents jammed at 30 s while the joint QP brings all 20 home by 16.1 s
+(closest approach 0.850 m either way); it also completes the perfectly
+symmetric swap (``jitter=0, speed_spread=0``) for ratios 4 to 10.
+
 Logged: ``fleet.position``, ``view.pose``, ``drive.done``. Expect a minimum
 pairwise distance of ``safety`` (to solver accuracy) and every agent at its
 goal by about 21 s at the defaults (about 2 s of wall time).

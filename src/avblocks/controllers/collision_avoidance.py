@@ -71,8 +71,12 @@ first term vanishes for radial ones), so the derivative is non-zero and
 ``u = 0`` is not the optimum: the cluster turns instead of stopping.
 Turning changes the geometry until each agent's nominal velocity points out of the cluster.
 This is an argument for the symmetric jam, not a proof for every
-configuration; the tests show the 20-agent swap completing for circle /
-safety radius ratios 4 to 10 with and without symmetry.
+configuration (in floating point the unbiased joint QP often escapes the
+symmetric swap as well, through round-off). The tests show the perfectly
+symmetric 20-agent swap completing for circle / safety radius ratios 4 to
+10 (right-hand bias 1), where the per-agent filter jams, and the jittered
+swap scenario completing at Robotarium's ratio 5.88. Note that the bias
+adds speed: up to ``sqrt(1 + rho^2)`` times the nominal one.
 
 Reference: L. Wang, A. D. Ames & M. Egerstedt, "Safety barrier certificates
 for collisions-free multirobot systems", IEEE T-RO 33(3), 2017; U. Borrmann

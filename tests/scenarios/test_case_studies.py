@@ -1,5 +1,7 @@
 """The built-in case-study scenarios, run small: the outcome a researcher checks."""
 
+import os
+
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist, pdist
@@ -125,6 +127,21 @@ def test_swap_without_symmetry_breaking_jams_but_stays_safe():
     p = np.asarray(res["fleet.position"])
     assert min(pdist(x).min() for x in p) >= 0.6 - 1e-3
     assert not np.asarray(res["drive.done"])[-1].any()
+
+
+def test_swap_at_robotarium_ratio_jams_per_agent_and_completes_jointly():
+    """Circle / safety radius 5.88 (Robotarium's default): the per-agent
+    filter leaves two agents stuck, the joint QP (mode="joint") brings all
+    20 home, both without ever breaking the safety radius."""
+    if not os.environ.get("CI"):
+        pytest.importorskip("clarabel")           # the safety extra; CI has it
+    out = {}
+    for mode in ("agent", "joint"):
+        mod, res = run("swap", safety=0.85, mode=mode)
+        p = np.asarray(res["fleet.position"])
+        assert min(pdist(x).min() for x in p) >= 0.85 - 1e-3
+        out[mode] = int(np.asarray(res["drive.done"])[-1].sum())
+    assert out == {"agent": 18, "joint": 20}
 
 
 def test_cli_runs_a_case_study(tmp_path):

@@ -14,6 +14,7 @@ from avblocks.scenarios import builtin_scenarios, load_scenario
 @pytest.mark.parametrize("name, sets", [
     ("nest", {"agents": 60, "t_final": 8.0}),
     ("swap", {"agents": 8, "t_final": 8.0}),
+    ("swap", {"agents": 8, "t_final": 8.0, "mode": "joint"}),
     ("flocking", {"agents": 12, "t_final": 4.0}),
     ("formation", {"agents": 4, "t_final": 30.0, "dt": 0.05}),   # through the 1st switch
 ])
@@ -42,7 +43,9 @@ def test_yaml_scenario_parameters_are_the_python_defaults():
         params = load_scenario(name).data["parameters"]
         for k, v in params.items():
             if isinstance(v, str) or defaults[k] is None:
-                assert k in ("tree", "agents") and (defaults[k] in (v, None)), (name, k)
+                # a string (swap's mode) is the Python default itself
+                assert defaults[k] == v or (k in ("tree", "agents")
+                                            and defaults[k] is None), (name, k)
                 continue
             assert np.allclose(np.asarray(v, float), np.asarray(defaults[k], float)), (name, k)
 

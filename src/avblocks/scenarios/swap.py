@@ -19,6 +19,13 @@ the ring jams even with the bias. A ``blocks.Function`` makes planar
 poses (heading along the velocity, or towards the goal once stopped) for
 plots and movies.
 
+``mode="joint"`` (needs the ``safety`` extra, Clarabel) solves one QP over
+all agents instead of one per agent: at ``safety=0.85`` (circle / safety
+radius 5.88, Robotarium's default ratio) the per-agent filter leaves 2 of
+20 agents jammed at 30 s while the joint QP brings all 20 home by 16.1 s
+(closest approach 0.850 m either way); it also completes the perfectly
+symmetric swap (``jitter=0, speed_spread=0``) for ratios 4 to 10.
+
 Logged: ``fleet.position``, ``view.pose``, ``drive.done``. Expect a minimum
 pairwise distance of ``safety`` (to solver accuracy) and every agent at its
 goal by about 21 s at the defaults (about 2 s of wall time).
@@ -52,7 +59,8 @@ def circle_swap(n, radius, jitter=0.0, seed=1):
 
 def make_diagram(agents=20, radius=5.0, safety=0.6, v_max=1.0, gain=1.0, gamma=2.0,
                  right_hand=1.0, sensing=3.0, k=6, goal_radius=0.05, jitter=0.5,
-                 speed_spread=0.3, seed=1, t_final=30.0, dt=0.05, log_every=1):
+                 speed_spread=0.3, seed=1, t_final=30.0, dt=0.05, log_every=1,
+                 mode="agent"):
     """The swap diagram and its simulation settings."""
     n = int(agents)
     start, goal = circle_swap(n, float(radius), float(jitter), seed)
@@ -74,7 +82,8 @@ def make_diagram(agents=20, radius=5.0, safety=0.6, v_max=1.0, gain=1.0, gamma=2
                           period=float(dt)),
                 name="neighbors")
     safe = dg.add(CollisionAvoidance(n, float(safety), gamma=float(gamma),
-                                     right_hand=float(right_hand)), name="safety")
+                                     right_hand=float(right_hand), mode=mode),
+                  name="safety")
     view = dg.add(Function(pose, inputs={"position": (n, 2), "velocity": (n, 2)},
                            outputs={"pose": (n, 3)}), name="view")
     dg.connect(fleet.position, drive.position)

@@ -68,6 +68,19 @@ def emulator(router, names, tmp_path, *extra, wait=True):
             p.kill()
 
 
+def wait_for_stop(log, robots, timeout=3.0):
+    """Wait (bounded) until each robot's last received command is zero: the
+    stop commands of on_stop may still be in flight through the router when
+    the run returns."""
+    t_end = time.monotonic() + timeout
+    while time.monotonic() < t_end:
+        recs = read_log(log) if Path(log).exists() else []
+        last = [commands(recs, r)[-1] if commands(recs, r) else None for r in robots]
+        if all(c is not None and c["v"] == 0.0 and c["w"] == 0.0 for c in last):
+            return
+        time.sleep(0.05)
+
+
 def read_log(path):
     with open(path) as f:
         return [json.loads(s) for s in f if s.strip()]

@@ -10,7 +10,7 @@ import pytest
 
 import avblocks as av
 
-from .conftest import commands, emulator, read_log
+from .conftest import commands, emulator, read_log, wait_for_stop
 
 
 def _robots(router, names="tb1,tb2", **kw):
@@ -33,6 +33,7 @@ def test_unicycle_follows_the_arc_and_stops_at_the_end(router, tmp_path):
         _const(d, [[v, w], [v, 0.0]], _robots(router))
         res = av.simulate(d, t_final=2.0, dt=0.05, realtime=1.0,
                           log=["fleet.pose", "fleet.fresh", "fleet.age"])
+        wait_for_stop(log, ("tb1", "tb2"))
     recs = read_log(log)
     assert res["fleet.fresh"][1:].all()
     assert np.median(res["fleet.age"][1:]) < 0.1   # 50 Hz odometry (slack for a busy machine)

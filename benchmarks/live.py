@@ -58,8 +58,9 @@ def page_time(drv):
     return float(m.group(1)) if m else None
 
 
-def measure(drv, n, seconds, shots, trail=3.0):
+def measure(drv, n, seconds, shots, trail=3.0, trail_style="dots"):
     view = LiveView(make_diagram(n), t_final=120.0, dt=0.05, realtime=1.0, trail=trail,
+                    trail_style=trail_style,
                     verbose=False, log=["fleet.pose"])
     view.start()
     try:
@@ -118,12 +119,13 @@ def main():
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--shots", default=None, help="folder for screenshots")
     ap.add_argument("--trail", type=float, default=3.0, help="trail length [s] (0: none)")
+    ap.add_argument("--trail-style", default="dots", choices=("dots", "lines"))
     a = ap.parse_args()
     drv = browser()
     rows = []
     try:
         for n in a.agents:
-            rows.append(measure(drv, n, a.seconds, a.shots, a.trail))
+            rows.append(measure(drv, n, a.seconds, a.shots, a.trail, a.trail_style))
             print(rows[-1], flush=True)
     finally:
         drv.quit()

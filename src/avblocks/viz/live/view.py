@@ -465,7 +465,7 @@ class LiveView:
                         if s["trail"] is None:
                             s["trail"] = srv.scene.add_point_cloud(
                                 "/trails/" + s["name"].replace(".", "_"), pts, cols,
-                                point_size=0.2 * self.agent_size, point_shape="square",
+                                point_size=0.1 * self.agent_size, point_shape="square",
                                 point_shading="flat", precision="float32")
                         else:
                             s["trail"].points = pts

@@ -58,12 +58,13 @@ def page_time(drv):
     return float(m.group(1)) if m else None
 
 
-def measure(drv, n, seconds, shots, trail=3.0):
+def measure(drv, n, seconds, shots, trail=3.0, trail_style="dots", dpr=None):
     view = LiveView(make_diagram(n), t_final=120.0, dt=0.05, realtime=1.0, trail=trail,
+                    trail_style=trail_style,
                     verbose=False, log=["fleet.pose"])
     view.start()
     try:
-        drv.get(view.url)
+        drv.get(view.url + (f"?fixedDpr={dpr:g}" if dpr else ""))
         t_end = time.monotonic() + 30
         while page_time(drv) is None and time.monotonic() < t_end:
             time.sleep(0.2)
@@ -89,11 +90,15 @@ def measure(drv, n, seconds, shots, trail=3.0):
                 lags.append(view.sim.t - pt)
         frames = drv.execute_script("return window.__n;") - n_start
         wall = time.perf_counter() - w0
+        canvas = drv.execute_script(
+            "const c = [...document.querySelectorAll('canvas')].sort((a, b) => "
+            "b.width * b.height - a.width * a.height)[0]; return c ? [c.width, c.height] : null;")
         row = {"agents": n, "drawn as": "points" if n > view.points_above else "arrows",
                "browser frames/s": frames / wall,
                "scene updates/s": (view.draws - d0) / wall,
                "page lag [s]": statistics.median(lags) if lags else float("nan"),
-               "real-time factor": (view.sim.k - k0) * view.sim.dt / wall}
+               "real-time factor": (view.sim.k - k0) * view.sim.dt / wall,
+               "canvas px": "x".join(map(str, canvas)) if canvas else "?"}
         # the same page with nothing changing: what the browser does when
         # it only has to keep its frame loop going
         view.pause()
@@ -118,12 +123,15 @@ def main():
     ap.add_argument("--seconds", type=float, default=6.0)
     ap.add_argument("--shots", default=None, help="folder for screenshots")
     ap.add_argument("--trail", type=float, default=3.0, help="trail length [s] (0: none)")
+    ap.add_argument("--trail-style", default="dots", choices=("dots", "lines"))
+    ap.add_argument("--dpr", type=float, default=None,
+                    help="open the page with ?fixedDpr=DPR (viser: fixed render scale)")
     a = ap.parse_args()
     drv = browser()
     rows = []
     try:
         for n in a.agents:
-            rows.append(measure(drv, n, a.seconds, a.shots, a.trail))
+            rows.append(measure(drv, n, a.seconds, a.shots, a.trail, a.trail_style, a.dpr))
             print(rows[-1], flush=True)
     finally:
         drv.quit()

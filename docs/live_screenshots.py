@@ -22,10 +22,13 @@ from avblocks.viz.live import LiveView  # noqa: E402
 
 
 def shot(drv, view, path, run_for):
+    """Open the page, pause at simulated time ``run_for``, save a shot."""
     view.start()
     try:
         drv.get(view.url)
-        time.sleep(run_for)
+        t_end = time.monotonic() + 60.0      # until simulated time run_for
+        while view.sim.t < run_for and time.monotonic() < t_end:
+            time.sleep(0.05)
         view.pause()
         time.sleep(4.0)
         drv.execute_script("document.querySelectorAll('.mantine-Notification-root')"
@@ -45,7 +48,7 @@ def main():
         d, sim = formation.make_diagram()
         sim.pop("t_final")
         shot(drv, LiveView(d, t_final=100.0, realtime=8.0, verbose=False, **sim),
-             os.path.join(out, "live-formation.png"), 6.0)
+             os.path.join(out, "live-formation.png"), 18.0)
         spec = importlib.util.spec_from_file_location(
             "quads", os.path.join(HERE, "..", "examples", "07_live_quadrotors.py"))
         mod = importlib.util.module_from_spec(spec)
@@ -53,7 +56,7 @@ def main():
         d, sim = mod.make_diagram()
         sim.pop("t_final")
         shot(drv, LiveView(d, t_final=60.0, realtime=2.0, verbose=False, **sim),
-             os.path.join(out, "live-quadrotors.png"), 10.0)
+             os.path.join(out, "live-quadrotors.png"), 20.0)
     finally:
         drv.quit()
 

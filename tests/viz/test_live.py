@@ -295,6 +295,8 @@ def test_simulate_live_flag_and_errors():
         LiveView(make_diagram(), 1.0, camera="side", verbose=False)
     with pytest.raises(av.AvError, match="no such numeric parameter"):
         LiveView(make_diagram(), 1.0, params={"gain.q": 1.0}, verbose=False)
+    with pytest.raises(av.AvError, match="trail_style must be 'dots' or 'lines'"):
+        LiveView(make_diagram(), 1.0, trail_style="ribbons", verbose=False)
     assert math.isfinite(res.meta["wall_time"])
 
 

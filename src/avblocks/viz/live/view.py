@@ -98,9 +98,13 @@ class LiveView:
     trail : float
         Seconds of trail behind each agent (0: none).
     trail_segments : int
-        At most this many trail segments in all (fat lines are costly in a
-        browser without a GPU): long trails get coarser with more agents,
-        and none are drawn above this many agents.
+        At most this many trail segments (dots) in all: long trails get
+        coarser with more agents, and none are drawn above this many agents.
+    trail_style : "dots" or "lines"
+        Trails as one point cloud of past positions (default: cheap) or as
+        fat screen-space line segments (three.js ``LineSegments2``: in a
+        browser without a GPU they cost several times the agents' own
+        drawing per frame; see docs/live.md, Speed).
     colors : colour or (N, 3), optional
         Agent colours of the first drawn signal (default: tab10 cycle).
     agent_size : float
@@ -130,7 +134,7 @@ class LiveView:
                  token=None, plots=None, plot_window=20.0, trail=5.0, colors=None,
                  agent_size=None, points_above=2000, fps=20.0, fps_points=8.0,
                  camera=None, obstacles=None, end_on_close=True, close_grace=2.0,
-                 trail_segments=6000,
+                 trail_segments=6000, trail_style="dots",
                  hold=True, verbose=True, title=None):
         from ...core.simulator import Simulator
         if isinstance(diagram, Diagram):
@@ -168,6 +172,10 @@ class LiveView:
         self.title = title or "avblocks live"
         self.plot_window, self.trail = float(plot_window), float(trail)
         self.trail_segments = int(trail_segments)
+        if trail_style not in ("dots", "lines"):
+            raise ParameterError("trail_style must be 'dots' or 'lines'", param="trail_style",
+                                 expected="'dots' or 'lines'", found=trail_style)
+        self.trail_style = trail_style
         self.points_above = int(points_above)
         self.fps, self.fps_points = float(fps), float(fps_points)
         self.end_on_close, self.close_grace = bool(end_on_close), float(close_grace)
@@ -449,7 +457,21 @@ class LiveView:
                     h.batched_wxyzs = Q.astype(np.float32)
                 if do_trails:
                     seg = self._trails(s, kt)
-                    if seg is not None:
+                    if seg is not None and self.trail_style == "dots":
+                        # one point cloud: a dot at each trail point but the
+                        # newest (under the agent); one node, no instancing
+                        pts = np.ascontiguousarray(seg[:, 0, :], dtype=np.float32)
+                        cols = np.repeat(s["colors"], len(seg) // s["n"], axis=0)
+                        if s["trail"] is None:
+                            s["trail"] = srv.scene.add_point_cloud(
+                                "/trails/" + s["name"].replace(".", "_"), pts, cols,
+                                point_size=0.1 * self.agent_size, point_shape="square",
+                                point_shading="flat", precision="float32")
+                        else:
+                            s["trail"].points = pts
+                            if s["trail"].colors.shape != cols.shape:
+                                s["trail"].colors = cols
+                    elif seg is not None:
                         cols = np.repeat(s["colors"], len(seg) // s["n"], axis=0)
                         cols = np.repeat(cols[:, None, :], 2, axis=1)
                         if s["trail"] is None:

@@ -320,7 +320,8 @@ def test_stop_sets_estop_first_and_restart_takes_next_seed():
     fleet = d.add(av.vehicles.SingleIntegrator(P0), name="fleet")
     d.connect(c.y, gate.u)
     d.connect(gate.y, fleet.velocity)
-    view = LiveView(d, t_final=60.0, dt=DT, realtime=None, verbose=False).start()
+    # as fast as possible: t_final far enough that the run cannot end during the test
+    view = LiveView(d, t_final=20000.0, dt=DT, realtime=None, verbose=False).start()
     try:
         _wait(lambda: view.sim.k > 20, timeout=10)
         view.restart()

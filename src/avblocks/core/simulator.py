@@ -323,37 +323,25 @@ class Simulator:
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         fast = self._fast
-        if fast is not None:                 # the generated step (codegen)
-            try:
-                X, Y = fast(self.X, self.Y, t, t1, k, h)
-            except AvError as e:
-                raise self._enrich(e, t) from e
-            except Exception as e:  # noqa: BLE001 - add the block context
-                raise self._wrap(e, t) from e
-            self._Yprev = self.Y        # the outputs that drove this step (for blame)
-            self.X, self.Y = X, Y
-            self.k = k + 1
-            if self._fcheck:
-                self._check(t1)
-            if self._side:
-                self._side_effects()
-            return
         try:
-            if self._queue:                  # inside a span: no discrete event
-                X = self._queue.pop()
+            if fast is not None:             # the generated step (codegen)
+                X, Y = fast(self.X, self.Y, t, t1, k, h)
             else:
-                X = eng.update(t, self.X, self.Y, eng.hits(k))
-                end = self._span_end(k)
-                states = None
-                if end > k + 1:
-                    times = [self.t0 + j * h for j in range(k + 1, end + 1)]
-                    states = self._try_span(t, X, times)
-                if states is not None:
-                    self._queue = states[::-1]
+                if self._queue:              # inside a span: no discrete event
                     X = self._queue.pop()
                 else:
-                    X = self._advance(t, X, h)
-            Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
+                    X = eng.update(t, self.X, self.Y, eng.hits(k))
+                    end = self._span_end(k)
+                    states = None
+                    if end > k + 1:
+                        times = [self.t0 + j * h for j in range(k + 1, end + 1)]
+                        states = self._try_span(t, X, times)
+                    if states is not None:
+                        self._queue = states[::-1]
+                        X = self._queue.pop()
+                    else:
+                        X = self._advance(t, X, h)
+                Y = eng.major_outputs(t1, X, self.Y, eng.hits(k + 1))
         except AvError as e:
             raise self._enrich(e, t) from e
         except Exception as e:  # noqa: BLE001 - add the block context
@@ -361,7 +349,8 @@ class Simulator:
         self._Yprev = self.Y        # the outputs that drove this step (for blame)
         self.X, self.Y = X, Y
         self.k = k + 1
-        self._check(t1)
+        if fast is None or self._fcheck:
+            self._check(t1)
         if self._side:
             self._side_effects()
 

@@ -128,26 +128,11 @@ class TracedEngine:
             out[o] = self.xp.asarray(a, dtype=self.canon(p.dtype))
         return out
 
-    def all_outputs(self, t, X, Y):
-        Y = list(Y)
-        for i in self.with_outputs:
-            Y[i] = self._out(i, t, X, Y)
-        return Y
-
-    def major_outputs(self, t, X, Yprev, hits):
-        Y = list(Yprev)
-        for i in self.with_outputs:
-            if self.periodic[i]:
-                Y[i] = _select(hits[i], self._out(i, t, X, Y), Yprev[i], self.xp)
-            else:
-                Y[i] = self._out(i, t, X, Y)
-        return Y
-
-    def minor_outputs(self, t, X, Y):
-        Y = list(Y)
-        for i in self.minor:
-            Y[i] = self._out(i, t, X, Y)
-        return Y
+    # output sweeps are the NumPy engine's: they call this class's _out, and
+    # its _select takes a traced hit flag as well as a Python bool
+    all_outputs = _Engine.all_outputs
+    major_outputs = _Engine.major_outputs
+    minor_outputs = _Engine.minor_outputs
 
     def update(self, t, X, Y, hits):
         X = list(X)

@@ -27,7 +27,9 @@ import numpy as np
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..core.memo import shared
 from ..core.params import agent_array, positive_scalar
+from ..utility.angles import heading_trig
 from ..utility.arrays import columns
 
 
@@ -90,19 +92,36 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     ``pose`` (N, 3), ``goal`` (N, 2), ``d``, ``gain``, ``v_max`` scalars or (N,).
     With ``radius`` also returns whether each point is within it of its goal.
     """
-    th = pose[:, 2]
-    c, s = xp.cos(th), xp.sin(th)
-    ex = goal[:, 0] - pose[:, 0] - d * c
-    ey = goal[:, 1] - pose[:, 1] - d * s
-    # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
-    e2 = ex * ex + ey * ey
-    k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
-    wx, wy = k * ex, k * ey
-    if xp is np:                        # same values, fewer temporaries
-        cmd = np.empty((th.shape[0], 2))
-        np.add(c * wx, s * wy, out=cmd[:, 0])
-        np.multiply(c * wy - s * wx, 1.0 / d, out=cmd[:, 1])
+    c, s = shared(heading_trig, pose, xp)
+    if xp is np:
+        # the same operations in the same order as below, written into
+        # buffers this function made (fewer temporaries; bit-identical)
+        ex = goal[:, 0] - pose[:, 0]
+        ex -= d * c
+        ey = goal[:, 1] - pose[:, 1]
+        ey -= d * s
+        e2 = ex * ex
+        e2 += ey * ey
+        k = np.sqrt(e2)
+        np.maximum(k, 1e-300, out=k)
+        np.divide(v_max, k, out=k)
+        np.minimum(gain, k, out=k)
+        ex *= k                         # now w_x
+        ey *= k                         # now w_y
+        cmd = np.empty((c.shape[0], 2))
+        a = c * ex
+        a += s * ey
+        cmd[:, 0] = a
+        np.multiply(c, ey, out=a)
+        a -= s * ex
+        np.multiply(a, 1.0 / d, out=cmd[:, 1])
     else:
+        ex = goal[:, 0] - pose[:, 0] - d * c
+        ey = goal[:, 1] - pose[:, 1] - d * s
+        # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
+        e2 = ex * ex + ey * ey
+        k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
+        wx, wy = k * ex, k * ey
         cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
     if radius is None:
         return cmd

@@ -330,11 +330,17 @@ class Block:
         if xp is not np:
             return True
         d = self.__dict__
-        vals = tuple(d[n] for n in names)
-        cache = d.setdefault("_flag_cache", {})
+        cache = d.get("_flag_cache")
+        if cache is None:
+            cache = d["_flag_cache"] = {}
         hit = cache.get(key)
-        if hit is not None and all(a is b for a, b in zip(hit[0], vals)):
-            return hit[1]
+        if hit is not None:
+            for a, n in zip(hit[0], names):
+                if a is not d[n]:
+                    break
+            else:
+                return hit[1]
+        vals = tuple(d[n] for n in names)
         r = bool(test(*vals))
         cache[key] = (vals, r)
         return r

@@ -44,6 +44,7 @@ import time as _time
 import numpy as np
 
 from . import codegen
+from . import memo as _memo
 from . import rng as _rng
 from .diagram import CompiledDiagram, Diagram, PortRef
 from .engine import Engine
@@ -144,6 +145,7 @@ class Simulator:
         self.param_changes = []
         self._queue = []
         self._fast = None       # generated major step (see codegen), set by init()
+        self._memo = _memo.Memo()   # values blocks share within and across steps
         self.k = 0
         self.X = None
         self.Y = None
@@ -203,6 +205,7 @@ class Simulator:
         self.k = 0
         self._queue = []
         self._Yprev = None
+        self._memo.clear()
         # on_start first: an interface block (robots) connects there and may
         # set its initial state from what it receives (the robots' poses)
         for i in self._side:
@@ -323,6 +326,7 @@ class Simulator:
         t = self.t0 + k * h
         t1 = self.t0 + (k + 1) * h
         fast = self._fast
+        token = _memo.activate(self._memo)
         try:
             if fast is not None:             # the generated step (codegen)
                 X, Y = fast(self.X, self.Y, t, t1, k, h)
@@ -346,6 +350,8 @@ class Simulator:
             raise self._enrich(e, t) from e
         except Exception as e:  # noqa: BLE001 - add the block context
             raise self._wrap(e, t) from e
+        finally:
+            _memo.deactivate(token)
         self._Yprev = self.Y        # the outputs that drove this step (for blame)
         self.X, self.Y = X, Y
         self.k = k + 1

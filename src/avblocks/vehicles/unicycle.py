@@ -18,23 +18,28 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.block import Block
+from ..core.memo import shared
 from ..core.params import limit, poses
-from ..utility.angles import wrap_angle
+from ..utility.angles import heading_trig, wrap_angle
 from ..utility.arrays import columns
 from ._common import any_finite
 
 
 def unicycle_rhs(pose, cmd, xp=np):
-    """Pose derivative of N unicycles: ``pose`` (N, 3), ``cmd`` (N, 2) -> (N, 3)."""
-    th = pose[:, 2]
+    """Pose derivative of N unicycles: ``pose`` (N, 3), ``cmd`` (N, 2) -> (N, 3).
+
+    Only the heading of ``pose`` is read; its cos/sin go through
+    :func:`~avblocks.core.memo.shared` (taken once per pose array per step
+    when a controller needs them too)."""
+    c, s = shared(heading_trig, pose, xp)
     v = cmd[:, 0]
     if xp is np:                        # same values, fewer temporaries
-        out = np.empty((th.shape[0], 3))
-        np.multiply(v, np.cos(th), out=out[:, 0])
-        np.multiply(v, np.sin(th), out=out[:, 1])
+        out = np.empty((v.shape[0], 3))
+        np.multiply(v, c, out=out[:, 0])
+        np.multiply(v, s, out=out[:, 1])
         out[:, 2] = cmd[:, 1]
         return out
-    return columns(xp, v * xp.cos(th), v * xp.sin(th), cmd[:, 1])
+    return columns(xp, v * c, v * s, cmd[:, 1])
 
 
 def wrapped_pose(p, xp=np):
@@ -46,8 +51,13 @@ def wrapped_pose(p, xp=np):
             # bit; the state array itself is returned (nothing writes into
             # states or outputs)
             return p
+        # wrap_angle's arithmetic, operation for operation, in one buffer
+        w = th - np.pi
+        w *= 0.5 / np.pi
+        np.ceil(w, out=w)
+        w *= 2 * np.pi
         out = p.copy()
-        out[:, 2] = th - (2 * np.pi) * np.ceil((th - np.pi) * (0.5 / np.pi))
+        np.subtract(th, w, out=out[:, 2])
         return out
     return columns(xp, p[:, 0], p[:, 1], wrap_angle(p[:, 2], xp))
 
@@ -118,7 +128,7 @@ class Unicycle(Block):
                                 doc="command exceeds the limit (cmd is feedthrough)")
 
     def output(self, t, x, u, xp):
-        y = {"pose": wrapped_pose(x["pose"], xp)}
+        y = {"pose": shared(wrapped_pose, x["pose"], xp)}
         if self.saturation_output:
             lim = xp.stack([self.v_max, self.omega_max], axis=-1)
             y["saturated"] = xp.abs(u["cmd"]) > lim
@@ -128,4 +138,7 @@ class Unicycle(Block):
         cmd = u["cmd"]
         if self.param_flag("limited", xp, any_finite, "v_max", "omega_max"):
             cmd = clip_cmd(cmd, self.v_max, self.omega_max, xp)
-        return {"pose": unicycle_rhs(x["pose"], cmd, xp)}
+        # the heading's trig is taken of the wrapped pose (the output):
+        # the same values (a whole number of turns apart), and the same
+        # array as the controllers downstream see, so it is computed once
+        return {"pose": unicycle_rhs(shared(wrapped_pose, x["pose"], xp), cmd, xp)}

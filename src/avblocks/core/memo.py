@@ -1,0 +1,89 @@
+"""Share a pure computation on one array between the blocks of a diagram.
+
+Splitting a vehicle and its controller into two blocks repeats work that a
+hand-fused loop does once: the unicycle's ``derivative`` and a go-to-goal
+law's ``output`` both take ``cos``/``sin`` of the same heading, and at 10^3
+agents those two transcendental calls are most of a step. Blocks cannot
+hand such values to each other without new ports, so helpers that are pure
+functions of one array can go through :func:`shared` instead::
+
+    c, s = shared(heading_trig, pose, xp)
+
+While a simulator evaluates a diagram it activates a :class:`Memo` (the
+NumPy simulator for its lifetime, across steps; the compiled backend while
+it traces one run). Inside, :func:`shared` returns the value already
+computed from the *same array object* (identity, not equality), so the
+vehicle's derivative at step k+1 reuses the trig the controller took of the
+vehicle's output at the end of step k, and under JAX the two calls trace to
+one operation. Outside a simulator it just calls the function.
+
+Why identity is enough: the simulator owns states and outputs and blocks
+never write into an array they are handed (the block contract), so an array
+object keeps its values for as long as anything refers to it; the memo holds
+a reference to each key, so its ``id`` cannot be reused while cached. Only
+functions of the array alone may be shared (no parameters: a parameter can
+change between steps while the array stays the same).
+"""
+
+from __future__ import annotations
+
+import contextvars
+from contextlib import contextmanager
+
+_ACTIVE: contextvars.ContextVar = contextvars.ContextVar("avblocks_memo", default=None)
+_SIZE = 16
+
+
+class Memo:
+    """Results of shared pure functions keyed by (function, array object)."""
+
+    __slots__ = ("entries", "hits", "misses")
+
+    def __init__(self):
+        self.entries = {}
+        self.hits = 0
+        self.misses = 0
+
+    def clear(self):
+        self.entries.clear()
+
+
+@contextmanager
+def active(memo: Memo):
+    """Make ``memo`` the one :func:`shared` uses in this thread/context."""
+    token = _ACTIVE.set(memo)
+    try:
+        yield memo
+    finally:
+        _ACTIVE.reset(token)
+
+
+def activate(memo):
+    """Low-cost form of :func:`active` for hot loops: returns the token to
+    pass to :func:`deactivate`."""
+    return _ACTIVE.set(memo)
+
+
+def deactivate(token):
+    _ACTIVE.reset(token)
+
+
+def shared(fn, a, xp):
+    """``fn(a, xp)``, computed once per array object ``a`` while a memo is
+    active (see the module docstring). ``fn`` must be a pure function of
+    ``a`` alone."""
+    memo = _ACTIVE.get()
+    if memo is None:
+        return fn(a, xp)
+    key = (fn, id(a))
+    entries = memo.entries
+    hit = entries.get(key)
+    if hit is not None and hit[0] is a:
+        memo.hits += 1
+        return hit[1]
+    memo.misses += 1
+    value = fn(a, xp)
+    if len(entries) >= _SIZE:           # forget the oldest (insertion order)
+        del entries[next(iter(entries))]
+    entries[key] = (a, value)
+    return value

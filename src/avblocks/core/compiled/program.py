@@ -10,10 +10,18 @@ small module-level LRU cache keyed by :func:`structure.diagram_key` plus
 the run settings (see :func:`cache_info`).
 
 The run is a nested ``lax.scan``: the outer scan has one iteration per log
-sample, which records the logged outputs and then advances ``log_every``
-major steps with the inner scan (skipped by a ``lax.cond`` after the last
-sample); the steps left over when ``log_every`` does not divide the step
-count run after it. Only the decimated log leaves the program: one copy.
+sample, which computes and records the logged outputs and then advances
+``log_every`` major steps with the inner scan (skipped by a ``lax.cond``
+after the last sample); the steps left over when ``log_every`` does not
+divide the step count run after it. Only the decimated log leaves the
+program: one copy. Each inner step computes its outputs first and then
+integrates (see ``Program.run``), so the outputs and the derivatives of one
+state are traced in one loop body and what blocks share through
+:mod:`avblocks.core.memo` is computed once.
+
+On CPU the programs are compiled with XLA's classic loop emitters
+(:func:`compiler_options`): measured on W1 they run the step 1.5-2.5x
+faster than the newer fusion emitters.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from .. import memo as _memo
 from ..params import bound_parameters
 from . import _jax
 from .engine import TracedEngine
@@ -58,6 +67,17 @@ def enable_persistent_cache(path=None, *, min_compile_time_s=0.0):
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_s))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return p
+
+
+def compiler_options() -> dict:
+    """XLA options for avblocks programs (this module's own compiles only;
+    nothing global). On CPU the classic loop emitters: XLA's newer fusion
+    emitters recompute a fused producer for every column of an (N, k)
+    result, which on the W1 benchmark made a step 1.5-2.5x slower
+    (benchmarks/scaling.py --backend jax; docs/compiled.md)."""
+    if _jax.jax().default_backend() == "cpu":
+        return {"xla_cpu_use_fusion_emitters": False}
+    return {}
 
 
 def get_program(key, factory):
@@ -120,15 +140,22 @@ class Program:
             per_block.setdefault(i, (self.cd.blocks[i], {}))[1][k] = theta[path]
         eng, dt, t0 = self.eng, self.dt, self.t0
         solver, le, nlog, idx = self.solver, self.log_every, self.nlog, self.log_idx
-        with bound_parameters(list(per_block.values())):
+        with bound_parameters(list(per_block.values())), _memo.active(_memo.Memo()):
             Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
 
+            # The carry is (X_k, Y_k-1): each step first computes its outputs
+            # at t_k (periodic blocks hold Y_k-1 between hits), then the
+            # updates and the solver step. Outputs and derivatives of one
+            # state are so traced in one body, where values blocks share
+            # through core.memo (the heading trig of a unicycle and its
+            # controller) become one operation.
             def step(carry, k):
-                X, Y = carry
+                X, Yp = carry
                 t = t0 + k * dt
-                X = eng.update(t, X, Y, eng.hits(k))
+                hit = eng.hits(k)
+                Y = eng.major_outputs(t, X, Yp, hit)
+                X = eng.update(t, X, Y, hit)
                 X = solver.step(eng, t, X, Y, dt)
-                Y = eng.major_outputs(t0 + (k + 1) * dt, X, Y, eng.hits(k + 1))
                 return (X, Y), None
 
             def advance(carry, k0, count):
@@ -142,7 +169,9 @@ class Program:
                 advance_le = jax.checkpoint(advance_le)
 
             def outer(carry, i):
-                row = [carry[1][j][o] for j, o in idx]
+                k = i * le
+                Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
+                row = [Y[j][o] for j, o in idx]
                 carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, i * le),
                                  lambda c: c, carry)
                 return carry, row
@@ -182,7 +211,7 @@ class Program:
                 self._rebind(compiled)
             t = time.perf_counter()
             with _jax.x64(self.x64):
-                exe = jax.jit(build()).lower(*args).compile()
+                exe = jax.jit(build()).lower(*args).compile(compiler_options())
             spent = time.perf_counter() - t
         with self._lock:
             self._exe[key] = exe

@@ -2,16 +2,36 @@
 
 from __future__ import annotations
 
+import os
+import sys
+
 from ..errors import AvError
+
+_started = False
 
 
 def jax():
-    """The ``jax`` module, or an AvError telling how to install it."""
+    """The ``jax`` module, or an AvError telling how to install it.
+
+    When this is the first import of JAX in the process and
+    ``JAX_NUM_CPU_DEVICES`` is not set, JAX is asked for one CPU device per
+    core, so compiled runs can use them all (see
+    :mod:`avblocks.core.compiled.devices`)."""
+    global _started
+    fresh = not _started and "jax" not in sys.modules
     try:
         import jax as _jax
     except ImportError as e:  # pragma: no cover - depends on the extra
         raise AvError("backend='jax' needs JAX: pip install 'avblocks[jax]' "
                       "(or run with backend='numpy')") from e
+    if not _started:
+        _started = True
+        if fresh and "JAX_NUM_CPU_DEVICES" not in os.environ:
+            from .devices import default_cpu_devices
+            try:
+                _jax.config.update("jax_num_cpu_devices", default_cpu_devices())
+            except (RuntimeError, AttributeError, KeyError):  # pragma: no cover
+                pass                    # started already, or an older JAX
     return _jax
 
 

@@ -14,6 +14,7 @@ from ..errors import CompileError, ParameterError, SimulationError
 from ..results import Results
 from ..solvers import make_solver
 from . import _jax
+from . import devices as _devices
 from .program import Program, get_program
 from .structure import diagram_key, fingerprint
 
@@ -65,7 +66,7 @@ def _solver_key(solver):
 
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
-            seed=0, backend="jax", dtype="float64", check_finite=True):
+            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None):
     """Compile ``diagram`` once for runs of ``t_final`` (JAX: ``jit`` of a
     nested ``lax.scan``) and return a :class:`Runner`.
 
@@ -91,6 +92,13 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
     check_finite : bool
         After a run, raise :class:`SimulationError` (with the results) if a
         logged signal or the final state is NaN/inf.
+    devices : None, int or list of JAX devices
+        Where the runs execute (default: every local device of JAX's
+        default backend). With several, a run of at least
+        ``devices.MIN_AGENTS_TO_SPLIT`` agents is split along its agent
+        axis and an ensemble along its run axis (see
+        :mod:`avblocks.core.compiled.devices`); ``devices=1`` keeps
+        everything on one device.
 
     The compiled program is shared by every diagram with the same structure
     (block types, wiring, shapes, sample times, non-parameter attributes),
@@ -155,7 +163,8 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                                             log_every=log_every, log_idx=idx,
                                             solver=solv, x64=x64))
     return Runner(cd, prog, names=names, specs=specs, aliases=aliases, seed=seed,
-                  dtype=dtype, check_finite=check_finite, solver_name=solv.name)
+                  dtype=dtype, check_finite=check_finite, solver_name=solv.name,
+                  devices=_devices.resolve(devices))
 
 
 class Runner:
@@ -174,7 +183,7 @@ class Runner:
     """
 
     def __init__(self, compiled, program, *, names, specs, aliases, seed, dtype,
-                 check_finite, solver_name):
+                 check_finite, solver_name, devices=None):
         self.compiled = compiled
         self.program = program
         self.names = names
@@ -185,6 +194,10 @@ class Runner:
         self.check_finite = bool(check_finite)
         self.solver_name = solver_name
         self.t = program.t0 + (program.log_every * np.arange(program.nlog)) * program.dt
+        self.devices = devices if devices is not None else _devices.resolve(None)
+        n = _devices.agents_of(compiled)
+        self._single = _devices.Placement(
+            self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
 
     @property
     def compilations(self) -> int:
@@ -288,11 +301,14 @@ class Runner:
         x0vals, _ = self._x0_values(x0)
         X0 = self._states(x0vals, [seed])
         prog = self.program
-        exe, compile_s = prog.executable("run", lambda: prog.run, (theta, X0),
+        place = self._single
+        with _jax.x64(prog.x64):
+            args = place((theta, X0))
+        exe, compile_s = prog.executable(("run", place.key), lambda: prog.run, args,
                                          self.compiled)
         t = time.perf_counter()
         with _jax.x64(prog.x64):
-            logs, XF = exe(theta, X0)
+            logs, XF = exe(*args)
             jax.block_until_ready((logs, XF))
         wall = time.perf_counter() - t
         logs = [np.asarray(a) for a in logs]
@@ -352,6 +368,12 @@ class Runner:
                       (item if np.dtype(s.dtype).kind == "f"
                        else np.dtype(s.dtype).itemsize) for s in self.specs)
         chunk = int(max(1, min(R, max_log_bytes // max(per_run, 1))))
+        ndev = len(self.devices)
+        if ndev > 1 and R > 1:
+            # whole runs per device: a multiple of the device count (the
+            # last chunk is padded anyway)
+            chunk = max(ndev, chunk // ndev * ndev)
+        place = _devices.Placement(self.devices, chunk)
         nchunks = -(-R // chunk)
         out = [np.empty((R, prog.nlog, *s.shape), dtype=_canon_np(s.dtype, prog.x64))
                for s in self.specs]
@@ -374,10 +396,12 @@ class Runner:
             th = {k: take(v, t_axes[k], lo, hi) for k, v in theta.items()}
             xs = [{k: take(v, x_axes[i][k], lo, hi) for k, v in x.items()}
                   for i, x in enumerate(X0)]
+            with _jax.x64(prog.x64):
+                th, xs = place((th, xs))
             if exe is None:
                 exe, compile_s = prog.executable(("ensemble", chunk, _axes_key(t_axes),
-                                                  _axes_key(x_axes)), build, (th, xs),
-                                                 self.compiled)
+                                                  _axes_key(x_axes), place.key), build,
+                                                 (th, xs), self.compiled)
             t = time.perf_counter()
             with _jax.x64(prog.x64):
                 logs, XF = exe(th, xs)

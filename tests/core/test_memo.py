@@ -107,3 +107,31 @@ def test_diagram_equals_the_hand_fused_loop():
     assert np.allclose(got[:, :2], pose[:, :2], atol=1e-9, rtol=0)
     wrapped = pose[:, 2] - 2 * np.pi * np.ceil((pose[:, 2] - np.pi) / (2 * np.pi))
     assert np.allclose(got[:, 2], wrapped, atol=1e-9, rtol=0)
+
+
+def test_compute_once_under_jax_is_exact_and_computed_once():
+    import os
+
+    import pytest
+    if os.environ.get("CI"):
+        import jax
+    else:
+        jax = pytest.importorskip("jax")
+    jnp = jax.numpy
+    from avblocks.utility.angles import heading_trig
+
+    def two_users(pose):
+        c, s = heading_trig(pose, jnp)
+        # two results of different shapes: XLA would fuse the trig into each
+        return jnp.stack([c * 2.0, s - 1.0, c * s], -1), (c * c + s * s) > 0.5
+
+    with jax.enable_x64(True):
+        pose = jnp.asarray(np.random.default_rng(0).uniform(-9, 9, (200, 3)))
+        a, b = jax.jit(two_users)(pose)
+        th = np.asarray(pose)[:, 2]
+        assert np.allclose(np.asarray(a)[:, 0], 2 * np.cos(th), rtol=0, atol=1e-15)
+        assert np.allclose(np.asarray(a)[:, 1], np.sin(th) - 1, rtol=0, atol=1e-15)
+        assert np.asarray(b).all()
+        if jax.default_backend() == "cpu":
+            hlo = jax.jit(two_users).lower(pose).compile().as_text()
+            assert hlo.count("cosine(") == 1 and hlo.count(" sine(") == 1

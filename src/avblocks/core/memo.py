@@ -30,6 +30,8 @@ from __future__ import annotations
 import contextvars
 from contextlib import contextmanager
 
+import numpy as np
+
 _ACTIVE: contextvars.ContextVar = contextvars.ContextVar("avblocks_memo", default=None)
 _SIZE = 16
 
@@ -87,3 +89,36 @@ def shared(fn, a, xp):
         del entries[next(iter(entries))]
     entries[key] = (a, value)
     return value
+
+
+#: fewest agents for which :func:`compute_once` pays on the CPU (below it,
+#: the extra kernel costs more than the recomputation it saves)
+COMPUTE_ONCE_MIN = 64
+
+
+def compute_once(arrays, xp):
+    """``arrays`` (a tuple of 1-D arrays of one length, computed elementwise
+    from the same inputs) made to be computed once per step under JAX.
+
+    XLA's CPU compiler fuses elementwise producers into every consumer and
+    duplicates them, however expensive: the heading's ``cos``/``sin``,
+    needed both by a vehicle's state update and by its controller's arrival
+    test, ends up computed once in each fused loop. A matrix product is
+    never fused into elementwise loops, so passing the values through the
+    identity (``I @ stack(arrays)``, exact: ``1 a + 0 b = a`` for finite
+    ``b``; a NaN in one array spreads to the others, which is why they must
+    come from the same inputs) makes XLA compute them once and keep them.
+    Measured on W1 at 10^3 agents: 35 -> 23 us per step.
+
+    A no-op under NumPy, on GPUs/TPUs and for fewer than
+    :data:`COMPUTE_ONCE_MIN` elements.
+    """
+    if xp is np or arrays[0].shape[0] < COMPUTE_ONCE_MIN:
+        return arrays
+    import jax
+    if jax.default_backend() != "cpu":
+        return arrays
+    st = xp.stack(arrays)
+    st = xp.matmul(xp.eye(len(arrays), dtype=st.dtype), st,
+                   precision=jax.lax.Precision.HIGHEST)
+    return tuple(st[i] for i in range(len(arrays)))

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.memo import compute_once
+
 
 def wrap_angle(a, xp=np):
     """Wrap angles to the interval (-pi, pi].
@@ -28,7 +30,7 @@ def heading_trig(pose, xp=np):
     (True, 1.0)
     """
     th = pose[:, 2]
-    return xp.cos(th), xp.sin(th)
+    return compute_once((xp.cos(th), xp.sin(th)), xp)
 
 
 def angle_diff(a, b, xp=np):

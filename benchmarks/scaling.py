@@ -255,8 +255,10 @@ def jax_main(args):
         xs = [r[0] for r in rows]
         for col, style, label in ((4, "s-", "plain NumPy loop"),
                                   (3, "^-", "avblocks, NumPy engine"),
-                                  (1, "o-", "avblocks, backend='jax' (2nd call)"),
-                                  (2, "d--", "fused Numba loop")):
+                                  (1, "o-", f"avblocks, backend='jax' (2nd call, "
+                                            f"{len(jax.devices())} {jax.default_backend()} "
+                                            "device(s))"),
+                                  (2, "d--", "fused Numba loop (1 thread)")):
             ax.loglog(xs, [r[col] for r in rows], style, label=label)
         ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
         ax.set_xlabel("number of unicycles N")

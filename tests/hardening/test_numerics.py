@@ -1,6 +1,8 @@
 """Numerical edge cases checked against libraries nobody here wrote:
 quadprog and cvxopt for the safety filter's QP."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -111,7 +113,7 @@ def test_named_airframes_match_their_motor_layout(frame):
     np.testing.assert_allclose(wrench_to_rotors(w, arm, km, frame), f, atol=1e-12)
 
 
-def _step_error(dt, te=0.33, t_final=1.0):
+def _step_error(dt, te=0.33, t_final=1.0, backend="numpy"):
     """|x(1) - truth| for x' = s(t) - x^3, x(0) = 0.5, s a Step at te."""
     from scipy.integrate import solve_ivp
 
@@ -125,7 +127,7 @@ def _step_error(dt, te=0.33, t_final=1.0):
     d.connect(s.y, f.u)
     d.connect(x.y, f.xs)
     d.connect(f.y, x.u)
-    res = av.simulate(d, t_final, dt=dt, log=["x.y"])
+    res = av.simulate(d, t_final, dt=dt, log=["x.y"], backend=backend)
     # truth: two tight solves joined at te
     a = solve_ivp(lambda t, y: 0.2 - y ** 3, (0, te), [0.5], rtol=1e-13, atol=1e-14)
     b = solve_ivp(lambda t, y: 1.5 - y ** 3, (te, t_final), a.y[:, -1], rtol=1e-13,
@@ -139,3 +141,53 @@ def test_step_under_rk4_keeps_fourth_order():
     # 2^4 = 16 per halving (first order, the straddled switch, would give ~2)
     assert all(12 < r < 20 for r in ratios), (errs, ratios)
     assert errs[-1] < 1e-7
+
+
+@pytest.mark.jax
+def test_step_under_rk4_keeps_fourth_order_on_the_compiled_backend():
+    """The compiled backend splits the major step at a Step's switch as the
+    NumPy simulator does: same fourth order, same values to round-off."""
+    if os.environ.get("CI"):
+        import jax  # noqa: F401 - in CI the jax extra is installed: never skip
+    else:
+        pytest.importorskip("jax")
+    errs = [_step_error(dt, backend="jax") for dt in (0.1, 0.05, 0.025)]
+    ratios = [errs[i] / errs[i + 1] for i in range(2)]
+    assert all(12 < r < 20 for r in ratios), (errs, ratios)
+    assert errs[-1] < 1e-7
+    for dt in (0.1, 0.025):
+        assert abs(_step_error(dt, backend="jax") - _step_error(dt)) < 1e-12
+
+
+@pytest.mark.jax
+def test_compiled_gradient_with_respect_to_a_switch_time():
+    """The split integrates up to the switch exactly, so d x(1) / d time
+    (reverse mode) equals central differences on the NumPy engine."""
+    if os.environ.get("CI"):
+        import jax  # noqa: F401 - in CI the jax extra is installed: never skip
+    else:
+        pytest.importorskip("jax")
+    import avblocks as av
+    d = av.Diagram()
+    s = d.add(av.blocks.Step(time=0.33, before=[0.2], after=[1.5]), name="s")
+    x = d.add(av.blocks.Integrator(np.array([0.5])), name="x")
+    f = d.add(av.blocks.Function(lambda t, u, xs: u - xs ** 3,
+                                 inputs={"u": (1,), "xs": (1,)}, outputs={"y": (1,)}),
+              name="f")
+    d.connect(s.y, f.u)
+    d.connect(x.y, f.xs)
+    d.connect(f.y, x.u)
+    g = av.grad(lambda res: res["x.y"][-1].sum(), d, ["s.time"], 1.0, dt=0.05, log=["x.y"])
+
+    def end(te):
+        return float(av.simulate(d, 1.0, dt=0.05, log=["x.y"],
+                                 params={"s.time": te})["x.y"][-1].sum())
+    h = 1e-6
+    fd = (end(0.33 + h) - end(0.33 - h)) / (2 * h)
+    assert abs(float(g["s.time"]) - fd) <= 1e-5 * abs(fd)
+    # per-run switch times in one ensemble equal single NumPy runs
+    times = np.array([0.12, 0.33, 0.5, 0.71])
+    ens = av.compile(d, 1.0, dt=0.05, log=["x.y"]).ensemble(params={"s.time": times})
+    for i, te in enumerate(times):
+        one = av.simulate(d, 1.0, dt=0.05, log=["x.y"], params={"s.time": te})
+        assert np.abs(ens["x.y"][i] - one["x.y"]).max() < 1e-12

@@ -104,8 +104,9 @@ class Step(Block):
 
     def switch_times(self):
         """Times where the output jumps: fixed-step solvers split the major
-        step there (RK4 keeps its fourth order across the step)."""
-        return (float(self.time),)
+        step there (RK4 keeps its fourth order across the step). Scalars,
+        traced values under the compiled backend."""
+        return (self.time,)
 
 
 class Sine(Block):

@@ -372,8 +372,8 @@ class Simulator:
         t1 = t + h
         if self._event_blocks:
             tol = 1e-9 * h
-            ev = sorted({te for b in self._event_blocks for te in b.switch_times()
-                         if t + tol < te < t1 - tol})
+            ev = sorted({float(te) for b in self._event_blocks
+                         for te in b.switch_times() if t + tol < float(te) < t1 - tol})
             for te in ev:
                 t_left = float(np.nextafter(te, -np.inf))
                 X = self.solver.step(eng, t, X, Y, t_left - t)

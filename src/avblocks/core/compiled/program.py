@@ -139,7 +139,7 @@ class Program:
         for path, i, k in self.slots:
             per_block.setdefault(i, (self.cd.blocks[i], {}))[1][k] = theta[path]
         eng, dt, t0 = self.eng, self.dt, self.t0
-        solver, le, nlog, idx = self.solver, self.log_every, self.nlog, self.log_idx
+        le, nlog, idx = self.log_every, self.nlog, self.log_idx
         with bound_parameters(list(per_block.values())), _memo.active(_memo.Memo()):
             Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
 
@@ -155,7 +155,7 @@ class Program:
                 hit = eng.hits(k)
                 Y = eng.major_outputs(t, X, Yp, hit)
                 X = eng.update(t, X, Y, hit)
-                X = solver.step(eng, t, X, Y, dt)
+                X = self._integrate(t, X, Y)
                 return (X, Y), None
 
             def advance(carry, k0, count):
@@ -181,6 +181,47 @@ class Program:
             if rem:
                 carry = advance(carry, (nlog - 1) * le, rem)
         return logs, carry[0]
+
+    def _integrate(self, t, X, Y):
+        """The solver step from t to t + dt; a switch time of a source (a
+        ``Step``) strictly inside it splits it, as the NumPy simulator does
+        (``Simulator._advance``): the part before ends one ulp short of the
+        switch, the outputs are recomputed at it, the rest follows. Switch
+        times are traced parameters, so the split is a ``lax.cond`` taken
+        only at the steps that contain one; the sub-steps of a step without
+        a switch there have zero length (an exact no-op). Because the run
+        integrates up to the switch exactly, gradients with respect to a
+        switch time are those of the true solution."""
+        eng, solver, dt = self.eng, self.solver, self.dt
+        events = [b for b in self.cd.blocks if hasattr(b, "switch_times")]
+        if not events:
+            return solver.step(eng, t, X, Y, dt)
+        jax = _jax.jax()
+        jnp = jax.numpy
+        t1 = t + dt
+        tol = 1e-9 * dt
+        tes = jnp.sort(jnp.stack([jnp.asarray(te, dtype=jnp.asarray(t).dtype).reshape(())
+                                  for b in events for te in b.switch_times()]))
+        inside = (tes > t + tol) & (tes < t1 - tol)
+
+        def split(X):
+            cur, Yc = t, Y
+            for j in range(tes.shape[0]):
+                # one ulp short of the switch; d(left)/d(te) = 1 for gradients
+                # (JAX has no derivative of nextafter)
+                te = tes[j]
+                ts = jax.lax.stop_gradient(te)
+                left = te + (jnp.nextafter(ts, -jnp.inf) - ts)
+                h = jnp.where(inside[j], left - cur, 0.0)
+                X = solver.step(eng, cur, X, Yc, h)
+                Ys = eng.minor_outputs(tes[j], X, Yc)
+                Yc = jax.tree_util.tree_map(lambda a, b, c=inside[j]: jnp.where(c, a, b),
+                                            Ys, Yc)
+                cur = jnp.where(inside[j], left, cur)
+            return solver.step(eng, cur, X, Yc, t1 - cur)
+
+        return jax.lax.cond(jnp.any(inside), split,
+                            lambda X: solver.step(eng, t, X, Y, dt), X)
 
     # ------------------------------------------------------- executables
     def executable(self, mode, build, args, compiled=None):

@@ -175,3 +175,17 @@ def test_results_save_and_load_errors_are_av_errors(tmp_path):
     res.save(z)                                  # overwrite in place
     np.testing.assert_array_equal(av.Results.load(z)["veh.y"], res["veh.y"])
     assert not list(tmp_path.glob(".*part*"))
+
+
+def test_absurd_port_and_seed_counts_are_refused_before_allocating():
+    """Found by the constructor fuzz: Mux(10**30) built a list of 10^30 port
+    names until the machine ran out of memory."""
+    import avblocks as av
+    from avblocks.sweep.spec import SweepError, normalise_seeds
+    for cls in (av.blocks.Mux, av.blocks.Concatenate):
+        with pytest.raises(av.ParameterError, match="number of ports"):
+            cls(10**30)
+    assert len(av.blocks.Mux(3).names) == 3
+    with pytest.raises(SweepError, match="seeds"):
+        normalise_seeds(10**30)
+    assert normalise_seeds(3) == [0, 1, 2]

@@ -168,11 +168,16 @@ class Gather(Block):
         return {"y": xp.take(u["u"], idx, axis=0)}
 
 
+#: most ports a routing block may declare (a port per agent is a misuse:
+#: agents go along the leading axis of one port)
+MAX_PORTS = 4096
+
+
 def _port_names(inputs, block, param, prefix):
     if isinstance(inputs, (int, np.integer)) and not isinstance(inputs, bool):
-        if inputs < 1:
-            raise ParameterError("need at least one port", block=block, param=param,
-                                 expected=">= 1", found=inputs)
+        if not 1 <= inputs <= MAX_PORTS:
+            raise ParameterError("number of ports out of range", block=block, param=param,
+                                 expected=f"1 .. {MAX_PORTS}", found=inputs)
         return [f"{prefix}{j}" for j in range(int(inputs))]
     try:
         names = [str(s) for s in inputs]

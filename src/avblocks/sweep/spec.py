@@ -80,8 +80,8 @@ def normalise_seeds(seeds) -> list:
     if isinstance(seeds, bool):
         raise SweepError("seeds must be a count or a list of integers", found=seeds)
     if isinstance(seeds, int | np.integer):
-        if seeds < 1:
-            raise SweepError("seeds must be >= 1", found=seeds)
+        if not 1 <= seeds <= 10**7:
+            raise SweepError("seeds must be a count from 1 to 10^7", found=seeds)
         return list(range(int(seeds)))
     try:
         out = [int(s) for s in seeds]

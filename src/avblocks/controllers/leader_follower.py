@@ -63,8 +63,9 @@ import numpy as np
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..core.memo import shared
 from ..core.params import agent_array, positive_scalar
-from ..utility.angles import wrap_angle
+from ..utility.angles import heading_trig, wrap_angle
 
 
 def leader_follower_terms(pose, pose_l, l_ref, alpha_ref, d, k_l, k_alpha,
@@ -76,8 +77,9 @@ def leader_follower_terms(pose, pose_l, l_ref, alpha_ref, d, k_l, k_alpha,
     (N, 2) and the errors ``(l_ref - l, wrap(alpha_ref - alpha))`` (N, 2).
     """
     th = pose[:, 2]
-    xd = pose[:, 0] + d * xp.cos(th)
-    yd = pose[:, 1] + d * xp.sin(th)
+    c, s = shared(heading_trig, pose, xp)     # shared with the vehicle's model
+    xd = pose[:, 0] + d * c
+    yd = pose[:, 1] + d * s
     dx = pose_l[:, 0] - xd
     dy = pose_l[:, 1] - yd
     l = xp.sqrt(dx * dx + dy * dy)

@@ -26,19 +26,20 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.block import Block
+from ..core.memo import shared
 from ..core.params import positive_scalar
+from ..utility.angles import heading_trig
 
 
 def off_axis_point(pose, d, xp=np):
     """(N, 2) points at distance ``d`` ahead of unicycles ``pose`` (N, 3)."""
-    th = pose[:, 2]
-    return xp.stack([pose[:, 0] + d * xp.cos(th), pose[:, 1] + d * xp.sin(th)], axis=-1)
+    c, s = shared(heading_trig, pose, xp)
+    return xp.stack([pose[:, 0] + d * c, pose[:, 1] + d * s], axis=-1)
 
 
 def holonomic_to_unicycle(pose, velocity, d, xp=np):
     """(v, omega) (N, 2) making the off-axis points move with ``velocity`` (N, 2)."""
-    th = pose[:, 2]
-    c, s = xp.cos(th), xp.sin(th)
+    c, s = shared(heading_trig, pose, xp)
     wx, wy = velocity[:, 0], velocity[:, 1]
     return xp.stack([c * wx + s * wy, (-s * wx + c * wy) / d], axis=-1)
 

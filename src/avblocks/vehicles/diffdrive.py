@@ -19,10 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.block import Block
+from ..core.memo import shared
 from ..core.params import agent_array, poses
-from ..utility.angles import wrap_angle
 from ._common import any_finite, limit
-from .unicycle import unicycle_rhs
+from .unicycle import unicycle_rhs, wrapped_pose
 
 
 def wheels_to_twist(wheels, wheel_radius, track_width, xp=np):
@@ -113,13 +113,13 @@ class DiffDrive(Block):
                             labels=("x", "y", "theta"), doc="pose, heading in (-pi, pi]")
 
     def output(self, t, x, u, xp):
-        p = x["pose"]
-        return {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1)}
+        return {"pose": shared(wrapped_pose, x["pose"], xp)}
 
     def derivative(self, t, x, u, xp):
         w = u["wheels"]
         if self.param_flag("limited", xp, any_finite, "wheel_speed_max"):
             m = self.wheel_speed_max[:, None]
             w = xp.clip(w, -m, m)
-        return {"pose": diffdrive_rhs(x["pose"], w, self.wheel_radius,
-                                      self.track_width, xp)}
+        # trig of the wrapped heading: shared with the controllers (core.memo)
+        return {"pose": diffdrive_rhs(shared(wrapped_pose, x["pose"], xp), w,
+                                      self.wheel_radius, self.track_width, xp)}

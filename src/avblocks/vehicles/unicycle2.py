@@ -22,10 +22,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.block import Block
+from ..core.memo import shared
 from ..core.params import agent_array, poses
-from ..utility.angles import wrap_angle
 from ._common import any_finite, limit
-from .unicycle import unicycle_rhs
+from .unicycle import unicycle_rhs, wrapped_pose
 
 
 def unicycle2_rhs(pose, twist, wrench, mass, inertia, lin_damping=0.0,
@@ -125,16 +125,16 @@ class Unicycle2(Block):
                             doc="forward speed and turn rate")
 
     def output(self, t, x, u, xp):
-        p = x["pose"]
-        return {"pose": xp.concatenate([p[:, :2], wrap_angle(p[:, 2:3], xp)], axis=-1),
-                "twist": x["twist"]}
+        return {"pose": shared(wrapped_pose, x["pose"], xp), "twist": x["twist"]}
 
     def derivative(self, t, x, u, xp):
         w = u["wrench"]
         if self.param_flag("limited", xp, any_finite, "f_max", "tau_max"):
             w = xp.stack([xp.clip(w[:, 0], -self.f_max, self.f_max),
                           xp.clip(w[:, 1], -self.tau_max, self.tau_max)], axis=-1)
-        dp, dt = unicycle2_rhs(x["pose"], x["twist"], w, self.mass, self.inertia,
+        # trig of the wrapped heading: shared with the controllers (core.memo)
+        pose = shared(wrapped_pose, x["pose"], xp)
+        dp, dt = unicycle2_rhs(pose, x["twist"], w, self.mass, self.inertia,
                                self.lin_damping, self.ang_damping, xp)
         return {"pose": dp, "twist": dt}
 

@@ -61,6 +61,22 @@ SCRIPT = textwrap.dedent("""
                                  params={"drive.gain": g * np.ones(5)})
             worst = max(worst, float(np.abs(ens[f2.pose][r] - single[f2.pose]).max()))
         out["ensemble_chunk"] = ens.meta["chunk_size"]
+        # a law that gathers each agent's waypoint from a flattened table:
+        # split, XLA would exchange data every stage; the runner must notice
+        # and run on one device instead, with the same results
+        wps = rng.uniform(0, 30, (n, 3, 2))
+        g = av.Diagram()
+        f3 = g.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
+        c3 = g.add(av.controllers.PointToPoint(wps, gain=0.8, v_max=1.5), name="drive")
+        g.connect(f3.pose, c3.pose)
+        g.connect(c3.cmd, f3.cmd)
+        kw3 = dict(dt=0.05, solver="rk4", log=[f3.pose], log_every=10)
+        r3 = av.compile(g, 20.0, **kw3)
+        before = r3._single.key[0]
+        a3 = r3()
+        out["gather_keys"] = [before, r3._single.key[0]]
+        out["gather_vs_numpy"] = float(np.abs(
+            a3[f3.pose] - av.simulate(g, 20.0, progress=False, **kw3)[f3.pose]).max())
         out["ensemble_vs_numpy"] = worst
     print(json.dumps(out))
 """)
@@ -84,6 +100,8 @@ def test_split_runs_equal_one_device_runs():
     assert out["done_equal"]
     assert out["ensemble_chunk"] % 2 == 0           # whole runs per device
     assert out["ensemble_vs_numpy"] <= 1e-9
+    assert out["gather_keys"] == ["split", "one"]
+    assert out["gather_vs_numpy"] <= 1e-9
 
 
 def test_avblocks_starting_jax_asks_for_one_cpu_device_per_core():

@@ -27,16 +27,21 @@ SCRIPT = textwrap.dedent("""
     from avblocks.core.compiled import _jax, devices
     jax = _jax.jax()
     out = {"devices": len(jax.devices()), "expected": devices.default_cpu_devices()}
+
+    def w1(p0, waypoints):
+        d = av.Diagram()
+        f = d.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
+        c = d.add(av.controllers.PointToPoint(waypoints, gain=0.8, v_max=1.5),
+                  name="drive")
+        d.connect(f.pose, c.pose)
+        d.connect(c.cmd, f.cmd)
+        return d, f, c
+
     if len(sys.argv) > 1:
         rng = np.random.default_rng(4)
         n = 256
         p0 = np.column_stack([rng.uniform(0, 30, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
-        goal = rng.uniform(0, 30, (n, 1, 2))
-        d = av.Diagram()
-        f = d.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
-        c = d.add(av.controllers.PointToPoint(goal, gain=0.8, v_max=1.5), name="drive")
-        d.connect(f.pose, c.pose)
-        d.connect(c.cmd, f.cmd)
+        d, f, c = w1(p0, rng.uniform(0, 30, (n, 1, 2)))
         kw = dict(dt=0.01, solver="rk4", log=[f.pose, c.done], log_every=10)
         split = av.compile(d, 4.0, **kw)
         one = av.compile(d, 4.0, devices=1, **kw)
@@ -47,11 +52,7 @@ SCRIPT = textwrap.dedent("""
         out["split_vs_numpy"] = float(np.abs(a[f.pose] - ref[f.pose]).max())
         out["done_equal"] = bool(np.array_equal(a[c.done], ref[c.done]))
         gains = np.linspace(0.3, 1.2, 6)
-        small = av.Diagram()
-        f2 = small.add(av.vehicles.Unicycle(pose0=p0[:5]), name="fleet")
-        c2 = small.add(av.controllers.PointToPoint(goal[:5], gain=0.8), name="drive")
-        small.connect(f2.pose, c2.pose)
-        small.connect(c2.cmd, f2.cmd)
+        small, f2, c2 = w1(p0[:5], rng.uniform(0, 30, (5, 1, 2)))
         runner = av.compile(small, 3.0, dt=0.01, solver="rk4", log=[f2.pose], log_every=10)
         ens = runner.ensemble(params={"drive.gain": gains[:, None] * np.ones((6, 5))})
         worst = 0.0
@@ -64,12 +65,7 @@ SCRIPT = textwrap.dedent("""
         # a law that gathers each agent's waypoint from a flattened table:
         # split, XLA would exchange data every stage; the runner must notice
         # and run on one device instead, with the same results
-        wps = rng.uniform(0, 30, (n, 3, 2))
-        g = av.Diagram()
-        f3 = g.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
-        c3 = g.add(av.controllers.PointToPoint(wps, gain=0.8, v_max=1.5), name="drive")
-        g.connect(f3.pose, c3.pose)
-        g.connect(c3.cmd, f3.cmd)
+        g, f3, c3 = w1(p0, rng.uniform(0, 30, (n, 3, 2)))
         kw3 = dict(dt=0.05, solver="rk4", log=[f3.pose], log_every=10)
         r3 = av.compile(g, 20.0, **kw3)
         before = r3._single.key[0]

@@ -113,10 +113,8 @@ def test_named_airframes_match_their_motor_layout(frame):
     np.testing.assert_allclose(wrench_to_rotors(w, arm, km, frame), f, atol=1e-12)
 
 
-def _step_error(dt, te=0.33, t_final=1.0, backend="numpy"):
-    """|x(1) - truth| for x' = s(t) - x^3, x(0) = 0.5, s a Step at te."""
-    from scipy.integrate import solve_ivp
-
+def _step_diagram(te=0.33):
+    """x' = s(t) - x^3, x(0) = 0.5, s a Step from 0.2 to 1.5 at te."""
     import avblocks as av
     d = av.Diagram()
     s = d.add(av.blocks.Step(time=te, before=[0.2], after=[1.5]), name="s")
@@ -127,7 +125,15 @@ def _step_error(dt, te=0.33, t_final=1.0, backend="numpy"):
     d.connect(s.y, f.u)
     d.connect(x.y, f.xs)
     d.connect(f.y, x.u)
-    res = av.simulate(d, t_final, dt=dt, log=["x.y"], backend=backend)
+    return d
+
+
+def _step_error(dt, te=0.33, t_final=1.0, backend="numpy"):
+    """|x(1) - truth| for the diagram of :func:`_step_diagram`."""
+    from scipy.integrate import solve_ivp
+
+    import avblocks as av
+    res = av.simulate(_step_diagram(te), t_final, dt=dt, log=["x.y"], backend=backend)
     # truth: two tight solves joined at te
     a = solve_ivp(lambda t, y: 0.2 - y ** 3, (0, te), [0.5], rtol=1e-13, atol=1e-14)
     b = solve_ivp(lambda t, y: 1.5 - y ** 3, (te, t_final), a.y[:, -1], rtol=1e-13,
@@ -168,15 +174,7 @@ def test_compiled_gradient_with_respect_to_a_switch_time():
     else:
         pytest.importorskip("jax")
     import avblocks as av
-    d = av.Diagram()
-    s = d.add(av.blocks.Step(time=0.33, before=[0.2], after=[1.5]), name="s")
-    x = d.add(av.blocks.Integrator(np.array([0.5])), name="x")
-    f = d.add(av.blocks.Function(lambda t, u, xs: u - xs ** 3,
-                                 inputs={"u": (1,), "xs": (1,)}, outputs={"y": (1,)}),
-              name="f")
-    d.connect(s.y, f.u)
-    d.connect(x.y, f.xs)
-    d.connect(f.y, x.u)
+    d = _step_diagram(0.33)
     g = av.grad(lambda res: res["x.y"][-1].sum(), d, ["s.time"], 1.0, dt=0.05, log=["x.y"])
 
     def end(te):

@@ -250,31 +250,15 @@ def jax_main(args):
           f"{R} sequential NumPy runs: {seq:.1f} s* (median of {seq_runs} timed, x {R}); "
           f"speed-up {seq / ens_wall:.0f}x; run {seq_runs - 1} agrees to {ens_agree:.1e}")
     print("* timed over fewer steps or runs and scaled")
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        fig, ax = plt.subplots(figsize=(6, 4.2))
-        xs = [r[0] for r in rows]
-        for col, style, label in ((4, "s-", "plain NumPy loop"),
-                                  (3, "^-", "avblocks, NumPy engine"),
-                                  (1, "o-", f"avblocks, backend='jax' (2nd call, "
-                                            f"{len(jax.devices())} {jax.default_backend()} "
-                                            "device(s))"),
-                                  (2, "d--", "fused Numba loop (1 thread)")):
-            ax.loglog(xs, [r[col] for r in rows], style, label=label)
-        ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
-        ax.set_xlabel("number of unicycles N")
-        ax.set_ylabel("wall time for 30 s simulated [s]")
-        ax.set_title("W1: go-to-goal unicycles, Euler, dt = 10 ms")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        out = Path(args.out).with_name("scaling_backends.png")
-        fig.savefig(out, dpi=110)
-        print(f"plot: {out}")
-    except ImportError:
-        pass
+    xs = [r[0] for r in rows]
+    jax_label = (f"avblocks, backend='jax' (2nd call, {len(jax.devices())} "
+                 f"{jax.default_backend()} device(s))")
+    _plot(xs, [([r[4] for r in rows], "s-", "plain NumPy loop"),
+               ([r[3] for r in rows], "^-", "avblocks, NumPy engine"),
+               ([r[1] for r in rows], "o-", jax_label),
+               ([r[2] for r in rows], "d--", "fused Numba loop (1 thread)")],
+          "W1: go-to-goal unicycles, Euler, dt = 10 ms",
+          Path(args.out).with_name("scaling_backends.png"))
 
 
 def ratios_main(args):
@@ -368,27 +352,35 @@ def main():
     print(f"\nN = 1, Euler: avblocks {one_av * 1e6:.1f} us/step, plain NumPy "
           f"{one_np * 1e6:.1f} us/step, framework overhead {(one_av - one_np) * 1e6:.1f} "
           f"us/step; Constant + Unicycle diagram {trivial * 1e6:.1f} us/step")
+    labels = {"legacy": "Python loop over agents", "numpy": "plain NumPy",
+              "euler": "avblocks (Euler)", "rk4": "avblocks (RK4)"}
+    _plot(ns, [([rows[(n, kind)][0] for n in ns], style, labels[kind])
+               for kind, style in (("legacy", "o-"), ("numpy", "s-"), ("euler", "^-"),
+                                   ("rk4", "v-"))],
+          "Go-to-goal unicycles, dt = 10 ms (cf. AVLib Fig. 3)", args.out)
+
+
+def _plot(ns, curves, title, out):
+    """Log-log wall time for 30 s simulated against N, one line per
+    ``(times, style, label)``, with the real-time line; saved to ``out``."""
     try:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, ax = plt.subplots(figsize=(6, 4.2))
-        for kind, style in (("legacy", "o-"), ("numpy", "s-"), ("euler", "^-"),
-                            ("rk4", "v-")):
-            ax.loglog(ns, [rows[(n, kind)][0] for n in ns], style,
-                      label={"legacy": "Python loop over agents", "numpy": "plain NumPy",
-                             "euler": "avblocks (Euler)", "rk4": "avblocks (RK4)"}[kind])
-        ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
-        ax.set_xlabel("number of unicycles N")
-        ax.set_ylabel("wall time for 30 s simulated [s]")
-        ax.set_title("Go-to-goal unicycles, dt = 10 ms (cf. AVLib Fig. 3)")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(args.out, dpi=110)
-        print(f"plot: {args.out}")
     except ImportError:
-        pass
+        return
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    for times, style, label in curves:
+        ax.loglog(ns, times, style, label=label)
+    ax.axhline(T_FINAL, color="k", lw=0.8, ls="--", label="real time (30 s)")
+    ax.set_xlabel("number of unicycles N")
+    ax.set_ylabel("wall time for 30 s simulated [s]")
+    ax.set_title(title)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    print(f"plot: {out}")
 
 
 if __name__ == "__main__":

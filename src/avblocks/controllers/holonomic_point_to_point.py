@@ -20,8 +20,7 @@ import numpy as np
 
 from ..core.block import Block
 from ..core.errors import ParameterError
-from ..core.params import agent_array, positive_scalar
-from .point_to_point import waypoint_array
+from .point_to_point import declare_goto_parameters, waypoint_array
 
 
 def _ndim(a):
@@ -115,12 +114,7 @@ class HolonomicPointToPoint(Block):
         wps, self.counts = waypoint_array_nd(waypoints, n, dim, name)
         self.declare_parameter("waypoints", wps, unit="m",
                                doc="(N, M, D), padded with each agent's last waypoint")
-        self.declare_parameter("gain", agent_array(gain, n, name, "gain", positive=True),
-                               bounds=(1e-12, None), unit="1/s")
-        self.declare_parameter("v_max", agent_array(v_max, n, name, "v_max", positive=True),
-                               bounds=(1e-12, None), allow_inf=True, unit="m/s")
-        self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
-                               bounds=(1e-12, None), unit="m")
+        declare_goto_parameters(self, n, gain, v_max, radius, name)
         self._rows = np.arange(n)
         self._last = self.counts - 1
         self.declare_discrete_state("wp", np.zeros(n, dtype=np.int64))

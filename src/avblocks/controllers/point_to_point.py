@@ -86,6 +86,18 @@ def waypoint_array(waypoints, n, block="PointToPoint"):
     return out, counts
 
 
+def declare_goto_parameters(block, n, gain, v_max, radius, name):
+    """Declare the numeric parameters every go-to-waypoint law has: ``gain``
+    (N,) [1/s], ``v_max`` (N,) [m/s, inf allowed] and the arrival
+    ``radius`` [m]."""
+    block.declare_parameter("gain", agent_array(gain, n, name, "gain", positive=True),
+                            bounds=(1e-12, None), unit="1/s")
+    block.declare_parameter("v_max", agent_array(v_max, n, name, "v_max", positive=True),
+                            bounds=(1e-12, None), allow_inf=True, unit="m/s")
+    block.declare_parameter("radius", positive_scalar(radius, name, "radius"),
+                            bounds=(1e-12, None), unit="m")
+
+
 def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     """(v, omega) driving the off-axis point of each unicycle to ``goal``.
 
@@ -93,35 +105,17 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     With ``radius`` also returns whether each point is within it of its goal.
     """
     c, s = shared(heading_trig, pose, xp)
-    if xp is np:
-        # the same operations in the same order as below, written into
-        # buffers this function made (fewer temporaries; bit-identical)
-        ex = goal[:, 0] - pose[:, 0]
-        ex -= d * c
-        ey = goal[:, 1] - pose[:, 1]
-        ey -= d * s
-        e2 = ex * ex
-        e2 += ey * ey
-        k = np.sqrt(e2)
-        np.maximum(k, 1e-300, out=k)
-        np.divide(v_max, k, out=k)
-        np.minimum(gain, k, out=k)
-        ex *= k                         # now w_x
-        ey *= k                         # now w_y
+    ex = goal[:, 0] - pose[:, 0] - d * c
+    ey = goal[:, 1] - pose[:, 1] - d * s
+    # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
+    e2 = ex * ex + ey * ey
+    k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
+    wx, wy = k * ex, k * ey
+    if xp is np:                        # same values, fewer temporaries
         cmd = np.empty((c.shape[0], 2))
-        a = c * ex
-        a += s * ey
-        cmd[:, 0] = a
-        np.multiply(c, ey, out=a)
-        a -= s * ex
-        np.multiply(a, 1.0 / d, out=cmd[:, 1])
+        np.add(c * wx, s * wy, out=cmd[:, 0])
+        np.multiply(c * wy - s * wx, 1.0 / d, out=cmd[:, 1])
     else:
-        ex = goal[:, 0] - pose[:, 0] - d * c
-        ey = goal[:, 1] - pose[:, 1] - d * s
-        # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
-        e2 = ex * ex + ey * ey
-        k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
-        wx, wy = k * ex, k * ey
         cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
     if radius is None:
         return cmd
@@ -190,12 +184,7 @@ class PointToPoint(Block):
                                doc="(N, M, 2), padded with each agent's last waypoint")
         self.declare_parameter("d", positive_scalar(d, name, "d"), bounds=(1e-9, None),
                                unit="m")
-        self.declare_parameter("gain", agent_array(gain, n, name, "gain", positive=True),
-                               bounds=(1e-12, None), unit="1/s")
-        self.declare_parameter("v_max", agent_array(v_max, n, name, "v_max", positive=True),
-                               bounds=(1e-12, None), allow_inf=True, unit="m/s")
-        self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
-                               bounds=(1e-12, None), unit="m")
+        declare_goto_parameters(self, n, gain, v_max, radius, name)
         m = wps.shape[1]
         self._single = m == 1
         self._base = np.arange(n) * m

@@ -86,12 +86,11 @@ class Placement:
                                and split % len(self.devices) == 0) else None
         if self.split is None:
             self.key = ("one", self.devices[0].id)
-            self.mesh = None
             return
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
-        self.mesh = Mesh(np.array(self.devices), ("d",))
-        self.divided = NamedSharding(self.mesh, PartitionSpec("d"))
-        self.replicated = NamedSharding(self.mesh, PartitionSpec())
+        mesh = Mesh(np.array(self.devices), ("d",))
+        self.divided = NamedSharding(mesh, PartitionSpec("d"))
+        self.replicated = NamedSharding(mesh, PartitionSpec())
         self.key = ("split", self.split, tuple(d.id for d in self.devices))
         self._put = jax.device_put
 

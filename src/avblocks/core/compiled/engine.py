@@ -21,60 +21,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..block import Periodic
 from ..engine import Engine as _Engine
+from ..engine import _select
 from ..errors import AvError, CompileError, ShapeError
 
 
-def _select(hit, new, old, xp):
-    if hit is True:
-        return new
-    return {k: xp.where(hit, new[k], old[k]) for k in old}
+class TracedEngine(_Engine):
+    """Pure, traceable evaluation of a compiled diagram (see module doc).
 
-
-class TracedEngine:
-    """Pure, traceable evaluation of a compiled diagram (see module doc)."""
+    The diagram's structure (sources, sample-time grid, which outputs feed
+    solver stages), the sample hits, the three output sweeps and the solver
+    arithmetic are the NumPy :class:`~avblocks.core.engine.Engine`'s; only
+    the calls into blocks differ: errors while tracing name the block, and
+    outputs and updated states keep their declared dtypes (a fixed carry
+    type for ``lax.scan``)."""
 
     def __init__(self, compiled, dt, xp, canon=np.dtype):
-        self.cd = compiled
+        super().__init__(compiled, dt, xp)
         self.canon = canon          # declared dtype -> dtype of this trace (x64 or not)
-        self.xp = xp
-        self.dt = float(dt)
-        self.blocks = compiled.blocks
-        self.names = compiled.names
-        self.src = [tuple((inp, s, o) for inp, (s, o) in srcs.items())
-                    for srcs in compiled.sources]
-        self.src_ft = [tuple(w for w in self.src[i] if w[0] in b.feedthrough)
-                       for i, b in enumerate(self.blocks)]
-        self.periodic = [isinstance(b.sample_time, Periodic) for b in self.blocks]
-        self.with_outputs = [i for i, b in enumerate(self.blocks) if b._outputs]
-        self.cont = [i for i, b in enumerate(self.blocks) if b._cstates]
-        self.cont_names = {i: tuple(self.blocks[i]._cstates) for i in self.cont}
-        self.disc = [i for i, b in enumerate(self.blocks) if b._dstates]
-        self.per_k = [0] * len(self.blocks)
-        self.off_k = [0] * len(self.blocks)
-        for i, b in enumerate(self.blocks):
-            if self.periodic[i]:
-                st = b.sample_time
-                per, off = st.period / self.dt, st.offset / self.dt
-                if (abs(per - round(per)) > 1e-6 * max(per, 1)
-                        or abs(off - round(off)) > 1e-6 * max(per, 1) or round(per) < 1):
-                    raise ShapeError(
-                        f"sample period {st.period} / offset {st.offset} is not a "
-                        f"multiple of the major step dt={self.dt}", block=self.names[i],
-                        hint="choose dt so that every discrete period is a whole "
-                             "number of steps")
-                self.per_k[i], self.off_k[i] = int(round(per)), int(round(off))
-        # outputs needed inside solver stages: feedthrough ancestors of the
-        # inputs of continuous blocks (others would be dead code anyway)
-        need, stack = set(), [s for i in self.cont for (_inp, s, _o) in self.src[i]]
-        while stack:
-            j = stack.pop()
-            if j in need:
-                continue
-            need.add(j)
-            stack += [s for (inp, s, _o) in self.src[j] if inp in self.blocks[j].feedthrough]
-        self.minor = [i for i in self.with_outputs if i in need and not self.periodic[i]]
 
     # --------------------------------------------------------------- calls
     def _call(self, i, what, fn, *args, **kw):
@@ -90,17 +54,6 @@ class TracedEngine:
                 hint="run this diagram with backend='numpy', or write the block's "
                      "math with the array namespace `xp` it is handed (no NumPy/SciPy "
                      "calls or Python `if` on its inputs, states or parameters)") from e
-
-    def hits(self, k):
-        out = [None] * len(self.blocks)
-        for i, p in enumerate(self.periodic):
-            if p:
-                off, per = self.off_k[i], self.per_k[i]
-                out[i] = (k >= off) & ((k - off) % per == 0)
-        return out
-
-    def gather(self, i, Y):
-        return {inp: Y[s][o] for inp, s, o in self.src[i]}
 
     def _out(self, i, t, X, Y):
         b = self.blocks[i]
@@ -128,12 +81,6 @@ class TracedEngine:
             out[o] = self.xp.asarray(a, dtype=self.canon(p.dtype))
         return out
 
-    # output sweeps are the NumPy engine's: they call this class's _out, and
-    # its _select takes a traced hit flag as well as a Python bool
-    all_outputs = _Engine.all_outputs
-    major_outputs = _Engine.major_outputs
-    minor_outputs = _Engine.minor_outputs
-
     def update(self, t, X, Y, hits):
         X = list(X)
         for i in self.disc:
@@ -154,6 +101,3 @@ class TracedEngine:
         return [self._call(i, "derivative", self.blocks[i].derivative, t, X[i],
                            self.gather(i, Y), self.xp) for i in self.cont]
 
-    # the solver's state arithmetic is the NumPy engine's, unchanged
-    axpy = _Engine.axpy
-    combine = _Engine.combine

@@ -44,8 +44,8 @@ class UnitDelay(Block):
     ---------
     y_k = x_k;  x_{k+1} = u_k;  x_0 = initial  (the z^-1 block)
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Clock(), name="c")
@@ -118,8 +118,8 @@ class ZeroOrderHold(Block):
     at its hits only, from the inputs at that instant, and holds them through
     the major steps and solver stages in between.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Clock(), name="c")

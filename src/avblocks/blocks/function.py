@@ -73,8 +73,8 @@ class Function(Block):
     initial : dict of str -> array_like, optional
         Initial outputs when ``feedthrough`` is false.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> f = Function(lambda t, x, xp: -x, inputs={"x": (2,)}, outputs={"dx": (2,)})
     >>> f.output(0.0, {}, {"x": np.array([1.0, 2.0])}, np)["dx"]

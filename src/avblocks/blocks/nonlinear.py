@@ -66,8 +66,8 @@ class Saturation(_Bounded):
     ---------
     y = min(max(u, lower), upper)
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> Saturation(-1.0, 2.0).output(0.0, {}, {"u": np.array([-3.0, 0.5, 7.0])}, np)["y"]
     array([-1. ,  0.5,  2. ])
@@ -99,8 +99,8 @@ class DeadZone(_Bounded):
     y = u - upper if u > upper;  0 if lower <= u <= upper;  u - lower if u < lower
     (Simulink's Dead Zone block.)
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> DeadZone(-1.0, 1.0).output(0.0, {}, {"u": np.array([-3.0, 0.5, 7.0])}, np)["y"]
     array([-2.,  0.,  6.])
@@ -145,6 +145,9 @@ class RateLimiter(Block):
         with the elapsed time, so a continuous consumer sees a rate-limited
         signal too).
 
+    Numeric parameters
+    ------------------
+
     ``rising`` and ``falling`` are numeric parameters (a default ``falling``
     is set once to ``-rising``: change both to keep them symmetric);
     ``initial`` is an initial value, the period structural.
@@ -154,8 +157,8 @@ class RateLimiter(Block):
     y_0 = initial (or u_0);
     y_k = y_{k-1} + clip(u_k - y_{k-1}, falling * dt, rising * dt)
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> s = d.add(av.blocks.Step(0.0, 0.0, 1.0, agents=False), name="s")

@@ -65,8 +65,8 @@ class Select(Block):
         Agents to keep, in the order given (negative indices count from the
         end, as in NumPy).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Constant(np.arange(8.0).reshape(4, 2)), name="c")
@@ -115,8 +115,8 @@ class Gather(Block):
     m : int, optional
         Number of output agents with a dynamic ``index`` port (default: N).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> g = Gather([0, 0, 1])
     >>> g.output(0.0, {}, {"u": np.array([[10.0], [20.0]])}, np)["y"][:, 0]
@@ -204,8 +204,8 @@ class Concatenate(Block):
     inputs : int or sequence of str
         Number of inputs (named ``u0``, ``u1``...) or their names.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> c = Concatenate(["leader", "followers"])
     >>> c.output(0.0, {}, {"leader": np.zeros((1, 3)),
@@ -267,8 +267,8 @@ class Mux(Block):
     inputs : int or sequence of str
         Number of inputs (named ``u0``, ``u1``...) or their names.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> p = d.add(av.blocks.Constant([[1.0, 2.0]]), name="p")
@@ -327,8 +327,8 @@ class Demux(Block):
     names : sequence of str, optional
         Output names (default ``y0``, ``y1``...).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> d = Demux(3, names=["x", "y", "theta"])
     >>> d.output(0.0, {}, {"u": np.array([[1.0, 2.0, 3.0]])}, np)["theta"]

@@ -78,6 +78,9 @@ class Step(Block):
     agents : bool
         Whether the first axis counts agents.
 
+    Numeric parameters
+    ------------------
+
     ``time``, ``before`` and ``after`` are numeric parameters.
 
     Equations

@@ -52,6 +52,9 @@ class Consensus(Block):
     adjacency : (N, N) array or sparse, optional — fixed weighted graph.
     radius, k_max : optional — compute proximity neighbours internally.
 
+    Numeric parameters
+    ------------------
+
     ``gain`` (and ``radius`` when given) are numeric parameters; the graph
     source, ``adjacency``, ``k_max``, ``n`` and ``dim`` are structural.
 

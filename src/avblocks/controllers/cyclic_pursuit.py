@@ -42,6 +42,9 @@ class CyclicPursuit(Block):
     n : int;  gain : float > 0;  angle : float (rad), ``pi / n`` for a circle.
     order : (N,) permutation, optional — ``order[k]`` pursues ``order[k+1]``.
 
+    Numeric parameters
+    ------------------
+
     ``gain`` and ``angle`` are numeric parameters; ``order`` is structural.
     """
 

@@ -38,9 +38,14 @@ class DisplacementFormation(Block):
 
     Parameters
     ----------
-    offsets : (N, D) — desired positions ``c`` (any common translation).
-    gain : float > 0;  adjacency / radius, k_max: graph source (see
-    :class:`~avblocks.controllers.Consensus`).
+    offsets : (N, D)
+        Desired positions ``c`` (any common translation).
+    gain : float > 0
+    adjacency, radius, k_max
+        The graph source (see :class:`~avblocks.controllers.Consensus`).
+
+    Numeric parameters
+    ------------------
 
     ``offsets``, ``gain`` (and ``radius``) are numeric parameters.
     """

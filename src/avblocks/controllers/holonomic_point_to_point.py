@@ -88,6 +88,9 @@ class HolonomicPointToPoint(Block):
     dim : int, 2 or 3 (default: from the waypoints)
     gain, v_max : float or (N,) > 0;  radius : float > 0 (m).
 
+    Numeric parameters
+    ------------------
+
     ``waypoints`` (padded (N, M, D); the counts are structural), ``gain``,
     ``v_max`` and ``radius`` are numeric parameters.
     """

@@ -180,12 +180,15 @@ class LeaderFollower(Block):
     k_l, k_alpha : float or (N,) > 0 — gains (1/s).
     l_min : float > 0 — lower clamp of ``l`` in the ``sin(alpha)/l`` term.
 
+    Numeric parameters
+    ------------------
+
     ``d``, ``l_ref``, ``alpha_ref``, ``k_l``, ``k_alpha`` (all (N,) but
     ``d``) and ``l_min`` are numeric parameters (``"follow.k_alpha"``); the
     leader tree and ``references_input`` are structural.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> lf = av.controllers.LeaderFollower([-1, 0, 1], l_ref=1.0, alpha_ref=0.0)
     >>> pose = np.array([[0.0, 0, 0], [-1.1, 0, 0], [-2.2, 0, 0]])

@@ -157,6 +157,9 @@ class PointToPoint(Block):
     radius : float
         Arrival radius (m).
 
+    Numeric parameters
+    ------------------
+
     ``waypoints`` (as the padded (N, M, 2) array; the counts M_i are
     structural), ``d``, ``gain``, ``v_max`` (both (N,)) and ``radius`` are
     numeric parameters: ``"drive.gain"``, ``"drive.waypoints"``...

@@ -168,6 +168,9 @@ class RandomWalk(Block):
     boundary : "reflect" or "turn_back";  margin : float (m).
     min_interval : float >= 0 — lower clip of drawn intervals.
 
+    Numeric parameters
+    ------------------
+
     Numeric parameters: ``interval_params`` (the distribution's ``(a,)`` or
     ``(a, b)``), ``speed`` (2,), ``turn_std`` (when given), ``gain``,
     ``omega_max``, ``min_interval``, ``margin``. The distribution kind, the

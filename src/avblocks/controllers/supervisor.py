@@ -183,8 +183,8 @@ class Supervisor(_Machine):
     No numeric parameters: states, transitions (guards are Python callables)
     and the output tables are structural (a mode machine, not a gain).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> s = Supervisor(["line", "column"], [("line", "column", lambda u, xp: u["gap"][0] < 2),
     ...                ("column", "line", lambda u, xp: u["gap"][0] > 3)],

@@ -341,6 +341,9 @@ class World:
             True (default, image / ROS map_server convention): row 0 is the
             top row of the map. False: row 0 is the bottom row (y = origin y).
 
+        Notes
+        -----
+
         ``bounds`` defaults to the grid's extent.
         """
         g = np.asarray(grid)

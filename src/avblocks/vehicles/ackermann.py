@@ -74,6 +74,9 @@ class Ackermann(Block):
     steer0 : float or (N,), optional
         Initial steering angle with a lag (default 0).
 
+    Numeric parameters
+    ------------------
+
     Numeric parameters (shape (N,) unless said): ``wheelbase``, ``v_max``,
     ``delta_max``; with a lag also ``steer_tau`` (scalar, > 0) and
     ``steer_rate_max``. Whether there is a lag (``steer_tau > 0``) is
@@ -87,8 +90,8 @@ class Ackermann(Block):
     ----------
     LaValle (2006) Section 13.1.2.1; Rajamani (2012) Section 2.2.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.Ackermann(np.zeros((1, 3)), wheelbase=2.0, delta_max=1.0)
     >>> b.derivative(0, b.initial_state(), {"cmd": np.array([[2.0, np.pi / 4]])}, np)["pose"]

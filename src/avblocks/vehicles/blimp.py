@@ -103,6 +103,9 @@ class Blimp(Block):
     torque_max : float or (N,), optional
         Limit on |tau_r| [N m] (default none).
 
+    Numeric parameters
+    ------------------
+
     ``mass``, ``inertia``, ``added_mass``, ``net_lift``, ``drag_coeff``,
     ``thrust_max`` and ``torque_max`` are numeric parameters (per agent,
     shapes as above with N leading); ``drag`` (the law) is structural.
@@ -115,8 +118,8 @@ class Blimp(Block):
     ----------
     Gomes & Ramos (1998); Fossen (2011).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.Blimp(np.zeros((1, 3)), mass=1.0, added_mass=(1.0, 1, 1, 0.1))
     >>> d = b.derivative(0, b.initial_state(), {"thrust": np.array([[1.0, 0, 0]])}, np)

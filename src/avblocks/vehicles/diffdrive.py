@@ -70,6 +70,9 @@ class DiffDrive(Block):
     wheel_speed_max : float or (N,), optional
         Symmetric wheel-speed limit [rad/s] (default: none).
 
+    Numeric parameters
+    ------------------
+
     ``wheel_radius``, ``track_width`` and ``wheel_speed_max`` are numeric
     parameters of shape (N,).
 
@@ -82,8 +85,8 @@ class DiffDrive(Block):
     ----------
     Siegwart, Nourbakhsh & Scaramuzza (2011), Section 3.2.1.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.DiffDrive(np.zeros((1, 3)), wheel_radius=0.1, track_width=0.5)
     >>> b.derivative(0, b.initial_state(), {"wheels": np.array([[10.0, 10.0]])}, np)["pose"]

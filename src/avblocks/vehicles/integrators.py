@@ -82,8 +82,8 @@ class SingleIntegrator(Block):
     ---------
     ``dp/dt = u min(1, v_max / |u|)`` (module docstring).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.SingleIntegrator(np.zeros((1, 2)), v_max=1.0)
     >>> b.derivative(0, b.initial_state(), {"velocity": np.array([[3.0, 4.0]])}, np)
@@ -142,6 +142,9 @@ class DoubleIntegrator(Block):
     a_max, v_max : float or (N,), optional
         Acceleration and speed limits (norms; default none).
 
+    Numeric parameters
+    ------------------
+
     ``mass``, ``drag``, ``a_max`` and ``v_max`` are numeric parameters of
     shape (N,); ``input`` and ``dim`` are structural.
 
@@ -149,8 +152,8 @@ class DoubleIntegrator(Block):
     ---------
     See the module docstring.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.DoubleIntegrator(np.zeros((1, 3)))
     >>> b.derivative(0, b.initial_state(), {"accel": np.ones((1, 3))}, np)["velocity"]

@@ -98,8 +98,8 @@ class Unicycle(Block):
         ``cmd`` then forms an algebraic loop. Off by default for that reason
         (log or display it only, or use a Saturation block in front).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.Unicycle(pose0=np.zeros((2, 3)))
     >>> b.derivative(0, b.initial_state(), {"cmd": np.array([[1.0, 0.5]] * 2)}, np)["pose"][0]

@@ -71,6 +71,9 @@ class Unicycle2(Block):
     f_max, tau_max : float or (N,), optional
         Symmetric input limits (default: none).
 
+    Numeric parameters
+    ------------------
+
     ``mass``, ``inertia``, the dampings and the limits are numeric
     parameters of shape (N,) (``"block.mass"`` ...); ``pose0``/``twist0``
     are initial states (set them with ``x0=``).
@@ -84,8 +87,8 @@ class Unicycle2(Block):
     ----------
     AVLib paper, Section III.A.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.Unicycle2(np.zeros((1, 3)), mass=2.0, inertia=0.5)
     >>> d = b.derivative(0, b.initial_state(), {"wrench": np.array([[1.0, 1.0]])}, np)

@@ -205,8 +205,8 @@ def plot_trajectories(results, pose=None, world=None, ax=None, *, agents=None,
     matplotlib.figure.Figure
         The figure holding ``ax`` (``fig.axes[0]`` when it made one).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av, avblocks.viz
     >>> t = np.linspace(0, 1, 5)
     >>> pose = np.zeros((5, 2, 3)); pose[:, 1, 0] = t
@@ -347,8 +347,8 @@ class Scope(Block):
     **plot_options
         Passed to :func:`plot_signals`.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av, avblocks.viz
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Constant(np.ones((2, 2))), name="c")

@@ -108,8 +108,8 @@ class PhysicsWorld(Block):
     ---------
     See the module docstring.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> from avblocks.interfaces.mujoco import Scene, PhysicsWorld
     >>> scene = Scene()

@@ -150,8 +150,8 @@ class Scene:
         flat-lit scene renders several times faster in software GL and is
         easier to threshold; ``SceneCamera(shadows=True)`` then draws them).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> from avblocks.interfaces.mujoco import Scene
     >>> s = Scene()

@@ -161,8 +161,8 @@ class Robots(Block):
     AVLib paper, Sections III.D and IV.D (robot interface blocks with the
     model's ports); REP 105 (odometry frames); the rmw_zenoh design document.
 
-    Example
-    -------
+    Examples
+    --------
     >>> from avblocks.interfaces.ros2 import Robots
     >>> b = Robots(["tb1", "tb2"])
     >>> sorted(b.input_ports), sorted(b.output_ports)

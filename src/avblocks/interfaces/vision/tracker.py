@@ -142,8 +142,8 @@ class ColorBlobTracker(Block):
     ---------
     See the module docstring.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> img = np.zeros((1, 20, 30, 3), np.uint8); img[0, 5:9, 10:16] = (255, 0, 0)
     >>> tr = ColorBlobTracker.red(1, 20, 30)

@@ -24,8 +24,8 @@ class EStop(Block):
         ``estop`` input (``interfaces.ros2``, ``estop=True``) stops the
         robots from the page.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> b = EStop(3)
     >>> b.output(0.0, {}, {}, np)["estop"].tolist()

@@ -1,12 +1,17 @@
-"""Regenerate the README's scenario pictures from the scenarios themselves,
-and the pictures of docs/plots-and-movies.md from its own snippets.
+"""Regenerate every picture of the README and the docs (``docs/images/``).
 
-    python docs/make_images.py            # every built-in scenario
-    python docs/make_images.py nest swap  # some
-    python docs/make_images.py --docs     # run plots-and-movies.md's snippets
+    python docs/make_images.py                 # the quick ones (scenarios, snippets, drawings)
+    python docs/make_images.py --all           # also benchmarks, browser shots, MuJoCo
+    python docs/make_images.py nest diagram    # some, by name (without .png)
+    python docs/make_images.py --list          # every picture and what makes it
+    python docs/make_images.py --check         # pages name only pictures made here
 
-Each picture is exactly the figure ``avblocks run NAME`` writes (the
-scenario's own ``figures``), copied to ``docs/images/scenario_NAME.png``.
+:data:`PRODUCERS` names what makes each picture: a case study's own figure
+(exactly what ``avblocks run NAME`` writes, copied to
+``scenario_NAME.png``), a docs page's own snippets, a drawing function in
+this file, or a script of the repository (benchmarks, examples, browser
+screenshots). ``tests/test_docs_site.py`` fails when a page names a picture
+that is not made here, or a picture here is named by no page.
 """
 
 from __future__ import annotations
@@ -20,6 +25,8 @@ from pathlib import Path
 
 from avblocks.cli import main
 from avblocks.scenarios import builtin_scenarios
+
+ROOT = Path(__file__).resolve().parents[1]
 
 DOCS = Path(__file__).resolve().parent
 IMAGES = DOCS / "images"
@@ -72,13 +79,211 @@ def make(name: str) -> Path:
     return dst
 
 
-if __name__ == "__main__":
-    if sys.argv[1:] == ["--docs"]:
+def _page(page, *names):
+    """Run a docs page's snippets in docs/images (they save ``names``)."""
+    def make_page():
         import matplotlib
         matplotlib.use("Agg")
-        run_blocks(DOCS / "plots-and-movies.md", IMAGES)
-        (IMAGES / "run.gif").unlink(missing_ok=True)
-        print(f"wrote the pictures of plots-and-movies.md into {IMAGES}")
+        run_blocks(DOCS / page, IMAGES)
+        for extra in ("run.gif", "run.mp4"):
+            (IMAGES / extra).unlink(missing_ok=True)
+    return make_page
+
+
+def _script(cmd, made=None, frame=None):
+    """Run ``cmd`` (a list; ``{images}`` and ``{tmp}`` are filled in) from the
+    repository root; copy ``made`` (a file it writes in ``{tmp}``) to the
+    picture, or a frame (a fraction of the length) of the movie ``made``."""
+    def run_script(name):
+        import subprocess
+        with tempfile.TemporaryDirectory() as tmp:
+            args = [a.format(images=IMAGES, tmp=tmp) for a in cmd]
+            subprocess.run(args, cwd=tmp if made else ROOT, check=True,
+                           env={**os.environ, "MPLBACKEND": "Agg"})
+            if made is not None:
+                src = Path(tmp) / made
+                if frame is None:
+                    shutil.copyfile(src, IMAGES / f"{name}.png")
+                else:
+                    from PIL import Image
+
+                    from avblocks.viz import read_video
+                    frames = read_video(src)
+                    Image.fromarray(frames[int(frame * (len(frames) - 1))]).save(
+                        IMAGES / f"{name}.png")
+    return run_script
+
+
+def draw_diagram_picture(name):
+    """The wiring of a small rendezvous diagram (vehicles, sensing at its
+    own rate, a controller), drawn by :func:`avblocks.viz.draw_diagram`."""
+    import numpy as np
+
+    import avblocks as av
+    n = 12
+    d = av.Diagram()
+    agents = d.add(av.vehicles.SingleIntegrator(position0=np.zeros((n, 2))), name="agents")
+    sense = d.add(av.environment.Neighbors(n, k=4, radius=12.0, input="position",
+                                           period=0.1), name="sense")
+    law = d.add(av.controllers.Consensus(n, gain=0.5), name="law")
+    scope = d.add(av.viz.Scope(inputs=("position",)), name="scope")
+    d.connect(agents.position, sense.position)
+    d.connect(agents.position, law.position)
+    d.connect(sense.neighbors, law.neighbors)
+    d.connect(law.velocity, agents.velocity)
+    d.connect(agents.position, scope.position)
+    av.viz.draw_diagram(d, IMAGES / f"{name}.png", engine="matplotlib")
+
+
+def draw_animation_frame(name):
+    """One frame of a 2D animation: every vehicle family's drawing, trails,
+    obstacles and a background."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    import avblocks as av
+    families = ["unicycle", "car", "quadrotor", "blimp", "robot", "arrow"]
+    n = 6 * len(families)
+    d = av.Diagram()
+    p0 = av.utility.random_poses(n, area=(24, 24), seed=3) - np.array([12.0, 12.0, 0.0])
+    fleet = d.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
+    rng = np.random.default_rng(4)
+    cmd = np.column_stack([rng.uniform(0.8, 1.6, n), rng.uniform(-0.4, 0.4, n)])
+    go = d.add(av.blocks.Constant(cmd), name="go")
+    d.connect(go.y, fleet.cmd)
+    res = av.simulate(d, 6.0, dt=0.05, log=[fleet.pose])
+    world = av.environment.World(obstacles=[av.environment.rectangle(-3, -3, 0, -1),
+                                            av.environment.Circle((5, 5), 1.5),
+                                            [(6, -6), (9, -6), (7.5, -3)]])
+    groups = [av.viz.Group(agents=slice(k, None, len(families)), drawing=f, size=1.2, label=f)
+              for k, f in enumerate(families)]
+    fig = av.viz.plot_frame(res, t=6.0, trail=3.0, world=world, groups=groups,
+                            title="avblocks Animation2D")
+    fig.savefig(IMAGES / f"{name}.png", dpi=100)
+    plt.close(fig)
+
+
+def draw_uav3d(name):
+    """Quadrotors in 3D (:func:`avblocks.viz.animate3d`), last frame."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    import avblocks as av
+    n = 5
+    a = 2 * np.pi * np.arange(n) / n
+    start = np.column_stack([3 * np.cos(a), 3 * np.sin(a), np.zeros(n)])
+    goal = np.column_stack([3 * np.cos(a + 2.0), 3 * np.sin(a + 2.0), 2.0 + np.arange(n) * 0.7])
+    d = av.Diagram()
+    fleet = d.add(av.vehicles.velocity_controlled_quadrotor(av.vehicles.Quadrotor(start)),
+                  name="fleet")
+    drive = d.add(av.controllers.HolonomicPointToPoint(goal[:, None, :], gain=1.0, v_max=1.5,
+                                                        radius=0.2), name="drive")
+    d.connect(fleet.position, drive.position)
+    d.connect(drive.velocity, fleet.velocity)
+    res = av.simulate(d, 10.0, dt=0.01, log=[fleet.position, fleet.attitude], log_every=10)
+    anim = av.viz.animate3d(res, trail=10.0)
+    anim.update(len(anim) - 1)
+    anim.fig.savefig(IMAGES / f"{name}.png", dpi=100)
+    plt.close(anim.fig)
+
+
+def _scenario(name):
+    return lambda _picture: make(name)
+
+
+#: picture name (docs/images/NAME.png) -> (what makes it, heavy?)
+PRODUCERS = {
+    **{f"scenario_{n}": (_scenario(n), False) for n in builtin_scenarios()},
+    "plots_trajectories": (_page("plots-and-movies.md"), False),
+    "plots_two_panels": (_page("plots-and-movies.md"), False),
+    "plots_signals": (_page("plots-and-movies.md"), False),
+    "diagram": (draw_diagram_picture, False),
+    "animation_frame": (draw_animation_frame, False),
+    "uav3d": (draw_uav3d, False),
+    "tune_gains": (_script([sys.executable, str(ROOT / "examples" / "06_tune_gains.py")],
+                           made="tune_gains.png"), True),
+    "robots-wiring": (_script([sys.executable, "docs/images/robots_wiring.py"]), False),
+    "robots-formation-diagram": (_script([sys.executable, "docs/images/robots_wiring.py",
+                                          "--formation"]), False),
+    "scaling": (_script([sys.executable, "benchmarks/scaling.py",
+                         "--out", "{images}/scaling.png"]), True),
+    "scaling_backends": (_script([sys.executable, "benchmarks/scaling.py", "--backend", "jax",
+                                  "--out", "{images}/scaling.png"]), True),
+    "physics-benchmark": (_script([sys.executable, "benchmarks/physics.py",
+                                   "--png", "{images}/physics-benchmark.png"]), True),
+    "live-formation": (_script([sys.executable, "docs/live_screenshots.py"]), True),
+    "live-quadrotors": (_script([sys.executable, "docs/live_screenshots.py"]), True),
+    "live-1000": (_script([sys.executable, "benchmarks/live.py", "--agents", "1000", "10000",
+                           "--shots", "{images}"]), True),
+    "live-10000": (_script([sys.executable, "benchmarks/live.py", "--agents", "1000", "10000",
+                            "--shots", "{images}"]), True),
+    "uav-tracking": (_script([sys.executable, "-m", "avblocks", "run", "uav_tracking",
+                              "--out", "{tmp}", "--quiet"], made="tracking.mp4", frame=0.5),
+                     True),
+    "uav-tracking-error": (_script([sys.executable, "-m", "avblocks", "run", "uav_tracking",
+                                    "--out", "{tmp}", "--quiet"], made="tracking_error.png"),
+                           True),
+    "sweep_time_to_done": (_script([sys.executable, "-m", "avblocks", "sweep", "waypoints",
+                                    "--grid", "drive.gain=0.5,1,2", "--grid",
+                                    "drive.v_max=1,2,3", "--seeds", "4",
+                                    "--out", "{tmp}/sweep.zarr"],
+                                   made="sweep.zarr.time_to_done.png"), True),
+}
+
+_IMAGE_REF = re.compile(r"(?:\]\(|src=\")(?:docs/)?images/([\w.-]+)\.png")
+
+
+def referenced():
+    """{picture name: [pages naming it]} over the README and docs/**/*.md."""
+    out = {}
+    for page in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
+        for m in _IMAGE_REF.finditer(page.read_text()):
+            out.setdefault(m.group(1), []).append(str(page.relative_to(ROOT)))
+    return out
+
+
+def check() -> list[str]:
+    """What is wrong between the pages, :data:`PRODUCERS` and docs/images."""
+    refs = referenced()
+    problems = [f"{name}.png (named by {', '.join(pages)}) is made by nothing in PRODUCERS"
+                for name, pages in sorted(refs.items()) if name not in PRODUCERS]
+    problems += [f"{name}.png is made here but no page names it"
+                 for name in sorted(PRODUCERS) if name not in refs
+                 and not name.startswith("scenario_")]
+    problems += [f"{p.name} is in docs/images but made by nothing here"
+                 for p in sorted(IMAGES.glob("*.png")) if p.stem not in PRODUCERS]
+    problems += [f"{name}.png is named by a page but missing from docs/images"
+                 for name in sorted(refs) if not (IMAGES / f"{name}.png").is_file()]
+    return problems
+
+
+def produce(names):
+    done = set()
+    for name in names:
+        fn, _ = PRODUCERS[name]
+        if fn in done:
+            continue
+        done.add(fn)
+        fn(name) if fn.__code__.co_argcount else fn()
+        print(f"made {name}")
+
+
+if __name__ == "__main__":
+    args = sys.argv[1:]
+    if args == ["--list"]:
+        for name, (fn, heavy) in PRODUCERS.items():
+            print(f"{name:28s} {'heavy' if heavy else 'quick'}  {fn.__name__}")
+    elif args == ["--check"]:
+        problems = check()
+        print("\n".join(problems) or "every picture is made here and named by a page")
+        sys.exit(1 if problems else 0)
+    elif args == ["--all"]:
+        produce(list(PRODUCERS))
+    elif args == ["--docs"]:
+        produce(["plots_trajectories"])
     else:
-        for n in sys.argv[1:] or list(builtin_scenarios()):
-            make(n)
+        produce(args or [n for n, (_, heavy) in PRODUCERS.items() if not heavy])

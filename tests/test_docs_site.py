@@ -140,3 +140,26 @@ def test_tutorial_notebooks_execute(page, tmp_path):
     expected = {"getting-started.md": "(1201, 20, 3)", "tutorial-diagram.md": "0.134 0.134",
                 "tutorial-scale.md": "N =  30000"}[page]
     assert expected in text
+
+
+def _make_images():
+    spec = importlib.util.spec_from_file_location("make_images", DOCS / "make_images.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_every_picture_is_made_by_the_images_script_and_named_by_a_page():
+    problems = _make_images().check()
+    assert not problems, "\n".join(problems)
+
+
+def test_the_images_script_draws_a_picture(tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+    mi = _make_images()
+    monkeypatch.setattr(mi, "IMAGES", tmp_path)
+    mi.produce(["diagram", "animation_frame"])
+    plt.close("all")
+    for name in ("diagram", "animation_frame"):
+        head = (tmp_path / f"{name}.png").read_bytes()[:8]
+        assert head == b"\x89PNG\r\n\x1a\n"

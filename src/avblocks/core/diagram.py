@@ -251,8 +251,8 @@ class Diagram:
     # ------------------------------------------------------------- pictures
     def to_graphviz(self) -> str:
         """The diagram in Graphviz DOT text (blocks, ports, wires)."""
-        from ..viz.diagram import to_dot
-        return to_dot(self)
+        from .plotting import get_backend
+        return get_backend().to_dot(self)
 
 
 @dataclass

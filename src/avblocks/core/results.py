@@ -15,6 +15,7 @@ import numpy as np
 
 from .errors import AvError
 from .ports import Port
+from .plotting import get_backend
 
 
 class Results:
@@ -104,19 +105,18 @@ class Results:
         (:func:`avblocks.viz.plot_trajectories`, into ``ax`` if given), else
         time plots of those signals (:func:`avblocks.viz.plot_signals`).
         Returns the Figure (also pyplot's current figure)."""
-        from ..viz import plot_signals, plot_trajectories
+        backend = get_backend()
         if not signals:
-            return plot_trajectories(self, ax=ax, **options)
+            return backend.plot_trajectories(self, ax=ax, **options)
         if ax is not None:
             raise AvError("plot(signals...) draws one subplot per component: pass "
                           "fig=... instead of ax=")
-        return plot_signals(self, list(signals), **options)
+        return backend.plot_signals(self, list(signals), **options)
 
     def animate(self, **options):
         """:func:`avblocks.viz.animate` of these results (shows inline in a
         notebook; ``.save("run.gif")``)."""
-        from ..viz import animate
-        return animate(self, **options)
+        return get_backend().animate(self, **options)
 
     # --------------------------------------------------------------- xarray
     def to_xarray(self):

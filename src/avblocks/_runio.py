@@ -186,7 +186,7 @@ def estimate_bytes(compiled, sim) -> int:
         steps = (float(sim.get("t_final", 10.0)) - float(sim.get("t0", 0.0))) / dt
         every = max(1, int(sim.get("log_every") or 1))
         if np.isfinite(steps) and steps > 0:
-            from .core.simulator import default_log
+            from .core.runguard import default_log
             log = sim.get("log") or default_log(compiled)
             log = [log] if isinstance(log, str) else list(log)
             per = 0
@@ -245,7 +245,7 @@ def _guarded_run(args, guard, load_any):
 
     from .cli import _parse_sets
     from .core.errors import SimulationError
-    from .core.simulator import simulate
+    from .core.frontend import simulate
     overrides = _parse_sets(args.set)
     loaded = load_any(args.target, overrides, args.out)
     d, sim, name, movie = loaded

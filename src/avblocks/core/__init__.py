@@ -17,7 +17,8 @@ from .errors import (
 )
 from .ports import Port
 from .results import Results
-from .simulator import Simulator, simulate
+from .frontend import simulate
+from .simulator import Simulator
 from .solvers import RK4, Euler, Scipy, Solver, make_solver
 
 __all__ = [

@@ -39,7 +39,7 @@ def compute_case(spec: Spec, case_id: int):
     alone, on a worker or in a resumed sweep: same seed, same overrides,
     same code, hence bit-identical metrics.
     """
-    from ..core.simulator import simulate
+    from ..core.frontend import simulate
     d, sim = spec.build(case_id)
     sim.setdefault("t_final", 10.0)
     want = spec.data.get("log")

@@ -194,7 +194,7 @@ class LiveView:
 
     # ------------------------------------------------------------ logging
     def _setup_log(self, log, plots, max_log_bytes):
-        from ...core.simulator import default_log
+        from ...core.runguard import default_log
         c = self.compiled
         refs = default_log(c) if log is None else (
             [log] if isinstance(log, (str, PortRef)) else list(log))
@@ -234,7 +234,7 @@ class LiveView:
         per = sum(int(np.prod(self.specs[n].shape)) * np.dtype(self.specs[n].dtype).itemsize
                   for n in self.names)
         if self._auto_log and (self.nsteps + 1) * per > max_log_bytes:
-            from ...core.simulator import _log_every_that_fits
+            from ...core.runguard import _log_every_that_fits
             self.log_every = _log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
         self.nlog = self.nsteps // self.log_every + 1
         need = self.nlog * per

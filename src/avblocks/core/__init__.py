@@ -15,9 +15,9 @@ from .errors import (
                      SimulationError,
                      WiringError,
 )
+from .frontend import simulate
 from .ports import Port
 from .results import Results
-from .frontend import simulate
 from .simulator import Simulator
 from .solvers import RK4, Euler, Scipy, Solver, make_solver
 

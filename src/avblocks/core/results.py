@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import AvError
-from .ports import Port
 from .plotting import get_backend
+from .ports import Port
 
 
 class Results:

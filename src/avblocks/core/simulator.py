@@ -36,20 +36,16 @@ a continuous block sees the discrete value through the whole step.
 from __future__ import annotations
 
 import math
-import os
-import sys
 import threading
-import time as _time
 
 import numpy as np
 
 from . import codegen
 from . import memo as _memo
 from . import rng as _rng
-from .diagram import CompiledDiagram, Diagram, PortRef
+from .diagram import CompiledDiagram, Diagram
 from .engine import Engine
 from .errors import AvError, ParameterError, ShapeError, SimulationError
-from .results import Results
 from .runguard import (  # noqa: F401  (default_log, initial_values: importable here as before)
     _finite,
     _log_every_that_fits,

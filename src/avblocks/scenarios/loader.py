@@ -387,7 +387,7 @@ def _parse_world(spec, where, folder, source=None):
     """
     import json
 
-    from .._runio import inside
+    from .paths import inside
     try:
         from ..environment import World
     except ImportError as e:
@@ -597,7 +597,7 @@ class Scenario:
     def output_dir(self, output_dir=None) -> Path:
         """Where this scenario's files go: ``output_dir`` or
         ``avblocks-out/<name>`` (the name made safe as one folder name)."""
-        from .._runio import safe_name
+        from .paths import safe_name
         if output_dir is not None:
             return Path(output_dir)
         return Path("avblocks-out") / safe_name(self.name)
@@ -605,7 +605,7 @@ class Scenario:
     def _confine(self, kwargs, where, out):
         """Paths a file names: writes only inside ``out``, reads only under
         the scenario's own folder."""
-        from .._runio import inside
+        from .paths import inside
         for k, v in kwargs.items():
             if not isinstance(v, (str, Path)):
                 continue
@@ -868,13 +868,17 @@ def builtin_dir() -> Path:
     return Path(__file__).parent
 
 
+#: modules of this package that are machinery, not scenarios
+INFRASTRUCTURE = ("loader", "report", "paths", "targets")
+
+
 def builtin_scenarios() -> dict:
     """``{name: path}`` of the scenarios shipped with avblocks: YAML files,
     and Python modules (``make_diagram(**params)``) for those with no YAML
     form. Where both exist the YAML file is the scenario (the module is its
     Python-API twin)."""
     py = [p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
-          and p.stem not in ("loader", "report")]
+          and p.stem not in INFRASTRUCTURE]
     out = {p.stem: p for p in sorted(py)}
     out.update({p.stem: p for p in sorted(builtin_dir().glob("*.yaml"))})
     return dict(sorted(out.items()))

@@ -26,8 +26,6 @@ x 100 agents 2.6 -> 1.8 s.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from ..errors import ParameterError

@@ -4,7 +4,7 @@ The three passes :class:`~avblocks.core.diagram.CompiledDiagram` makes over
 the leaf blocks and their wires (``srcs[i] = {input: (block, output)}``):
 shapes propagate along wires until every port is known (``configure`` lets a
 block fix its outputs from its inputs), a block declared
-:class:`~avblocks.core.block.Inherited` takes its drivers' sample time, and a
+:class:`~avblocks.core.sample_times.Inherited` takes its drivers' sample time, and a
 depth-first sort over direct-feedthrough wires gives the evaluation order (a
 cycle without a state on it is an :class:`AlgebraicLoopError`).
 """

@@ -8,7 +8,8 @@ Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
 import sys as _sys
 
 from ..core import plotting as _plotting
-from .animation import Animation, Animation2D, animate, find_pose, plot_frame, save_movie
+from .animation import Animation, animate, find_pose, plot_frame, save_movie
+from .animation_block import Animation2D
 from .diagram import draw_diagram, to_dot
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths

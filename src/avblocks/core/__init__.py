@@ -3,7 +3,7 @@
 from . import check, rng
 from .block import CONTINUOUS, INHERITED, Block, Continuous, Inherited, Periodic
 from .check import check_block
-from .compiled import Runner, compile, grad
+from .compiled import Runner, grad
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
                      AlgebraicLoopError,
@@ -15,7 +15,7 @@ from .errors import (
                      SimulationError,
                      WiringError,
 )
-from .frontend import simulate
+from .frontend import compile, simulate
 from .ports import Port
 from .results import Results
 from .simulator import Simulator

@@ -21,6 +21,11 @@ engine (:mod:`avblocks.core.run_loop`), the compiled JAX engine
 (:mod:`avblocks.viz.live`, a layer *above* this one, which is why engines are
 named here, not imported). A new engine is one new module plus
 :func:`register_engine`.
+
+An engine that can also compile ahead of time (a diagram once, many runs)
+offers ``compile(diagram, t_final, dt, solver, *, log, log_every, t0, seed,
+backend, dtype, check_finite, devices) -> Runner``, named in
+:data:`COMPILERS`; :func:`compile` picks it by ``backend``.
 """
 
 from __future__ import annotations
@@ -34,6 +39,11 @@ ENGINES = {
     "numpy": "avblocks.core.run_loop:run",
     "jax": "avblocks.core.compiled.entry:run",
     "live": "avblocks.viz.live.engine:run",
+}
+
+#: backend name -> ``"module:function"`` compiling a diagram ahead of time
+COMPILERS = {
+    "jax": "avblocks.core.compiled.entry:compile",
 }
 
 _loaded: dict = {}
@@ -50,6 +60,11 @@ def register_engine(name, target) -> None:
         ENGINES[name] = str(target)
 
 
+def _load(target):
+    module, _, attr = target.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
 def engine(name):
     """The run function of the engine called ``name`` (imported on first use)."""
     fn = _loaded.get(name) if isinstance(name, str) else None
@@ -59,10 +74,25 @@ def engine(name):
                                  expected=" or ".join(repr(k) for k in ENGINES
                                                       if k != "live"),
                                  found=name)
-        module, _, attr = ENGINES[name].partition(":")
-        fn = getattr(importlib.import_module(module), attr)
-        _loaded[name] = fn
+        fn = _loaded[name] = _load(ENGINES[name])
     return fn
+
+
+def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
+            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None):
+    """Compile ``diagram`` once for runs of ``t_final`` with the compiling
+    engine named by ``backend`` and return its :class:`Runner` (arguments:
+    :func:`avblocks.core.compiled.compile`, the JAX engine's)."""
+    key = ("compile", backend) if isinstance(backend, str) else None
+    fn = _loaded.get(key)
+    if fn is None:
+        if key is None or backend not in COMPILERS:
+            raise ParameterError("unknown compiled backend", param="backend",
+                                 expected=" or ".join(repr(k) for k in COMPILERS),
+                                 found=backend)
+        fn = _loaded[key] = _load(COMPILERS[backend])
+    return fn(diagram, t_final, dt, solver, log=log, log_every=log_every, t0=t0, seed=seed,
+              backend=backend, dtype=dtype, check_finite=check_finite, devices=devices)
 
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,

@@ -2,12 +2,13 @@
 
 ``simulate(..., backend="jax")`` lands here: the whole run is traced and
 compiled once per diagram structure (:func:`~avblocks.core.compiled.compile`)
-and a second run with other numbers reuses the executable.
+and a second run with other numbers reuses the executable. ``compile`` is
+the engine's ahead-of-time entry (:func:`avblocks.compile` lands there).
 """
 
 from __future__ import annotations
 
-from .runner import simulate_compiled
+from .runner import compile, simulate_compiled  # noqa: F401  (compile: the contract's)
 
 
 def run(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None, seed=0,

@@ -28,6 +28,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from .core.atomic import atomic_path, atomic_write_bytes  # noqa: F401  (atomic_path: as before)
 from .core.errors import AvError
 from .scenarios.paths import inside, safe_name  # noqa: F401  (importable here as before)
 
@@ -124,33 +125,7 @@ def prepare_output(out) -> Path:
     return out
 
 
-@contextlib.contextmanager
-def atomic_path(path):
-    """``with atomic_path(p) as tmp: write(tmp)``: ``tmp`` is renamed to ``p``
-    when the block succeeds, removed when it fails (an OSError becomes an
-    :class:`AvError` naming ``p``)."""
-    from .core.results import _os_reason
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".part{path.suffix}",
-                               dir=path.parent)
-    from .core.results import _umask
-    os.fchmod(fd, 0o666 & ~_umask())
-    os.close(fd)
-    ok = False
-    try:
-        yield Path(tmp)
-        os.replace(tmp, path)
-        ok = True
-    except OSError as e:
-        raise AvError(f"could not write '{path}': {_os_reason(e)}") from None
-    finally:
-        if not ok:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
-
-
 def write_text_atomic(path, text):
-    from .core.results import atomic_write_bytes
     return atomic_write_bytes(path, text.encode())
 
 

@@ -144,7 +144,7 @@ def _guarded_run(args, guard, load_any):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
-    from ..scenarios.report import _jsonable
+    from ..scenarios.report import jsonable
     outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:
         from ..scenarios.report import default_outcome
@@ -163,7 +163,7 @@ def _guarded_run(args, guard, load_any):
         "wall_s": round(wall, 3),
         "realtime_factor": None,
         "outcome": outcome,
-        "numbers": _jsonable(numbers),
+        "numbers": jsonable(numbers),
         "files": [str(f) for f in files],
     }
     if interrupted:

@@ -42,6 +42,8 @@ import numpy as np
 
 from ...core.diagram import CompiledDiagram, Diagram
 from ...core.errors import ParameterError, SimulationError
+from ...core.params import integer
+from ...core.runguard import _finite, whole_steps
 from . import _scene
 from ._server import LiveViewError, open_server  # noqa: F401  (importable here as before)
 from .controls import Controls
@@ -125,20 +127,12 @@ class LiveView(Recording, Drawing, Controls):
         self.seed = int(seed)
         self.sim = Simulator(diagram, dt, solver, seed=self.seed, t0=t0,
                              check_finite=check_finite, x0=x0)
-        try:
-            span = float(t_final) - self.sim.t0
-        except (TypeError, ValueError):
-            span = float("nan")
-        if not (math.isfinite(span) and span >= 0):
-            raise ParameterError("t_final must be a number >= t0", param="t_final",
-                                 expected=f">= {self.sim.t0}", found=t_final)
-        self.nsteps = int(round(span / self.sim.dt))
+        # the shared run guard: the same arguments mean the same as in simulate()
+        self.nsteps = whole_steps(self.sim.t0, _finite(t_final, "t_final"), self.sim.dt)
         self._auto_log = log_every is None     # as simulate(): every step unless too big
-        self.log_every = 1 if log_every is None else int(log_every)
-        if self.log_every < 1:
-            raise ParameterError("log_every must be >= 1", param="log_every",
-                                 expected=">= 1", found=log_every)
-        if realtime is not None and not (float(realtime) > 0):
+        self.log_every = 1 if log_every is None else integer(log_every, None, "log_every",
+                                                             lo=1)
+        if realtime is not None and not (_finite(realtime, "realtime") > 0):
             raise ParameterError("realtime factor must be > 0", param="realtime",
                                  expected="> 0 or None", found=realtime)
         self.speed = None if realtime is None else float(realtime)

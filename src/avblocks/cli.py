@@ -9,9 +9,8 @@
     avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks --version
 
-Sub-commands: :mod:`avblocks.commands` (run, list, diagram), the ROS 2
-commands (:mod:`avblocks.interfaces.ros2.cli`) and ``sweep``
-(:mod:`avblocks.sweep.cli`).
+Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep) and the
+ROS 2 commands (:mod:`avblocks.interfaces.ros2.cli`).
 """
 
 from __future__ import annotations
@@ -23,6 +22,7 @@ import sys
 from .commands import diagram as _diagram
 from .commands import listing as _listing
 from .commands import run as _run
+from .commands import sweep as _sweep
 from .core.errors import AvError
 from .scenarios.targets import Loaded, load_any  # noqa: F401  (importable here as before)
 
@@ -44,8 +44,7 @@ def build_parser():
     add_commands(sub)
     _listing.add_parser(sub)
     _diagram.add_parser(sub)
-    from .sweep.cli import add_parser as add_sweep_parser  # `avblocks sweep` (issue 14)
-    add_sweep_parser(sub)
+    _sweep.add_parser(sub)                                   # `avblocks sweep` (issue 14)
     return ap
 
 

@@ -10,9 +10,10 @@ in :data:`ENGINES` and imported only when first used)::
 
 It takes the arguments of :func:`simulate` (``log_every=None`` means "every
 step unless the log would not fit"), checks them (the shared run guard,
-:mod:`avblocks.core.runguard`, says what each means), refuses what it cannot do with a
-:class:`ParameterError`, and returns :class:`~avblocks.core.results.Results`
-(with ``final_state`` when it has one). Options of its own (``dtype`` for the
+:mod:`avblocks.core.runguard`, says what each means), refuses what it
+cannot do with a :class:`ParameterError`, and returns
+:class:`~avblocks.core.results.Results` (with ``final_state`` when it has
+one). Options of its own (``dtype`` for the
 compiled engine, ``live`` for the live one) come as keywords.
 
 The engines below know nothing of this module and do not call one another:
@@ -20,8 +21,8 @@ the NumPy engine (:mod:`avblocks.core.run_loop`), the compiled JAX engine
 (:mod:`avblocks.core.compiled`) and the live browser engine
 (:mod:`avblocks.viz.live`, which steps the NumPy engine's
 :class:`~avblocks.core.simulator.Simulator` paced by the page; it sits in a
-layer *above* this one, which is why engines are named here, not imported). A new engine is one new module plus
-:func:`register_engine`.
+layer *above* this one, which is why engines are named here, not
+imported). A new engine is one new module plus :func:`register_engine`.
 
 An engine that can also compile ahead of time (a diagram once, many runs)
 offers ``compile(diagram, t_final, dt, solver, *, log, log_every, t0, seed,

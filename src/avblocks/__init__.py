@@ -1,5 +1,12 @@
 """avblocks: vectorized building blocks for multi-vehicle and multi-agent systems.
 
+Layers, each importing only from those below it (docs/architecture.md; the
+import-linter contracts in pyproject.toml check them): apps (``cli``,
+``commands``, the run guard ``_runio``, ``sweep``) > ``scenarios`` > ``viz``,
+``interfaces`` > ``controllers``, ``vehicles`` > ``environment`` >
+``blocks``, ``utility`` > ``core`` (data, then the NumPy step, the engines,
+and the front end ``simulate``/``compile`` that picks one).
+
 >>> import avblocks as av
 >>> d = av.Diagram()
 """

@@ -3,7 +3,7 @@
 from . import check, rng
 from .block import CONTINUOUS, INHERITED, Block, Continuous, Inherited, Periodic
 from .check import check_block
-from .compiled import Runner, compile, grad
+from .compiled import Runner, grad
 from .diagram import BlockHandle, CompiledDiagram, Diagram, PortRef
 from .errors import (
                      AlgebraicLoopError,
@@ -15,9 +15,10 @@ from .errors import (
                      SimulationError,
                      WiringError,
 )
+from .frontend import compile, simulate
 from .ports import Port
 from .results import Results
-from .simulator import Simulator, simulate
+from .simulator import Simulator
 from .solvers import RK4, Euler, Scipy, Solver, make_solver
 
 __all__ = [

@@ -38,133 +38,15 @@ A proportional heading controller in a few lines:
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from .errors import ParameterError
+from .guarded import _guard_init
 from .params import Param
 from .ports import Port
-
-
-def _guard_init(cls, init):
-    """Wrap a block constructor so that a plain Python/NumPy error raised on
-    the user's arguments (a bare ``int()`` of a string, a negative size, an
-    overflow) becomes a :class:`ParameterError` naming the block, instead
-    of leaking from deep inside. A ``TypeError`` stays a ``TypeError`` too
-    (``ParameterTypeError``), so unknown keywords are still TypeErrors."""
-    import functools
-
-    from .errors import AvError, ParameterError, ParameterTypeError
-
-    @functools.wraps(init)
-    def __init__(self, *args, **kwargs):
-        try:
-            init(self, *args, **kwargs)
-        except AvError:
-            raise
-        except TypeError as e:
-            raise ParameterTypeError(_ctor_msg(e), block=cls.__name__,
-                                     param=_culprit(init, self, args, kwargs, e),
-                                     hint=_ctor_hint(init)) from e
-        except MemoryError:
-            raise ParameterError("the arguments ask for more memory than there is",
-                                 block=cls.__name__,
-                                 hint="use fewer agents or smaller sizes") from None
-        except (ValueError, OverflowError, ZeroDivisionError, IndexError, KeyError,
-                FloatingPointError) as e:
-            raise ParameterError(_ctor_msg(e), block=cls.__name__,
-                                 param=_culprit(init, self, args, kwargs, e),
-                                 hint=_ctor_hint(init)) from e
-
-    __init__._av_guarded = True
-    return __init__
-
-
-def _culprit(init, self, args, kwargs, e):
-    """The argument the error message quotes, when exactly one does."""
-    import inspect
-    try:
-        bound = inspect.signature(init).bind(self, *args, **kwargs)
-    except TypeError:
-        return None
-    msg = str(e)
-    hits = []
-    for k, v in bound.arguments.items():
-        if k == "self" or isinstance(v, (bool, type(None))):
-            continue
-        try:
-            r = repr(v)
-        except Exception:  # noqa: BLE001 - an odd object's repr
-            continue
-        if 0 < len(r) <= 60 and r in msg:
-            hits.append(k)
-    return hits[0] if len(hits) == 1 else None
-
-
-def _ctor_msg(e):
-    msg = " ".join(str(e).split()) or type(e).__name__
-    return f"bad argument: {type(e).__name__}: {msg}"
-
-
-def _ctor_hint(init):
-    import inspect
-    try:
-        sig = str(inspect.signature(init)).replace("(self, ", "(").replace("(self)", "()")
-    except (TypeError, ValueError):  # pragma: no cover - builtins
-        return None
-    return f"the constructor takes {sig}"
-
-
-@dataclass(frozen=True)
-class Continuous:
-    """Sample time of a continuous-time block.
-
-    Its outputs are recomputed at every solver stage. Its discrete states,
-    if any (modes such as "current waypoint"), are updated at every major
-    step.
-    """
-
-    def __repr__(self):
-        return "Continuous()"
-
-
-@dataclass(frozen=True)
-class Periodic:
-    """Sample time of a discrete block: hits at ``offset + k * period``.
-
-    Outputs are computed at hits and held between them (zero-order hold);
-    discrete states are updated at hits.
-    """
-
-    period: float
-    offset: float = 0.0
-
-    def __post_init__(self):
-        if not (math.isfinite(self.period) and self.period > 0):
-            raise ParameterError("sample period must be a positive number",
-                                 param="period", expected="> 0", found=self.period)
-        if not (math.isfinite(self.offset) and 0 <= self.offset < self.period):
-            raise ParameterError("sample offset must lie in [0, period)",
-                                 param="offset", expected=f"[0, {self.period})",
-                                 found=self.offset)
-
-
-@dataclass(frozen=True)
-class Inherited:
-    """Sample time taken from the blocks that drive this one, when the
-    diagram is built: ``Periodic(p, o)`` if every driver is periodic with the
-    same ``(p, o)``, else continuous. For stateless elementwise blocks (gains,
-    sums, saturations, routing) placed after a discrete block: they then
-    compute once per hit instead of at every solver stage."""
-
-    def __repr__(self):
-        return "Inherited()"
-
-
-CONTINUOUS = Continuous()
-INHERITED = Inherited()
+from .sample_times import CONTINUOUS, INHERITED, Continuous, Inherited, Periodic  # noqa: F401
 
 
 class Block:

@@ -13,7 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import atomic_write_bytes
+from .atomic import os_reason as _os_reason
 from .errors import AvError
+from .plotting import get_backend
 from .ports import Port
 
 
@@ -104,19 +107,18 @@ class Results:
         (:func:`avblocks.viz.plot_trajectories`, into ``ax`` if given), else
         time plots of those signals (:func:`avblocks.viz.plot_signals`).
         Returns the Figure (also pyplot's current figure)."""
-        from ..viz import plot_signals, plot_trajectories
+        backend = get_backend()
         if not signals:
-            return plot_trajectories(self, ax=ax, **options)
+            return backend.plot_trajectories(self, ax=ax, **options)
         if ax is not None:
             raise AvError("plot(signals...) draws one subplot per component: pass "
                           "fig=... instead of ax=")
-        return plot_signals(self, list(signals), **options)
+        return backend.plot_signals(self, list(signals), **options)
 
     def animate(self, **options):
         """:func:`avblocks.viz.animate` of these results (shows inline in a
         notebook; ``.save("run.gif")``)."""
-        from ..viz import animate
-        return animate(self, **options)
+        return get_backend().animate(self, **options)
 
     # --------------------------------------------------------------- xarray
     def to_xarray(self):
@@ -233,57 +235,6 @@ class Results:
                             bool(var.attrs.get("agents", 1)))
         meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
         return cls(np.asarray(ds["time"].values), data, ports, meta, runs=runs)
-
-
-def _os_reason(e):
-    import errno
-    if getattr(e, "errno", None) in (errno.ENOSPC, errno.EDQUOT):
-        return "the disk is full"
-    if getattr(e, "errno", None) == errno.EFBIG:
-        return "the file is larger than this process may write (file size limit)"
-    if isinstance(e, PermissionError):
-        return "permission denied"
-    if getattr(e, "errno", None) == errno.EROFS:
-        return "the file system is read-only"
-    return f"{type(e).__name__}: {e}"
-
-
-def _umask():
-    import os
-    old = os.umask(0o022)
-    os.umask(old)
-    return old
-
-
-def atomic_write_bytes(path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` through a temporary file in the same folder
-    and an atomic rename; on failure the temporary file is removed, ``path``
-    is untouched, and an :class:`AvError` says why."""
-    import os
-    import tempfile
-    path = Path(path)
-    tmp = None
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part",
-                                   dir=path.parent)
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-        tmp = None
-    except OSError as e:
-        raise AvError(f"could not write '{path}': {_os_reason(e)}",
-                      hint="nothing was left behind; free space or choose another folder"
-                      ) from None
-    finally:
-        if tmp is not None:
-            try:
-                os.unlink(tmp)
-            except OSError:
-                pass
-    return path
 
 
 def _save_zarr(ds, path):

@@ -34,28 +34,7 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ._common import agent_count, declare_agents_input, maybe_periodic
 from .footprint import Disc, Footprint
-from .world import World
-
-
-def _disc_obstacle_hits(world, centers, radii):
-    """(agent, obstacle) index pairs where discs touch obstacles (exact)."""
-    if world.n_obstacles == 0 or len(centers) == 0:
-        e = np.zeros(0, np.int64)
-        return e, e
-    cx, cy = centers[:, 0], centers[:, 1]
-    boxes = shapely.box(cx - radii, cy - radii, cx + radii, cy + radii)
-    a, o = world.tree.query(boxes)
-    circ = world.is_circle[o]
-    hit = np.zeros(len(a), dtype=bool)
-    if np.any(~circ):
-        ap, op = a[~circ], o[~circ]
-        pts = shapely.points(centers[ap])
-        hit[~circ] = shapely.distance(pts, world._geom_arr[op]) <= radii[ap]
-    if np.any(circ):
-        ac, oc = a[circ], o[circ]
-        d = np.hypot(*(centers[ac] - world.circle_center[oc]).T)
-        hit[circ] = d <= radii[ac] + world.circle_radius[oc]
-    return a[hit].astype(np.int64), o[hit].astype(np.int64)
+from .world import World, _disc_obstacle_hits
 
 
 def _poly_obstacle_hits(world, polys, margin):

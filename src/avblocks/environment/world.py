@@ -257,7 +257,6 @@ class World:
         are not free. Points outside ``bounds`` are not free when the world
         has walls.
         """
-        from .collision import _disc_obstacle_hits
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         r = np.full(len(p), float(clearance))
         ai, _ = _disc_obstacle_hits(self, p, r)
@@ -391,3 +390,24 @@ class World:
                 path, (ox, ox + w * resolution, oy, oy + h * resolution))
         return cls.from_occupancy(occ, resolution, origin, threshold=occupied_thresh,
                                   image_rows=True, **kw)
+
+
+def _disc_obstacle_hits(world, centers, radii):
+    """(agent, obstacle) index pairs where discs touch obstacles (exact)."""
+    if world.n_obstacles == 0 or len(centers) == 0:
+        e = np.zeros(0, np.int64)
+        return e, e
+    cx, cy = centers[:, 0], centers[:, 1]
+    boxes = shapely.box(cx - radii, cy - radii, cx + radii, cy + radii)
+    a, o = world.tree.query(boxes)
+    circ = world.is_circle[o]
+    hit = np.zeros(len(a), dtype=bool)
+    if np.any(~circ):
+        ap, op = a[~circ], o[~circ]
+        pts = shapely.points(centers[ap])
+        hit[~circ] = shapely.distance(pts, world._geom_arr[op]) <= radii[ap]
+    if np.any(circ):
+        ac, oc = a[circ], o[circ]
+        d = np.hypot(*(centers[ac] - world.circle_center[oc]).T)
+        hit[circ] = d <= radii[ac] + world.circle_radius[oc]
+    return a[hit].astype(np.int64), o[hit].astype(np.int64)

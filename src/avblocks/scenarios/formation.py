@@ -205,3 +205,47 @@ def figures(res, out, params):
     b.legend(fontsize=8, loc="upper right")
     b.grid(True, alpha=0.3)
     return [save_figure(fig, f"{out}/formation.png")]
+
+
+# ------------------------------------------------- generators for scenario files
+# (the YAML twin names this case study's geometry: see avblocks.scenarios.generators)
+def _formation_start(n, spacing, offset, seed):
+    return start_poses(int(n), float(spacing), float(offset), seed)
+
+
+def _formation_refs(n, spacing, d, tree="star", state="wedge"):
+    leader, refs = formation_references(int(n), float(spacing), float(d), tree)
+    if state == "leader":
+        return leader
+    if state not in refs:
+        raise ValueError(f"state must be one of {sorted(refs)} or 'leader', got {state!r}")
+    return refs[state]
+
+
+def _formation_switch(n, spacing, which="in"):
+    x_in, x_out = switch_points(int(n), float(spacing))
+    return {"in": x_in, "out": x_out}[which]
+
+
+def _corridor(x0, x1, width, wall=4.0):
+    return corridor_world(float(x0), float(x1), float(width), float(wall))
+
+
+def _team_size(agents=None, followers=None):
+    """``agents`` when given, else ``followers + 1`` (a leader and its
+    followers)."""
+    if agents is not None:
+        return int(agents)
+    if followers is None:
+        raise ValueError("give agents or followers")
+    return int(followers) + 1
+
+
+#: the generators this case study offers to scenario files
+GENERATORS = {
+    "team_size": _team_size,
+    "formation_start": _formation_start,
+    "formation_references": _formation_refs,
+    "formation_switch": _formation_switch,
+    "corridor": _corridor,
+}

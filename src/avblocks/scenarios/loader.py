@@ -41,13 +41,13 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from ..core.diagram import Diagram
-from ..core.errors import AvError, ParameterError, ScenarioError, did_you_mean
-from ..core.params import count as _count
-from ..core.params import integer as _integer
+from ..core.errors import AvError, ScenarioError, did_you_mean
 from ._numeric import is_numeric_key, resolve
+from .files import _read
+from .generators import GENERATORS
+from .limits import MAX_FILE_BYTES, MAX_YAML_VALUES, memory_limit  # noqa: F401  (as before)
+from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
@@ -64,271 +64,6 @@ _SIM_SHORTCUTS = {"t_final", "dt", "log_every", "solver"}
 WRITE_KEYS = {"path", "movie", "file", "filename", "output", "save", "save_path"}
 #: ... and files it reads: they must lie under the scenario file's folder.
 READ_KEYS = {"background", "image", "map", "geojson"}
-
-
-# ------------------------------------------------------------------ limits
-#: Largest scenario file read (bytes).
-MAX_FILE_BYTES = 10 * 1024**2
-#: Largest number of values a YAML document may expand to through
-#: anchors and aliases (a "billion laughs" file is refused, not expanded).
-MAX_YAML_VALUES = 1_000_000
-
-
-def memory_limit() -> int:
-    """Bytes a scenario may ask for (generated arrays; the log is checked by
-    ``simulate``): ``AVBLOCKS_MAX_MEMORY`` (e.g. ``8e9``) or half the
-    physical memory, at most 8 GB."""
-    import os
-    env = os.environ.get("AVBLOCKS_MAX_MEMORY")
-    if env:
-        try:
-            return int(float(env))
-        except (ValueError, OverflowError):
-            raise ScenarioError(f"AVBLOCKS_MAX_MEMORY must be a number of bytes, "
-                                f"found {env!r}") from None
-    try:
-        phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        phys = 16 * 1024**3
-    return int(min(8e9, phys / 2))
-
-
-def _budget(elements, what):
-    """Refuse an array of ``elements`` float64 values past the memory limit,
-    before allocating it."""
-    need = 8 * int(elements)
-    lim = memory_limit()
-    if need > lim:
-        raise ParameterError(f"{what} would take {need / 1e9:.3g} GB", param=what,
-                             expected=f"<= {lim / 1e9:.3g} GB (AVBLOCKS_MAX_MEMORY)",
-                             hint="use fewer agents/points")
-
-
-def _n(value, name, lo=0):
-    return _count(value, None, name, lo=lo, hi=10**12)
-
-
-def _shape(shape, name):
-    if isinstance(shape, (int, float)) and not isinstance(shape, bool):
-        shape = [shape]
-    if not isinstance(shape, (list, tuple)):
-        raise ParameterError("a shape is a list of whole numbers", param=name,
-                             found=repr(shape)[:60])
-    return tuple(_n(v, f"{name}[{i}]") for i, v in enumerate(shape))
-
-
-# ----------------------------------------------------------------- generators
-def _random_poses(n, area, seed=0, min_separation=0.0):
-    from ..utility import random_poses
-    n = _n(n, "n")
-    _budget(3 * n, "random_poses")
-    return random_poses(n, area=area, min_separation=min_separation,
-                        seed=_integer(seed, None, "seed"))
-
-
-def _random_positions(n, area, seed=0, min_separation=0.0, dim=2):
-    from ..utility import random_positions
-    n = _n(n, "n")
-    dim = _integer(dim, None, "dim", lo=2, hi=3)
-    _budget(dim * n, "random_positions")
-    p = random_positions(n, area=area, min_separation=min_separation,
-                         seed=_integer(seed, None, "seed"))
-    if dim == 3:
-        p = np.column_stack([p, np.zeros(len(p))])
-    return p
-
-
-def _random_waypoints(n, count, area, seed=0):
-    n, count = _n(n, "n"), _n(count, "count", lo=1)
-    _budget(2 * n * count, "random_waypoints")
-    rng = np.random.default_rng([_integer(seed, None, "seed", lo=0), 7])
-    lo, hi = _area_bounds(area)
-    return rng.uniform(lo, hi, (n, count, 2))
-
-
-def _area_bounds(area):
-    a = np.asarray(area, dtype=float)
-    if a.shape == (2,):
-        return np.zeros(2), a
-    if a.shape == (4,):
-        return a[[0, 2]], a[[1, 3]]
-    raise ValueError(f"area must be [width, height] or [xmin, xmax, ymin, ymax], got {area}")
-
-
-def _line(n, spacing=1.0, heading=0.0, start=(0.0, 0.0)):
-    n = _n(n, "n")
-    _budget(3 * n, "line_poses")
-    spacing, heading = float(spacing), float(heading)
-    x = start[0] - spacing * np.arange(n) * np.cos(heading)
-    y = start[1] - spacing * np.arange(n) * np.sin(heading)
-    return np.column_stack([x, y, np.full(n, float(heading))])
-
-
-def _tile(value, n):
-    v = np.asarray(value, dtype=float)
-    n = _n(n, "n")
-    _budget(n * max(v.size, 1), "tile")
-    return np.tile(v, (n, 1))
-
-
-def _full(shape, value):
-    shape = _shape(shape, "shape")
-    _budget(np.prod(shape, dtype=object), "full")
-    return np.full(shape, value, dtype=float)
-
-
-def _zeros(shape):
-    shape = _shape(shape, "shape")
-    _budget(np.prod(shape, dtype=object), "zeros")
-    return np.zeros(shape)
-
-
-def _arange(n, dtype="int64"):
-    n = _n(n, "n")
-    _budget(n, "arange")
-    if dtype not in ("int64", "int32", "float64", "float32"):
-        raise ParameterError("dtype must be int64, int32, float64 or float32",
-                             param="dtype", found=repr(dtype)[:40])
-    return np.arange(n).astype(dtype)
-
-
-def _multiply(a, b):
-    return np.asarray(a, float) * np.asarray(b, float) if np.ndim(a) or np.ndim(b) \
-        else float(a) * float(b)
-
-
-def _uniform(low, high, shape, seed=0, stream=0):
-    """Uniform draws from ``numpy.random.default_rng([seed, stream])``."""
-    rng = np.random.default_rng([int(seed), int(stream)])
-    return rng.uniform(float(low), float(high), tuple(int(s) for s in shape))
-
-
-def _first_true(n, k):
-    m = np.zeros(int(n), dtype=bool)
-    m[:min(int(k), int(n))] = True
-    return m
-
-
-def _nest_hexagon(agents, density):
-    from .nest import hexagon, hexagon_radius
-    return hexagon(hexagon_radius(int(agents), float(density)))
-
-
-def _nest_poses(agents, density, scouts, seed):
-    from .nest import hexagon_radius, nest_poses
-    return nest_poses(int(agents), hexagon_radius(int(agents), float(density)), scouts, seed)
-
-
-def _circle_swap(n, radius, jitter=0.0, seed=1, which="start"):
-    from .swap import circle_swap
-    start, goal = circle_swap(int(n), float(radius), float(jitter), seed)
-    if which == "start":
-        return start
-    if which == "goal":
-        return goal[:, None, :]
-    raise ValueError(f"which must be 'start' or 'goal', got {which!r}")
-
-
-def _speed_caps(n, v_max, spread, seed=1, stream=10):
-    rng = np.random.default_rng([int(seed), int(stream)])
-    return float(v_max) * (1.0 - float(spread) * rng.uniform(0.0, 1.0, int(n)))
-
-
-def _formation_start(n, spacing, offset, seed):
-    from .formation import start_poses
-    return start_poses(int(n), float(spacing), float(offset), seed)
-
-
-def _formation_refs(n, spacing, d, tree="star", state="wedge"):
-    from .formation import formation_references
-    leader, refs = formation_references(int(n), float(spacing), float(d), tree)
-    if state == "leader":
-        return leader
-    if state not in refs:
-        raise ValueError(f"state must be one of {sorted(refs)} or 'leader', got {state!r}")
-    return refs[state]
-
-
-def _formation_switch(n, spacing, which="in"):
-    from .formation import switch_points
-    x_in, x_out = switch_points(int(n), float(spacing))
-    return {"in": x_in, "out": x_out}[which]
-
-
-def _corridor(x0, x1, width, wall=4.0):
-    from .formation import corridor_world
-    return corridor_world(float(x0), float(x1), float(width), float(wall))
-
-
-def _disc(radius):
-    from ..environment import Disc
-    return Disc(float(radius))
-
-
-_OPS = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal,
-        "==": np.equal, "!=": np.not_equal}
-
-
-def _guard(input=None, index=(), op=">=", value=0.0, all=None):
-    """A transition guard from data: ``u[input][index] <op> value``, or the
-    conjunction of several (``all: [{input, index, op, value}, ...]``)."""
-    if all is not None:
-        parts = [_guard(**g) for g in all]
-
-        def both(u, xp):
-            out = parts[0](u, xp)
-            for g in parts[1:]:
-                out = out & g(u, xp)
-            return out
-        return both
-    if op not in _OPS:
-        raise ValueError(f"op must be one of {sorted(_OPS)}, got {op!r}")
-    if input is None:
-        raise ValueError("a guard names its 'input' (an input port of the block)")
-    idx = tuple(int(i) for i in np.atleast_1d(index)) if np.size(index) else ()
-    name, v, opname = str(input), float(value), op
-
-    def guard(u, xp):
-        x = u[name][idx] if idx else u[name]
-        return {"<": x < v, "<=": x <= v, ">": x > v, ">=": x >= v, "==": x == v,
-                "!=": x != v}[opname]
-    return guard
-
-
-def _team_size(agents=None, followers=None):
-    """``agents`` when given, else ``followers + 1`` (a leader and its
-    followers)."""
-    if agents is not None:
-        return int(agents)
-    if followers is None:
-        raise ValueError("give agents or followers")
-    return int(followers) + 1
-
-
-GENERATORS = {
-    "team_size": _team_size,
-    "formation_start": _formation_start,
-    "formation_references": _formation_refs,
-    "formation_switch": _formation_switch,
-    "corridor": _corridor,
-    "disc": _disc,
-    "guard": _guard,
-    "multiply": _multiply,
-    "uniform": _uniform,
-    "first_true": _first_true,
-    "nest_hexagon": _nest_hexagon,
-    "nest_poses": _nest_poses,
-    "circle_swap": _circle_swap,
-    "speed_caps": _speed_caps,
-    "random_poses": _random_poses,
-    "random_positions": _random_positions,
-    "random_waypoints": _random_waypoints,
-    "line_poses": _line,
-    "tile": _tile,
-    "full": _full,
-    "zeros": _zeros,
-    "arange": _arange,
-}
 
 
 # ------------------------------------------------------------------ registry
@@ -353,102 +88,6 @@ def block_registry(code_blocks=False) -> dict:
                     continue
                 reg[f"{fam}.{name}"] = obj
     return reg
-
-
-_WORLD_KEYS = {"obstacles", "bounds", "walls", "image", "geojson", "wkt"}
-
-
-def _obstacle(ob, where, source=None):
-    from ..environment.world import Circle
-    if isinstance(ob, dict):
-        if set(ob) == {"circle"} and isinstance(ob["circle"], dict):
-            ob = ob["circle"]
-        if set(ob) == {"center", "radius"}:
-            c = np.asarray(ob["center"], dtype=float)
-            return Circle(tuple(c.tolist()) if c.ndim == 1 else c, float(ob["radius"]))
-        if set(ob) == {"polygon"}:
-            return ob["polygon"]
-        raise ScenarioError("an obstacle is a list of [x, y] vertices, {polygon: "
-                            "[[x, y], ...]} or {circle: {center: [x, y], radius: r}}",
-                            file=source, entry=where,
-                            hint=f"found keys {sorted(map(str, ob))}")
-    return ob
-
-
-def _parse_world(spec, where, folder, source=None):
-    """A :class:`~avblocks.environment.World` from a scenario mapping::
-
-        world:
-          bounds: [0, 0, 50, 50]          # xmin, ymin, xmax, ymax
-          walls: true
-          obstacles: [[[10, 10], [20, 10], [15, 20]], {circle: {center: [30, 30], radius: 4}}]
-        # or instead of obstacles: image: {path: map.png, resolution: 0.05},
-        #   geojson: obstacles.geojson (files under the scenario's folder), wkt: "POLYGON(...)"
-    """
-    import json
-
-    from .._runio import inside
-    try:
-        from ..environment import World
-    except ImportError as e:
-        raise ScenarioError("a 'world' needs avblocks.environment.World",
-                            file=source, entry=where) from e
-    if not isinstance(spec, dict):
-        raise ScenarioError("a world is a mapping like {obstacles: [...], bounds: [...]}",
-                            file=source, entry=where)
-    unknown = set(map(str, spec)) - _WORLD_KEYS
-    if unknown:
-        raise ScenarioError(f"unknown world key(s) {sorted(unknown)}", file=source,
-                            entry=where, hint=f"known: {sorted(_WORLD_KEYS)}")
-    sources = [k for k in ("obstacles", "image", "geojson", "wkt") if k in spec]
-    if len(sources) > 1:
-        raise ScenarioError(f"give the obstacles one way, not {sources}", file=source,
-                            entry=where)
-    kw = {}
-    if spec.get("bounds") is not None:
-        kw["bounds"] = spec["bounds"]
-    if "walls" in spec:
-        if not isinstance(spec["walls"], bool):
-            raise ScenarioError("walls must be true or false", file=source,
-                                entry=f"{where}.walls")
-        kw["walls"] = spec["walls"]
-    try:
-        if "image" in spec:
-            im = spec["image"]
-            if not isinstance(im, dict) or "path" not in im:
-                raise ScenarioError("image is {path: file, resolution: metres per pixel,"
-                                    " origin: [x, y]}", file=source, entry=f"{where}.image")
-            opts = {k: v for k, v in im.items() if k != "path"}
-            bad = set(opts) - {"resolution", "origin", "occupied_thresh", "negate"}
-            if bad:
-                raise ScenarioError(f"unknown image option(s) {sorted(map(str, bad))}",
-                                    file=source, entry=f"{where}.image")
-            path = inside(im["path"], folder, what=f"{where}.image.path", source=source,
-                          must_exist=True)
-            return World.from_image(str(path), **opts, **kw)
-        if "geojson" in spec:
-            g = spec["geojson"]
-            if isinstance(g, str):
-                path = inside(g, folder, what=f"{where}.geojson", source=source,
-                              must_exist=True)
-                g = json.loads(path.read_text(encoding="utf-8"))
-            return World.from_geojson(g, **kw)
-        if "wkt" in spec:
-            return World.from_wkt(spec["wkt"], **kw)
-        obs = spec.get("obstacles") or []
-        if not isinstance(obs, list):
-            raise ScenarioError("obstacles must be a list", file=source,
-                                entry=f"{where}.obstacles")
-        return World([_obstacle(o, f"{where}.obstacles[{j}]", source) for j, o in enumerate(obs)],
-                     **kw)
-    except ScenarioError:
-        raise
-    except AvError as e:
-        raise ScenarioError(str(e), file=source, entry=where) from None
-    except (TypeError, ValueError, KeyError, OverflowError, MemoryError, OSError,
-            RecursionError) as e:
-        raise ScenarioError(f"bad world: {type(e).__name__}: {e}", file=source,
-                            entry=where) from None
 
 
 @dataclass
@@ -597,7 +236,7 @@ class Scenario:
     def output_dir(self, output_dir=None) -> Path:
         """Where this scenario's files go: ``output_dir`` or
         ``avblocks-out/<name>`` (the name made safe as one folder name)."""
-        from .._runio import safe_name
+        from .paths import safe_name
         if output_dir is not None:
             return Path(output_dir)
         return Path("avblocks-out") / safe_name(self.name)
@@ -605,7 +244,7 @@ class Scenario:
     def _confine(self, kwargs, where, out):
         """Paths a file names: writes only inside ``out``, reads only under
         the scenario's own folder."""
-        from .._runio import inside
+        from .paths import inside
         for k, v in kwargs.items():
             if not isinstance(v, (str, Path)):
                 continue
@@ -724,148 +363,13 @@ class Scenario:
         return d, sim
 
 
-def _yaml_error(e):
-    """A PyYAML error in one line with its position."""
-    import yaml
-    if isinstance(e, yaml.MarkedYAMLError):
-        m = e.problem_mark or e.context_mark
-        what = " ".join(str(e.problem or e.context or "invalid YAML").split())
-        if e.context and e.problem:
-            what = " ".join(f"{e.problem} ({e.context})".split())
-        return what + (f" at line {m.line + 1}, column {m.column + 1}" if m else "")
-    return " ".join(str(e).split())
-
-
-def _expanded_size(node, limit):
-    """Number of values ``node`` expands to (aliases counted every time they
-    are used), computed on the graph without expanding it; ``limit + 1`` as
-    soon as it passes ``limit``; -1 for a recursive structure."""
-    import yaml
-    size, state = {}, {}
-    stack = [(node, False)]
-    while stack:
-        n, done = stack.pop()
-        key = id(n)
-        if done:
-            kids = _children(n, yaml)
-            size[key] = min(limit + 1, 1 + sum(size[id(c)] for c in kids))
-            state[key] = 2
-            continue
-        if state.get(key) == 2:
-            continue
-        if state.get(key) == 1:
-            return -1
-        state[key] = 1
-        stack.append((n, True))
-        for c in _children(n, yaml):
-            if state.get(id(c)) == 1:
-                return -1
-            if state.get(id(c)) != 2:
-                stack.append((c, False))
-    return size[id(node)]
-
-
-def _children(n, yaml):
-    if isinstance(n, yaml.SequenceNode):
-        return list(n.value)
-    if isinstance(n, yaml.MappingNode):
-        return [x for kv in n.value for x in kv]
-    return []
-
-
-def _safe_yaml(text, source):
-    """``yaml.safe_load`` that refuses duplicate keys, unhashable keys and
-    alias expansions past :data:`MAX_YAML_VALUES`."""
-    import yaml
-
-    class Loader(yaml.SafeLoader):
-        pass
-
-    def mapping(loader, node, deep=False):
-        seen = set()
-        for k_node, _v in node.value:
-            if k_node.tag == "tag:yaml.org,2002:merge":
-                continue
-            k = loader.construct_object(k_node, deep=True)
-            try:
-                hash(k)
-            except TypeError:
-                raise yaml.constructor.ConstructorError(
-                    None, None, "a mapping key must be a plain value",
-                    k_node.start_mark) from None
-            if k in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key {k!r}", k_node.start_mark)
-            seen.add(k)
-        return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
-
-    Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
-    loader = Loader(text)
-    try:
-        node = loader.get_single_node()
-        if node is None:
-            return None
-        n = _expanded_size(node, MAX_YAML_VALUES)
-        if n < 0:
-            raise ScenarioError("anchors/aliases make a recursive structure",
-                                file=source)
-        if n > MAX_YAML_VALUES:
-            raise ScenarioError(f"anchors/aliases expand to more than {MAX_YAML_VALUES:,} "
-                                "values", file=source,
-                                hint="write the data out or use a generator")
-        return loader.construct_document(node)
-    finally:
-        loader.dispose()
-
-
-def _read(path: Path):
-    source = str(path)
-    if path.is_dir():
-        raise ScenarioError("is a folder, not a scenario file", file=source)
-    try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ScenarioError(f"the file is {size / 1e6:.1f} MB; scenario files are "
-                                f"at most {MAX_FILE_BYTES / 1e6:.0f} MB", file=source)
-        raw = path.read_bytes()
-    except OSError as e:
-        raise ScenarioError(f"cannot read: {e.strerror or e}", file=source) from None
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        raise ScenarioError(f"not UTF-8 text (byte 0x{raw[e.start]:02x} at offset "
-                            f"{e.start})", file=source,
-                            hint="save the file as UTF-8") from None
-    if path.suffix in (".yaml", ".yml"):
-        import yaml
-        try:
-            return _safe_yaml(text, source)
-        except ScenarioError:
-            raise
-        except yaml.YAMLError as e:
-            raise ScenarioError(f"cannot parse: {_yaml_error(e)}", file=source) from None
-        except RecursionError:
-            raise ScenarioError("cannot parse: the file nests values too deeply",
-                                file=source) from None
-        except Exception as e:  # noqa: BLE001 - constructors of odd YAML scalars
-            raise ScenarioError(f"cannot parse: {type(e).__name__}: {e}",
-                                file=source) from None
-    if path.suffix == ".toml":
-        import tomllib
-        try:
-            return tomllib.loads(text)
-        except RecursionError:
-            raise ScenarioError("cannot parse: the file nests values too deeply",
-                                file=source) from None
-        except Exception as e:  # noqa: BLE001 - tomllib errors
-            raise ScenarioError(f"cannot parse: {' '.join(str(e).split())}",
-                                file=source) from None
-    raise ScenarioError("unknown scenario file type", file=source,
-                        hint="use .yaml, .yml or .toml (or a .py file)")
-
-
 def builtin_dir() -> Path:
     return Path(__file__).parent
+
+
+#: modules of this package that are machinery, not scenarios
+INFRASTRUCTURE = ("loader", "report", "paths", "targets", "generators", "limits",
+                  "worlds", "files")
 
 
 def builtin_scenarios() -> dict:
@@ -874,7 +378,7 @@ def builtin_scenarios() -> dict:
     form. Where both exist the YAML file is the scenario (the module is its
     Python-API twin)."""
     py = [p for p in builtin_dir().glob("*.py") if not p.stem.startswith("_")
-          and p.stem not in ("loader", "report")]
+          and p.stem not in INFRASTRUCTURE]
     out = {p.stem: p for p in sorted(py)}
     out.update({p.stem: p for p in sorted(builtin_dir().glob("*.yaml"))})
     return dict(sorted(out.items()))

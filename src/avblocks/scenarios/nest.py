@@ -145,3 +145,20 @@ def figures(res, out, params):
                   title=f"{n} random walkers, {int(count[0])} scouts, "
                         f"contact range {float(params['comm_range']):g} m")
     return [save_figure(fig, f"{out}/nest.png")]
+
+
+# ------------------------------------------------- generators for scenario files
+# (the YAML twin names this case study's geometry: see avblocks.scenarios.generators)
+def _nest_hexagon(agents, density):
+    return hexagon(hexagon_radius(int(agents), float(density)))
+
+
+def _nest_poses(agents, density, scouts, seed):
+    return nest_poses(int(agents), hexagon_radius(int(agents), float(density)), scouts, seed)
+
+
+#: the generators this case study offers to scenario files
+GENERATORS = {
+    "nest_hexagon": _nest_hexagon,
+    "nest_poses": _nest_poses,
+}

@@ -305,11 +305,13 @@ def default_outcome(res):
             {"agents": n})
 
 
-def _jsonable(o):
+def jsonable(o):
+    """``o`` with NumPy scalars and arrays as plain Python values, dict keys
+    as strings and non-finite floats as None (for ``summary.json``)."""
     if isinstance(o, dict):
-        return {str(k): _jsonable(v) for k, v in o.items()}
+        return {str(k): jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_jsonable(v) for v in o]
+        return [jsonable(v) for v in o]
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):

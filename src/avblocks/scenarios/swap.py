@@ -138,3 +138,26 @@ def figures(res, out, params):
     b.legend(fontsize=8)
     b.grid(True, alpha=0.3)
     return [save_figure(fig, f"{out}/swap.png")]
+
+
+# ------------------------------------------------- generators for scenario files
+# (the YAML twin names this case study's geometry: see avblocks.scenarios.generators)
+def _circle_swap(n, radius, jitter=0.0, seed=1, which="start"):
+    start, goal = circle_swap(int(n), float(radius), float(jitter), seed)
+    if which == "start":
+        return start
+    if which == "goal":
+        return goal[:, None, :]
+    raise ValueError(f"which must be 'start' or 'goal', got {which!r}")
+
+
+def _speed_caps(n, v_max, spread, seed=1, stream=10):
+    rng = np.random.default_rng([int(seed), int(stream)])
+    return float(v_max) * (1.0 - float(spread) * rng.uniform(0.0, 1.0, int(n)))
+
+
+#: the generators this case study offers to scenario files
+GENERATORS = {
+    "circle_swap": _circle_swap,
+    "speed_caps": _speed_caps,
+}

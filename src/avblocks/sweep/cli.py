@@ -89,7 +89,7 @@ def add_parser(sub):
 
 
 def cmd_sweep(args):
-    from ..cli import _parse_sets
+    from ..scenarios.targets import parse_overrides
     from . import resume_sweep, run_sweep
     common = dict(scheduler=args.scheduler, workers=args.workers,
                   progress=False if args.quiet else None, plot=not args.no_plot,
@@ -110,7 +110,7 @@ def cmd_sweep(args):
             if log and "all" in log:
                 log = True
             study = run_sweep(args.target, grid=parse_grid(args.grid), seeds=args.seeds,
-                              metrics=args.metric, out=out, fixed=_parse_sets(args.set),
+                              metrics=args.metric, out=out, fixed=parse_overrides(args.set),
                               log=log, log_every=args.log_every, overwrite=args.overwrite,
                               ensemble=args.ensemble,
                               **common)

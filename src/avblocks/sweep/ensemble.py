@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 from . import store
-from .spec import Spec, SweepError
+from .spec import Spec, SweepError, cached_spec
 
 
 def check_traceable(diagram):
@@ -112,8 +112,7 @@ def compute_group(spec: Spec, case_ids):
 
 def run_group(spec_data: dict, case_ids, out: str) -> list:
     """The Dask task of an ensemble sweep: run and write one grid point."""
-    from .runner import _spec
-    spec = _spec(spec_data)
+    spec = cached_spec(spec_data)
     t0 = time.perf_counter()
     results = compute_group(spec, case_ids)
     wall = (time.perf_counter() - t0) / max(1, len(case_ids))

@@ -19,17 +19,7 @@ import numpy as np
 
 from . import store
 from .spec import Spec, SweepError
-
-_SPEC_CACHE: dict = {}
-
-
-def _spec(spec_data) -> Spec:
-    key = spec_data["token"]
-    sp = _SPEC_CACHE.get(key)
-    if sp is None:
-        _SPEC_CACHE.clear()
-        sp = _SPEC_CACHE[key] = Spec(spec_data)
-    return sp
+from .spec import cached_spec as _spec
 
 
 def compute_case(spec: Spec, case_id: int):
@@ -39,7 +29,7 @@ def compute_case(spec: Spec, case_id: int):
     alone, on a worker or in a resumed sweep: same seed, same overrides,
     same code, hence bit-identical metrics.
     """
-    from ..core.simulator import simulate
+    from ..core.frontend import simulate
     d, sim = spec.build(case_id)
     sim.setdefault("t_final", 10.0)
     want = spec.data.get("log")

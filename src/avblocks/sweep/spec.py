@@ -166,16 +166,15 @@ def build_case(src, values: dict, seed: int):
     overrides; the seed goes to the scenario's ``seed`` parameter when it
     has one and to ``simulate(seed=)`` always; block parameters go to
     ``simulate(params=)``."""
-    from ..cli import _from_namespace
+    from ..scenarios.targets import from_namespace, load_any
     scen, blocks = split_overrides(values)
     ns = _namespace_of(src) if src["kind"] == "py" else None
     if _accepts_seed(src, ns):
         scen = {**scen, "seed": int(seed)}
     if src["kind"] == "builtin":
-        from ..cli import load_any
         d, sim, *_ = load_any(src["name"], scen)      # (the hooks ride on .hooks)
     elif src["kind"] == "py":
-        d, sim, _movie = _from_namespace(ns, scen, src["path"])
+        d, sim, _movie = from_namespace(ns, scen, src["path"])
     else:
         from ..scenarios import Scenario
         sc = Scenario(_data_of(src), src["path"])
@@ -233,3 +232,17 @@ class Spec:
     def build(self, case_id: int):
         values, seed = self.case(case_id)
         return build_case(self.data["scenario"], values, seed)
+
+
+_SPEC_CACHE: dict = {}
+
+
+def cached_spec(spec_data) -> Spec:
+    """The :class:`Spec` of ``spec_data``, built once per worker process (the
+    last one is kept: a worker runs the cases of one sweep at a time)."""
+    key = spec_data["token"]
+    sp = _SPEC_CACHE.get(key)
+    if sp is None:
+        _SPEC_CACHE.clear()
+        sp = _SPEC_CACHE[key] = Spec(spec_data)
+    return sp

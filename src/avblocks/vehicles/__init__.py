@@ -33,13 +33,12 @@ from .diffdrive import DiffDrive, diffdrive_rhs, twist_to_wheels, wheels_to_twis
 from .integrators import DoubleIntegrator, SingleIntegrator
 from .quadrotor import (
     Quadrotor,
-    QuadrotorVelocityControl,
     mixer_matrix,
     quadrotor_rhs,
     rotors_to_wrench,
-    velocity_controlled_quadrotor,
     wrench_to_rotors,
 )
+from .quadrotor_control import QuadrotorVelocityControl, velocity_controlled_quadrotor
 from .unicycle import Unicycle, unicycle_rhs
 from .unicycle2 import Unicycle2, unicycle2_rhs
 

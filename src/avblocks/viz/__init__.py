@@ -5,7 +5,11 @@ Drawing uses Matplotlib (offscreen Agg when no display); MP4 movies need the
 ``movie`` extra (imageio-ffmpeg), GIFs only Pillow.
 """
 
-from .animation import Animation, Animation2D, animate, find_pose, plot_frame, save_movie
+import sys as _sys
+
+from ..core import plotting as _plotting
+from .animation import Animation, animate, find_pose, plot_frame, save_movie
+from .animation_block import Animation2D
 from .diagram import draw_diagram, to_dot
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
@@ -20,3 +24,6 @@ __all__ = [
     "animate3d", "Animation3D", "quat_to_matrix",
     "to_dot", "draw_diagram",
 ]
+
+# the plotting backend of Results.plot/animate and Diagram.to_graphviz (pandas-style)
+_plotting.register_backend(__name__, _sys.modules[__name__])

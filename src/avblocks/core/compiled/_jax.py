@@ -27,12 +27,21 @@ def jax():
     if not _started:
         _started = True
         if fresh and "JAX_NUM_CPU_DEVICES" not in os.environ:
-            from .devices import default_cpu_devices
             try:
                 _jax.config.update("jax_num_cpu_devices", default_cpu_devices())
             except (RuntimeError, AttributeError, KeyError):  # pragma: no cover
                 pass                    # started already, or an older JAX
     return _jax
+
+
+def default_cpu_devices() -> int:
+    """CPU devices avblocks asks JAX for when it starts JAX itself: one
+    per core this process may use, at most 16."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not on Linux
+        n = os.cpu_count() or 1
+    return max(1, min(16, n))
 
 
 def x64(flag):

@@ -26,26 +26,15 @@ x 100 agents 2.6 -> 1.8 s.
 
 from __future__ import annotations
 
-import os
-
 import numpy as np
 
 from ..errors import ParameterError
 from . import _jax
+from ._jax import default_cpu_devices  # noqa: F401  (public here since it began)
 
 #: a single run is split along its agent axis from this many agents on
 #: (below it the per-step synchronisation costs more than it saves)
 MIN_AGENTS_TO_SPLIT = 128
-
-
-def default_cpu_devices() -> int:
-    """CPU devices avblocks asks JAX for when it starts JAX itself: one
-    per core this process may use, at most 16."""
-    try:
-        n = len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # pragma: no cover - not on Linux
-        n = os.cpu_count() or 1
-    return max(1, min(16, n))
 
 
 def resolve(devices):

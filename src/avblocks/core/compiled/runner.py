@@ -26,7 +26,7 @@ _UNTRACEABLE_HINT = ("run this diagram with backend='numpy' (simulate(..., "
 
 def _log_spec(compiled, log):
     """(indices, names, port specs, aliases) of what to log (as the NumPy path)."""
-    from ..simulator import default_log
+    from ..runguard import default_log
     if log is None:
         refs = default_log(compiled)
     elif isinstance(log, (str, PortRef)):
@@ -251,7 +251,7 @@ class Runner:
 
     def _x0_values(self, x0, runs=None):
         """{(block index, state): array} from ``{"block.state": value}``."""
-        from ..simulator import initial_values
+        from ..runguard import initial_values
         return initial_values(self.compiled, x0, runs)
 
     def _states(self, x0vals, seeds):

@@ -13,7 +13,9 @@ ends, and ``docs/live.md``.
 """
 
 from ._server import LiveViewError, open_server
+from .controls import SPEEDS
+from .engine import simulate_live
 from .estop import EStop
-from .view import SPEEDS, LiveView, simulate_live
+from .view import LiveView
 
 __all__ = ["LiveView", "EStop", "simulate_live", "LiveViewError", "open_server", "SPEEDS"]

@@ -35,43 +35,23 @@ from __future__ import annotations
 
 import math
 import queue
-import sys
 import threading
 import time as _time
 
 import numpy as np
 
-from ...core.diagram import CompiledDiagram, Diagram, PortRef
-from ...core.errors import AvError, ParameterError, SimulationError
-from ...core.results import Results
+from ...core.diagram import CompiledDiagram, Diagram
+from ...core.errors import ParameterError, SimulationError
+from ...core.params import integer
+from ...core.runguard import _finite, whole_steps
 from . import _scene
-from ._server import LiveViewError, open_server
-
-#: Speed choices offered in the page (``None``: as fast as possible).
-SPEEDS = {"x0.1": 0.1, "x0.2": 0.2, "x0.5": 0.5, "x1": 1.0, "x2": 2.0, "x5": 5.0,
-          "x10": 10.0, "max": None}
-
-
-def _speed_label(speed):
-    if speed is None:
-        return "max"
-    best = min((k for k, v in SPEEDS.items() if v is not None),
-               key=lambda k: abs(math.log(SPEEDS[k] / speed)))
-    return best
+from ._server import LiveViewError, open_server  # noqa: F401  (importable here as before)
+from .controls import Controls
+from .drawing import Drawing
+from .recording import Recording
 
 
-def _in_notebook():
-    ip = sys.modules.get("IPython")
-    if ip is None:
-        return False
-    try:
-        shell = ip.get_ipython()
-    except Exception:  # noqa: BLE001 - not in IPython
-        return False
-    return shell is not None and hasattr(shell, "kernel")
-
-
-class LiveView:
+class LiveView(Recording, Drawing, Controls):
     """Run a diagram live in the browser (see the module docstring).
 
     Parameters
@@ -147,20 +127,12 @@ class LiveView:
         self.seed = int(seed)
         self.sim = Simulator(diagram, dt, solver, seed=self.seed, t0=t0,
                              check_finite=check_finite, x0=x0)
-        try:
-            span = float(t_final) - self.sim.t0
-        except (TypeError, ValueError):
-            span = float("nan")
-        if not (math.isfinite(span) and span >= 0):
-            raise ParameterError("t_final must be a number >= t0", param="t_final",
-                                 expected=f">= {self.sim.t0}", found=t_final)
-        self.nsteps = int(round(span / self.sim.dt))
+        # the shared run guard: the same arguments mean the same as in simulate()
+        self.nsteps = whole_steps(self.sim.t0, _finite(t_final, "t_final"), self.sim.dt)
         self._auto_log = log_every is None     # as simulate(): every step unless too big
-        self.log_every = 1 if log_every is None else int(log_every)
-        if self.log_every < 1:
-            raise ParameterError("log_every must be >= 1", param="log_every",
-                                 expected=">= 1", found=log_every)
-        if realtime is not None and not (float(realtime) > 0):
+        self.log_every = 1 if log_every is None else integer(log_every, None, "log_every",
+                                                             lo=1)
+        if realtime is not None and not (_finite(realtime, "realtime") > 0):
             raise ParameterError("realtime factor must be > 0", param="realtime",
                                  expected="> 0 or None", found=realtime)
         self.speed = None if realtime is None else float(realtime)
@@ -191,127 +163,6 @@ class LiveView:
         self._error = None
         self.restarts = []
         self.draws = 0
-
-    # ------------------------------------------------------------ logging
-    def _setup_log(self, log, plots, max_log_bytes):
-        from ...core.simulator import default_log
-        c = self.compiled
-        refs = default_log(c) if log is None else (
-            [log] if isinstance(log, (str, PortRef)) else list(log))
-        self.names, self.aliases, self.specs, self.idx = [], {}, {}, {}
-
-        def add(r):
-            i, o = c.resolve(r)
-            name = f"{c.names[i]}.{o}"
-            alias = r.path if isinstance(r, PortRef) else str(r)
-            if alias != name:
-                self.aliases[alias] = name
-            if name not in self.idx:
-                self.names.append(name)
-                self.idx[name] = (i, o)
-                self.specs[name] = c.blocks[i]._outputs[o]
-            return name
-
-        self.logged = [add(r) for r in refs]
-        drawn = []
-        for n in list(self.names):
-            i, o = self.idx[n]
-            p = self.specs[n]
-            if o in ("pose", "position") and p.shape and len(p.shape) == 2 \
-                    and p.shape[1] in (2, 3):
-                drawn.append(n)
-                if o == "position" and "attitude" in c.blocks[i]._outputs:
-                    add(f"{c.names[i]}.attitude")
-        # a block with a 3D position and a planar pose (UAVs) is drawn once, in 3D
-        in3d = {self.idx[n][0] for n in drawn
-                if self.idx[n][1] == "position" and self.specs[n].shape[1] == 3}
-        self.drawn = [n for n in drawn
-                      if not (self.idx[n][1] == "pose" and self.idx[n][0] in in3d)]
-        if plots is None:
-            plots = [n for n in self.names if n not in drawn
-                     and self.idx[n][1] not in ("attitude", "pose", "position")][:3]
-        self.plots = [add(r) for r in plots]
-        per = sum(int(np.prod(self.specs[n].shape)) * np.dtype(self.specs[n].dtype).itemsize
-                  for n in self.names)
-        if self._auto_log and (self.nsteps + 1) * per > max_log_bytes:
-            from ...core.simulator import _log_every_that_fits
-            self.log_every = _log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
-        self.nlog = self.nsteps // self.log_every + 1
-        need = self.nlog * per
-        if need > max_log_bytes:
-            raise ParameterError(
-                f"the log would take {need / 1e9:.2f} GB", param="log",
-                expected=f"<= {max_log_bytes / 1e9:.2f} GB",
-                hint="log fewer signals or decimate with log_every")
-        self.bufs = {n: np.empty((self.nlog, *self.specs[n].shape), self.specs[n].dtype)
-                     for n in self.names}
-        self.tlog = np.empty(self.nlog)
-        self.count = 0
-
-    def _record(self):
-        sim = self.sim
-        if self.count >= self.nlog:
-            return
-        for n in self.names:
-            i, o = self.idx[n]
-            self.bufs[n][self.count] = sim.Y[i][o]
-        self.tlog[self.count] = sim.t
-        self.count += 1
-
-    # ------------------------------------------------------------ scene
-    def _setup_sources(self, colors, agent_size, camera, obstacles):
-        from ...environment.world import World
-        worlds, seen = [], set()
-        extra = obstacles if isinstance(obstacles, (list, tuple)) else \
-            ([] if obstacles is None else [obstacles])
-        for w in list(extra) + [v for b in self.compiled.blocks for v in vars(b).values()]:
-            if isinstance(w, World) and id(w) not in seen:
-                seen.add(id(w))
-                worlds.append(w)
-        for w in extra:
-            if not isinstance(w, World):
-                raise ParameterError("obstacles must be environment.World objects",
-                                     param="obstacles", found=type(w).__name__)
-        self.worlds = worlds
-        self.sources = []
-        first = []
-        for k, n in enumerate(self.drawn):
-            i, o = self.idx[n]
-            shape = self.specs[n].shape
-            kind = "pose" if o == "pose" else ("pos3" if shape[1] == 3 else "pos2")
-            att = f"{self.compiled.names[i]}.attitude" if kind == "pos3" and \
-                f"{self.compiled.names[i]}.attitude" in self.idx else None
-            n_agents = shape[0]
-            col = _scene.agent_colors(n_agents, colors if k == 0 else None)
-            self.sources.append({"name": n, "kind": kind, "att": att, "n": n_agents,
-                                 "colors": col,
-                                 "points": n_agents > self.points_above})
-            first.append(np.asarray(self._initial_value(n), float)[:, :2])
-        self.camera = camera or ("3d" if any(s["kind"] == "pos3" for s in self.sources)
-                                 else "top")
-        if self.camera not in ("top", "3d"):
-            raise ParameterError("camera must be 'top' or '3d'", param="camera",
-                                 found=camera)
-        pts = np.concatenate(first) if first else np.zeros((0, 2))
-        self.extent = _scene.frame_extent(pts, worlds)
-        span = max(self.extent[1] - self.extent[0], self.extent[3] - self.extent[2])
-        if agent_size is None:
-            total = max([s["n"] for s in self.sources] + [1])
-            agent_size = float(np.clip(span / (1.5 * math.sqrt(total) + 40), 0.05, span / 20))
-            if self.camera == "3d":
-                agent_size *= 3.0
-        self.agent_size = float(agent_size)
-
-    def _initial_value(self, name):
-        """A drawn signal at t0, to frame the camera. A diagram with side
-        effects (robot interfaces) is not started here (that waits for
-        :meth:`run`): zeros then, and the worlds frame the view."""
-        i, o = self.idx[name]
-        if self.sim.Y is None:
-            if self.sim._side:
-                return np.zeros(self.specs[name].shape)
-            self._init_sim()
-        return self.sim.Y[i][o]
 
     def _init_sim(self):
         self.sim.horizon = self.nsteps
@@ -374,319 +225,7 @@ class LiveView:
         self._build_gui(uplot)
         srv.on_client_connect(lambda _c: None)
 
-    def _add_source(self, s):
-        sc = self.server.scene
-        name = "/agents/" + s["name"].replace(".", "_")
-        P, Q = self._frame(s, None)
-        if s["points"]:
-            s["handle"] = sc.add_point_cloud(name, P.astype(np.float32), s["colors"],
-                                             point_size=self.agent_size,
-                                             point_shape="circle", point_shading="flat",
-                                             precision="float32")
-        else:
-            v, f = _scene.ARROW_2D if s["kind"] != "pos3" else _scene.DART_3D
-            s["handle"] = sc.add_batched_meshes_simple(
-                name, v * self.agent_size, f, batched_wxyzs=Q, batched_positions=P,
-                batched_colors=s["colors"], side="double", material="toon3",
-                flat_shading=True, cast_shadow=False, receive_shadow=False, lod="off")
-        s["trail"] = None
-
-    def _frame(self, s, k):
-        """Positions (N, 3) and orientations (N, 4) of a source, live
-        (``k`` None) or from log sample ``k``."""
-        val = (self.sim.Y[self.idx[s["name"]][0]][self.idx[s["name"]][1]] if k is None
-               else self.bufs[s["name"]][k])
-        val = np.asarray(val, dtype=float)
-        n = val.shape[0]
-        P = np.zeros((n, 3))
-        P[:, :2] = val[:, :2]
-        if s["kind"] == "pose":
-            Q = _scene.yaw_quaternions(val[:, 2])
-            P[:, 2] = 0.02 * self.agent_size
-        elif s["kind"] == "pos3":
-            P[:, 2] = val[:, 2]
-            if s["att"] is not None:
-                a = (self.sim.Y[self.idx[s["att"]][0]][self.idx[s["att"]][1]] if k is None
-                     else self.bufs[s["att"]][k])
-                Q = np.asarray(a, dtype=float)
-            else:
-                Q = np.tile([1.0, 0, 0, 0], (n, 1))
-        else:
-            Q = np.tile([1.0, 0, 0, 0], (n, 1))
-            P[:, 2] = 0.02 * self.agent_size
-        return P, Q
-
-    def _trails(self, s, k_end):
-        """(N * (L-1), 2, 3) trail segments up to log sample ``k_end``."""
-        if self.trail <= 0 or k_end < 1:
-            return None
-        per = self.sim.dt * self.log_every
-        L = int(min(k_end + 1, self.trail / per + 1))
-        if L < 2:
-            return None
-        per_agent = min(30, self.trail_segments // s["n"] + 1)     # points per trail
-        if per_agent < 2:
-            return None
-        stride = max(1, math.ceil((L - 1) / (per_agent - 1)))
-        ks = np.arange(k_end - (L - 1), k_end + 1)[::-1][::stride][::-1]
-        if len(ks) < 2:
-            return None
-        a = np.asarray(self.bufs[s["name"]][ks], dtype=np.float32)   # (L, N, c)
-        pts = np.zeros((len(ks), s["n"], 3), np.float32)
-        pts[..., :2] = a[..., :2]
-        if s["kind"] == "pos3":
-            pts[..., 2] = a[..., 2]
-        seg = np.stack([pts[:-1], pts[1:]], axis=2)                 # (L-1, N, 2, 3)
-        seg = np.swapaxes(seg, 0, 1).reshape(-1, 2, 3)
-        return seg
-
-    def _draw(self, k=None):
-        """Send the scene at the live state (``k`` None) or at log sample k."""
-        srv = self.server
-        kt = self.count - 1 if k is None else k
-        now = _time.perf_counter()
-        do_trails = now - getattr(self, "_last_trail", 0.0) > 0.5 or k is not None
-        with srv.atomic():
-            for s in self.sources:
-                P, Q = self._frame(s, k)
-                h = s["handle"]
-                if s["points"]:
-                    h.points = P.astype(np.float32)
-                else:
-                    h.batched_positions = P.astype(np.float32)
-                    h.batched_wxyzs = Q.astype(np.float32)
-                if do_trails:
-                    seg = self._trails(s, kt)
-                    if seg is not None and self.trail_style == "dots":
-                        # one point cloud: a dot at each trail point but the
-                        # newest (under the agent); one node, no instancing
-                        pts = np.ascontiguousarray(seg[:, 0, :], dtype=np.float32)
-                        cols = np.repeat(s["colors"], len(seg) // s["n"], axis=0)
-                        if s["trail"] is None:
-                            s["trail"] = srv.scene.add_point_cloud(
-                                "/trails/" + s["name"].replace(".", "_"), pts, cols,
-                                point_size=0.1 * self.agent_size, point_shape="square",
-                                point_shading="flat", precision="float32")
-                        else:
-                            s["trail"].points = pts
-                            if s["trail"].colors.shape != cols.shape:
-                                s["trail"].colors = cols
-                    elif seg is not None:
-                        cols = np.repeat(s["colors"], len(seg) // s["n"], axis=0)
-                        cols = np.repeat(cols[:, None, :], 2, axis=1)
-                        if s["trail"] is None:
-                            s["trail"] = srv.scene.add_line_segments(
-                                "/trails/" + s["name"].replace(".", "_"), seg, cols,
-                                thickness=2.5, thickness_units="screen")
-                        else:
-                            s["trail"].points = seg
-                            if s["trail"].colors.shape != cols.shape:
-                                s["trail"].colors = cols
-            if do_trails:
-                self._last_trail = now
-        self.draws += 1
-
-    # --------------------------------------------------------------- GUI
-    def _build_gui(self, uplot):
-        gui = self.server.gui
-        self._status = gui.add_markdown(self._status_text())
-        self._pause_btn = gui.add_button("Pause")
-        self._step_btn = gui.add_button("Step")
-        self._speed = gui.add_dropdown("Speed", tuple(SPEEDS), initial_value=_speed_label(
-            self.speed))
-        self._scrub = gui.add_slider("Scrub t [s]", min=self.sim.t0,
-                                     max=self.sim.t0 + max(self.nsteps, 1) * self.sim.dt,
-                                     step=self.sim.dt * self.log_every,
-                                     initial_value=self.sim.t0, disabled=True)
-        self._restart_btn = gui.add_button("Restart (new seed)")
-        self.estops = [p for p in self.compiled.parameters() if p.rsplit(".", 1)[1] == "estop"]
-        self._stop_btn = gui.add_button("Stop (e-stop)" if self.estops else "Stop",
-                                        color="red")
-        self._pause_btn.on_click(lambda _e: self._cmds.put(("toggle",)))
-        self._step_btn.on_click(lambda _e: self._cmds.put(("step",)))
-        self._restart_btn.on_click(lambda _e: self._cmds.put(("restart",)))
-        self._stop_btn.on_click(lambda _e: self._cmds.put(("stop",)))
-        self._speed.on_update(lambda _e: self._cmds.put(("speed", self._speed.value)))
-        self._scrub.on_update(lambda _e: self._cmds.put(("scrub", self._scrub.value)))
-        self._param_inputs, self._param_kinds = {}, {}
-        params = self.compiled.parameters()
-        if params:
-            with gui.add_folder("Parameters"):
-                for path, spec in params.items():
-                    h = self._param_input(gui, path, spec)
-                    if h is not None:
-                        self._param_inputs[path] = h
-        self._plot_handles = []
-        if self.plots:
-            with gui.add_folder("Signals"):
-                for n in self.plots:
-                    labels = self._plot_labels(n)
-                    data = tuple(np.zeros(1) for _ in range(len(labels) + 1))
-                    series = (uplot.Series(label="t [s]"),) + tuple(
-                        uplot.Series(label=lb, stroke=c, width=1.5)
-                        for lb, c in zip(labels, ("#1f77b4", "#d62728", "#2ca02c",
-                                                  "#ff7f0e")))
-                    self._plot_handles.append(gui.add_uplot(
-                        data, series, title=n, aspect=1.8,
-                        scales={"x": uplot.Scale(time=False, auto=True)}))
-
-    def _param_input(self, gui, path, spec):
-        """One control for a numeric parameter: a slider (both bounds finite)
-        or a number field for a scalar, or for an array whose entries are
-        all equal (per-agent gains: the value is set for every agent);
-        vector fields for other 2/3-vectors; JSON text otherwise."""
-        import json
-        val = np.asarray(self.sim.get_param(path), float)
-        lo, hi = spec.bounds
-        lo = None if lo is None or not np.isfinite(lo) else float(lo)
-        hi = None if hi is None or not np.isfinite(hi) else float(hi)
-        label = path + (f" [{spec.unit}]" if spec.unit else "")
-        hint = spec.doc or None
-        uniform = val.size >= 1 and np.all(val == val.flat[0]) and np.isfinite(val.flat[0])
-        if uniform:
-            v = float(val.flat[0])
-            if val.size > 1:
-                label += " (all)"
-                hint = (hint + "; " if hint else "") + f"one value for all {val.size} entries"
-            if lo is not None and hi is not None and hi > lo:
-                h = gui.add_slider(label, min=lo, max=hi, step=(hi - lo) / 1000,
-                                   initial_value=min(max(v, lo), hi), hint=hint)
-            else:
-                mag = abs(v) if v else 1.0
-                h = gui.add_number(label, initial_value=v, min=lo, max=hi,
-                                   step=10 ** math.floor(math.log10(mag)) / 100, hint=hint)
-            kind = "scalar"
-        elif val.size in (2, 3) and np.all(np.isfinite(val)):
-            add = gui.add_vector2 if val.size == 2 else gui.add_vector3
-            h = add(label, initial_value=tuple(val.ravel().tolist()), hint=hint)
-            kind = "vector"
-        elif val.size <= 64:
-            h = gui.add_text(label, initial_value=json.dumps(val.tolist()), hint=hint)
-            kind = "json"
-        else:                       # too big to edit in a page (still settable from Python)
-            return None
-        self._param_kinds[path] = kind
-        h.on_update(lambda _e, p=path, hh=h: self._cmds.put(("param", p, hh.value)))
-        return h
-
-    def _param_value_for(self, path, cur):
-        import json
-        kind = self._param_kinds[path]
-        if kind == "scalar":
-            return float(cur.flat[0])
-        if kind == "vector":
-            return tuple(cur.ravel().tolist())
-        return json.dumps(cur.tolist())
-
-    def _plot_labels(self, n):
-        p = self.specs[n]
-        size = int(np.prod(p.shape)) if p.shape else 1
-        if p.dtype == bool or np.dtype(p.dtype) == np.bool_:
-            return ["count true"] if size > 1 else ["value"]
-        if size <= 4:
-            return [f"[{j}]" for j in range(size)] if size > 1 else ["value"]
-        return ["mean |row|", "max |row|"]
-
-    def _plot_series(self, n, k0, k1):
-        a = self.bufs[n][k0:k1]
-        m = a.shape[0]
-        if a.dtype == np.bool_:
-            flat = a.reshape(m, -1)
-            return [flat.sum(axis=1).astype(float)] if flat.shape[1] > 1 else \
-                [flat[:, 0].astype(float)]
-        flat = np.asarray(a, dtype=float).reshape(m, -1)
-        if flat.shape[1] <= 4:
-            return [flat[:, j] for j in range(flat.shape[1])]
-        rows = np.asarray(a, float).reshape(m, a.shape[1] if a.ndim > 1 else 1, -1)
-        norms = np.linalg.norm(rows, axis=2)
-        return [norms.mean(axis=1), norms.max(axis=1)]
-
-    def _update_plots(self, k_end):
-        if not self._plot_handles or k_end < 0:
-            return
-        per = self.sim.dt * self.log_every
-        k0 = max(0, k_end + 1 - int(self.plot_window / per) - 1)
-        idx = slice(k0, k_end + 1)
-        stride = max(1, (k_end + 1 - k0) // 400)
-        t = self.tlog[idx][::stride]
-        for n, h in zip(self.plots, self._plot_handles):
-            ys = [y[::stride] for y in self._plot_series(n, k0, k_end + 1)]
-            h.data = (t, *ys)
-
-    def _status_text(self):
-        sim = self.sim
-        t = sim.t if sim.X is not None else sim.t0
-        state = ("finished" if sim.k >= self.nsteps else
-                 "paused" if getattr(self, "_paused", False) else "running")
-        agents = sum(s["n"] for s in self.sources)
-        rate = getattr(self, "_draw_rate", 0.0)
-        return (f"**t = {t:.2f} s** of {self.sim.t0 + self.nsteps * sim.dt:g} s  \n"
-                f"{state} · speed {'max' if self.speed is None else f'x{self.speed:g}'}"
-                f" · seed {self.seed}  \n"
-                f"{agents} agents · {rate:.0f} draws/s")
-
     # -------------------------------------------------------------- loop
-    def _notify(self, title, body):
-        try:
-            self.server.add_notification(title, body, auto_close_seconds=6.0, color="red")
-        except Exception:  # noqa: BLE001 - notifications are a courtesy
-            pass
-
-    def _handle(self, cmd):
-        kind = cmd[0]
-        if kind == "toggle":
-            self._paused = not self._paused
-            if self.server is None:
-                return
-            self._pause_btn.label = "Resume" if self._paused else "Pause"
-            self._scrub.disabled = not self._paused
-            if self._paused:
-                self._scrub.max = max(self.tlog[max(self.count - 1, 0)], self.sim.t0 + 1e-9)
-                self._scrub.value = self._scrub.max
-            else:
-                self._anchor()
-                self._scrubbing = None
-        elif kind == "step":
-            if not self._paused:
-                self._handle(("toggle",))
-            self._steps += 1
-        elif kind == "pause":
-            if self._paused != cmd[1]:
-                self._handle(("toggle",))
-        elif kind == "speed":
-            self.speed = SPEEDS.get(cmd[1], self.speed) if isinstance(cmd[1], str) else cmd[1]
-            self._anchor()
-        elif kind == "scrub":
-            if self._paused and self.count:
-                k = int(np.clip(np.searchsorted(self.tlog[: self.count], cmd[1]), 0,
-                                self.count - 1))
-                self._scrubbing = k
-        elif kind == "param":
-            path, value = cmd[1], cmd[2]
-            try:
-                spec = self.compiled.parameters()[path]
-                v = np.asarray(value if not isinstance(value, str) else
-                               __import__("json").loads(value), float)
-                v = np.broadcast_to(v, spec.shape) if v.size == 1 else v.reshape(spec.shape)
-                self.sim.set_param(path, v)
-            except (AvError, ValueError, TypeError) as e:
-                self._notify(f"{path} not changed", str(e))
-                h = self._param_inputs.get(path)
-                if h is not None:
-                    h.value = self._param_value_for(path, np.asarray(self.sim.get_param(path),
-                                                                  float))
-        elif kind == "restart":
-            self._restart()
-        elif kind == "stop":
-            for p in self.estops:
-                self.sim.set_param(p, 1.0)
-            if self.estops and self.sim.X is not None:
-                self.sim.step()        # the stop value reaches the interfaces
-                self._record()
-            self._end = "stop button"
-        elif kind == "close":
-            self._end = cmd[1]
-
     def _restart(self):
         from ...core.simulator import Simulator
         self.sim.close()
@@ -813,35 +352,6 @@ class LiveView:
             self._result = self._results(wall0, snapshot)
         return self._result
 
-    def _results(self, wall0, snapshot, error=None):
-        sim = self.sim
-        wall = _time.perf_counter() - wall0
-        n = self.count
-        start = getattr(self, "_start_values", snapshot)
-        changed = {k: v.tolist() for k, v in start.items()
-                   if not np.array_equal(v, snapshot[k])}
-        meta = {"solver": sim.solver.name, "dt": sim.dt, "seed": self.seed, "t0": sim.t0,
-                "t_final": sim.t0 + self.nsteps * sim.dt, "log_every": self.log_every,
-                "steps": sim.k, "agents": max([s["n"] for s in self.sources] + [0]),
-                "blocks": len(self.compiled.blocks), "wall_time": wall,
-                "realtime_factor": (sim.k * sim.dt / wall) if wall > 0 else math.inf,
-                "param_changes": list(sim.param_changes),
-                "live": {"url": self.url.replace(self.token, "<token>") if self.url else None,
-                         "ended_by": self._end, "restarts": self.restarts,
-                         "draws": self.draws, "late_resyncs": getattr(self, "late", 0)}}
-        if changed:
-            meta["params"] = changed
-        final = getattr(self, "_final_values", None)
-        if final is not None:
-            meta["live"]["params_final"] = {k: v.tolist() for k, v in final.items()}
-        if self._end in ("interrupted", "page closed", "stop button", "close()"):
-            meta["interrupted"] = True
-            meta["interrupted_at"] = sim.t
-        if error:
-            meta["error"] = error
-        data = {k: self.bufs[k][:n].copy() for k in self.names}
-        return Results(self.tlog[:n].copy(), data, dict(self.specs), meta, self.aliases)
-
     def start(self):
         """Serve the page and run in a background thread (for notebooks and
         scripts that go on); :meth:`wait` returns the results."""
@@ -914,20 +424,3 @@ class LiveView:
             return "<i>avblocks LiveView (not started)</i>"
         return (f'<iframe src="{self.url}" width="100%" height="600" '
                 f'style="border:0"></iframe>')
-
-
-def simulate_live(diagram, t_final, dt=0.01, solver="rk4", *, live=True, progress=None,
-                  **kw):
-    """:func:`avblocks.simulate` with ``live=True`` (or a dict of
-    :class:`LiveView` options): serve the page, run, return the results.
-    In a notebook the page is shown in the cell's output."""
-    options = dict(live) if isinstance(live, dict) else {}
-    if kw.get("realtime", "unset") is None and "realtime" not in options:
-        kw["realtime"] = 1.0
-    kw.update(options)
-    view = LiveView(diagram, t_final, dt, solver, **kw)
-    if _in_notebook():
-        view._start_server()
-        from IPython.display import display
-        display(view.iframe())
-    return view.run()

@@ -1,0 +1,76 @@
+"""Block constructors that fail well: a plain Python/NumPy error raised on a
+user's arguments becomes a :class:`ParameterError` (or ``ParameterTypeError``)
+naming the block, the argument the message quotes, and the constructor's
+signature. :class:`~avblocks.core.block.Block` wraps every subclass's
+``__init__`` with :func:`_guard_init`."""
+
+from __future__ import annotations
+
+
+def _guard_init(cls, init):
+    """Wrap a block constructor so that a plain Python/NumPy error raised on
+    the user's arguments (a bare ``int()`` of a string, a negative size, an
+    overflow) becomes a :class:`ParameterError` naming the block, instead
+    of leaking from deep inside. A ``TypeError`` stays a ``TypeError`` too
+    (``ParameterTypeError``), so unknown keywords are still TypeErrors."""
+    import functools
+
+    from .errors import AvError, ParameterError, ParameterTypeError
+
+    @functools.wraps(init)
+    def __init__(self, *args, **kwargs):
+        try:
+            init(self, *args, **kwargs)
+        except AvError:
+            raise
+        except TypeError as e:
+            raise ParameterTypeError(_ctor_msg(e), block=cls.__name__,
+                                     param=_culprit(init, self, args, kwargs, e),
+                                     hint=_ctor_hint(init)) from e
+        except MemoryError:
+            raise ParameterError("the arguments ask for more memory than there is",
+                                 block=cls.__name__,
+                                 hint="use fewer agents or smaller sizes") from None
+        except (ValueError, OverflowError, ZeroDivisionError, IndexError, KeyError,
+                FloatingPointError) as e:
+            raise ParameterError(_ctor_msg(e), block=cls.__name__,
+                                 param=_culprit(init, self, args, kwargs, e),
+                                 hint=_ctor_hint(init)) from e
+
+    __init__._av_guarded = True
+    return __init__
+
+
+def _culprit(init, self, args, kwargs, e):
+    """The argument the error message quotes, when exactly one does."""
+    import inspect
+    try:
+        bound = inspect.signature(init).bind(self, *args, **kwargs)
+    except TypeError:
+        return None
+    msg = str(e)
+    hits = []
+    for k, v in bound.arguments.items():
+        if k == "self" or isinstance(v, (bool, type(None))):
+            continue
+        try:
+            r = repr(v)
+        except Exception:  # noqa: BLE001 - an odd object's repr
+            continue
+        if 0 < len(r) <= 60 and r in msg:
+            hits.append(k)
+    return hits[0] if len(hits) == 1 else None
+
+
+def _ctor_msg(e):
+    msg = " ".join(str(e).split()) or type(e).__name__
+    return f"bad argument: {type(e).__name__}: {msg}"
+
+
+def _ctor_hint(init):
+    import inspect
+    try:
+        sig = str(inspect.signature(init)).replace("(self, ", "(").replace("(self)", "()")
+    except (TypeError, ValueError):  # pragma: no cover - builtins
+        return None
+    return f"the constructor takes {sig}"

@@ -234,6 +234,9 @@ class Quadrotor(Block):
     quat_gain : float
         k_q [1/s], quaternion norm stabilization (default 1).
 
+    Numeric parameters
+    ------------------
+
     Numeric parameters (per agent, N leading): ``mass``, ``inertia``,
     ``drag``, ``arm_length``, ``yaw_coeff``, ``rotor_max``, ``thrust_max``,
     ``torque_max``; scalars ``gravity`` and ``quat_gain``. ``input`` and
@@ -247,8 +250,8 @@ class Quadrotor(Block):
     ----------
     Mahony, Kumar & Corke (2012).
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> b = av.vehicles.Quadrotor(np.zeros((1, 3)), mass=1.0)
     >>> hover = np.array([[9.81, 0.0, 0.0, 0.0]])

@@ -62,6 +62,9 @@ class QuadrotorVelocityControl(Block):
     rotor_max, thrust_max : float or (N,)
         Actuator limits.
 
+    Numeric parameters
+    ------------------
+
     Every value above except ``n``, ``output`` and ``frame`` (structural) is
     a numeric parameter (``"ctrl.kv"``...; per-agent ones of shape (N,) or
     (N, 3)). :meth:`for_quadrotor` copies the vehicle's values once.

@@ -59,8 +59,8 @@ class Animation2D(_Frames, Block):
         As for :func:`animate`; without ``extent`` the view fits the first
         poses and the obstacles and grows when agents leave it.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np, avblocks as av, avblocks.viz
     >>> d = av.Diagram()
     >>> f = d.add(av.vehicles.Unicycle(np.zeros((3, 3))), name="fleet")

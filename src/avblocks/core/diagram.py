@@ -253,6 +253,26 @@ class Diagram:
         from .plotting import get_backend
         return get_backend().to_dot(self)
 
+    def __repr__(self):
+        kinds = ", ".join(f"{n}: {type(h.block).__name__}" for n, h in self._handles.items())
+        name = f" {self.name!r}" if self.name else ""
+        return (f"<Diagram{name}: {len(self._handles)} blocks, {len(self._driver)} wires"
+                f"{' (' + kinds + ')' if kinds and len(kinds) < 200 else ''}>")
+
+    def _repr_svg_(self):
+        """The diagram as an SVG picture, for Jupyter (drawn by the plotting
+        backend, :func:`avblocks.viz.draw_diagram`'s Matplotlib layout).
+        ``None`` (Jupyter then shows the text repr) while the diagram cannot
+        be drawn yet, e.g. before its inputs are wired."""
+        from .errors import AvError
+        from .plotting import get_backend
+        if not self._handles:
+            return None
+        try:
+            return get_backend().diagram_svg(self)
+        except AvError:
+            return None
+
 
 @dataclass
 class CompiledDiagram:

@@ -10,8 +10,9 @@ default), importing that module by name the first time if nobody has yet.
 
 A backend is any object with the functions the conveniences call:
 ``plot_trajectories(results, ax=None, **options)``,
-``plot_signals(results, signals, **options)``, ``animate(results, **options)``
-and ``to_dot(diagram)``.
+``plot_signals(results, signals, **options)``, ``animate(results, **options)``,
+``to_dot(diagram)`` and ``diagram_svg(diagram)`` (the picture Jupyter shows
+for a :class:`~avblocks.core.diagram.Diagram`).
 
 >>> from avblocks.core import plotting
 >>> plotting.options["backend"]

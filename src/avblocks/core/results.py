@@ -101,6 +101,39 @@ class Results:
         return (f"Results({runs}{len(self.t)} samples, t=[{self.t[0] if len(self.t) else 0}"
                 f", {self.t[-1] if len(self.t) else 0}]: {sigs})")
 
+    def _repr_html_(self):
+        """A compact table for Jupyter, as an xarray Dataset shows itself:
+        the runs, samples and time span, one row per signal (shape per
+        sample, dtype, unit, finite range), and what the run reported."""
+        import html
+        lead = 1 if self.runs is None else 2
+        n = len(self.t)
+        span = (f"t = {self.t[0]:g} .. {self.t[-1]:g} s" if n else "no samples")
+        step = f", every {self.t[1] - self.t[0]:g} s" if n > 1 else ""
+        runs = "" if self.runs is None else f"{self.runs} runs &times; "
+        rows = []
+        for k, v in self.data.items():
+            spec = self.ports.get(k)
+            unit = getattr(spec, "unit", None) or ""
+            rng = ""
+            if v.size and np.issubdtype(v.dtype, np.number):
+                fin = v[np.isfinite(v)] if np.issubdtype(v.dtype, np.floating) else v
+                if fin.size:
+                    rng = f"{fin.min():.4g} .. {fin.max():.4g}"
+            rows.append("<tr>" + "".join(
+                f"<td style='text-align:left'>{html.escape(str(c))}</td>"
+                for c in (k, v.shape[lead:], v.dtype, unit, rng)) + "</tr>")
+        keep = ("status", "outcome", "wall_time", "realtime_factor", "overruns", "error",
+                "interrupted_by", "log_every")
+        meta = [f"<b>{html.escape(k)}</b>: {html.escape(_short(self.meta[k]))}"
+                for k in keep if k in self.meta]
+        head = ("<tr>" + "".join(f"<th style='text-align:left'>{h}</th>" for h in
+                                 ("signal", "shape per sample", "dtype", "unit", "range"))
+                + "</tr>")
+        return (f"<div><b>avblocks.Results</b>: {runs}{n} samples, {span}{step}"
+                f"<table>{head}{''.join(rows)}</table>"
+                f"{'<div>' + '; '.join(meta) + '</div>' if meta else ''}</div>")
+
     # ---------------------------------------------------------------- plots
     def plot(self, *signals, ax=None, **options):
         """Quick look, Matplotlib-style: with no ``signals`` the x-y paths
@@ -268,3 +301,9 @@ def _jsonable(o):
     if isinstance(o, np.generic):
         return o.item()
     return str(o)
+
+
+def _short(v, limit=120):
+    """A value as at most ``limit`` characters of text."""
+    text = f"{v:.4g}" if isinstance(v, float) else str(v)
+    return text if len(text) <= limit else text[: limit - 3] + "..."

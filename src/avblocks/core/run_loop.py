@@ -23,6 +23,7 @@ from .runguard import (
     _log_every_that_fits,
     _param_binding,
     _progress_wanted,
+    progress_bar,
     default_log,
     whole_steps,
 )
@@ -143,11 +144,7 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
 
     bar = None
     if _progress_wanted(progress) and nsteps > 0:
-        try:
-            from tqdm import tqdm
-            bar = tqdm(total=nsteps, unit="step", leave=False)
-        except ImportError:  # pragma: no cover - tqdm is a core dependency
-            bar = None
+        bar = progress_bar(nsteps)
     pace = None if realtime is None else float(realtime)
     overruns, worst = 0, 0.0
     wall0 = _time.perf_counter()

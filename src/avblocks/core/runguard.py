@@ -144,7 +144,33 @@ def _param_binding(compiled, params):
     return bound_parameters(list(per_block.values()))
 
 
+def in_notebook() -> bool:
+    """Whether this process is a Jupyter kernel (an IPython ZMQ shell)."""
+    ipython = sys.modules.get("IPython")
+    if ipython is None:
+        return False
+    try:
+        shell = ipython.get_ipython()
+    except Exception:  # noqa: BLE001 - an odd IPython: no notebook
+        return False
+    return type(shell).__name__ == "ZMQInteractiveShell"
+
+
 def _progress_wanted(progress):
+    """``progress=None`` shows a bar in a terminal and in Jupyter, not in CI
+    or when stderr goes to a file."""
     if progress is not None:
         return bool(progress)
-    return sys.stderr.isatty() and not os.environ.get("CI")
+    if os.environ.get("CI"):
+        return False
+    return in_notebook() or sys.stderr.isatty()
+
+
+def progress_bar(total):
+    """A progress bar over ``total`` steps: a notebook widget in Jupyter
+    (``tqdm.auto``, when ipywidgets is installed), a text bar otherwise."""
+    if in_notebook():
+        from tqdm.auto import tqdm
+    else:
+        from tqdm import tqdm
+    return tqdm(total=total, unit="step", leave=False)

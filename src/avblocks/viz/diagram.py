@@ -237,6 +237,16 @@ def _layout(names, blocks, wires):
     return layer, order
 
 
+def diagram_svg(diagram: Diagram) -> str:
+    """The diagram as SVG text (the Matplotlib layout of
+    :func:`draw_diagram`): what ``Diagram._repr_svg_`` shows in Jupyter."""
+    import io
+    fig = draw_diagram_matplotlib(diagram)
+    buf = io.StringIO()
+    fig.savefig(buf, format="svg")
+    return buf.getvalue()
+
+
 def draw_diagram_matplotlib(diagram: Diagram):
     """Matplotlib picture of a diagram (leaf blocks, ports, wires, subsystem
     frames); returns the Figure. SVG output keeps names as text and gives

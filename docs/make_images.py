@@ -36,14 +36,15 @@ _FENCE = re.compile(r"^(?P<indent>[ ]*)```python[ ]*\n(?P<code>.*?)^(?P=indent)`
 _SKIP = re.compile(r"<!--\s*no-test\b[^>]*-->\s*$")
 
 
-def python_blocks(path):
+def python_blocks(path, partial=False):
     """``[(line, code)]`` of the fenced ```python blocks of a Markdown file,
-    in order, without those right after a ``<!-- no-test: why -->`` line."""
+    in order, without those right after a ``<!-- no-test: why -->`` line
+    (or only those, the partial ones, with ``partial=True``)."""
     text = Path(path).read_text()
     out = []
     for m in _FENCE.finditer(text):
         before = text[:m.start()].rstrip("\n").rsplit("\n", 1)[-1]
-        if _SKIP.search(before):
+        if bool(_SKIP.search(before)) != partial:
             continue
         ind = len(m.group("indent"))
         code = "\n".join(ln[ind:] for ln in m.group("code").splitlines())

@@ -49,9 +49,16 @@ Kernels (each broadcasts element-wise, ``xp`` arrays)
   (0 when ``o`` is inside);
 - :func:`point_in_polygons`: crossing number of a horizontal ray against
   all edges (brute force, (N, E): for tests and small worlds);
+- :func:`segment_segment_distance`, :func:`point_in_ring` (a vertex loop);
 - :meth:`EdgeGrid.disc_hits`: circle (disc) vs every obstacle through the
   grid: ``inside(q) or dist(q, boundary) <= r`` for polygons,
-  ``|q - c| <= r + R`` for circles.
+  ``|q - c| <= r + R`` for circles;
+- :meth:`EdgeGrid.polygon_hits`: posed polygons (a vehicle footprint) vs
+  every obstacle, with a margin: ``dist(F, O) <= m`` where the boundary
+  distance is the least segment-segment distance over footprint edges x
+  candidate edges, and containment either way is tested with one vertex
+  (a footprint vertex inside ``O`` through the grid, an obstacle edge's
+  start inside ``F`` by crossing number).
 
 Exactness: the grid answers are the same set predicates as shapely's
 (``distance(point, polygon) <= r``), computed in float64 from the same
@@ -134,6 +141,41 @@ def ray_circle(ox, oy, ux, uy, cx, cy, r, xp=np):
     inside = ff <= r2
     ok = inside | ((d2 <= r2) & (tca - thc >= 0))
     return xp.where(ok, xp.where(inside, 0.0, tca - thc), xp.inf)
+
+
+def segment_segment_distance(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp=np):
+    """Distance between segments ``a0 a1`` and ``b0 b1`` (broadcast): 0 when
+    they meet (closed segments), else the least of the four endpoint-to-
+    segment distances."""
+    o1 = _cross(a1x - a0x, a1y - a0y, b0x - a0x, b0y - a0y)
+    o2 = _cross(a1x - a0x, a1y - a0y, b1x - a0x, b1y - a0y)
+    o3 = _cross(b1x - b0x, b1y - b0y, a0x - b0x, a0y - b0y)
+    o4 = _cross(b1x - b0x, b1y - b0y, a1x - b0x, a1y - b0y)
+    collinear = (o1 == 0) & (o2 == 0) & (o3 == 0) & (o4 == 0)
+    meet = (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~collinear
+    d = xp.minimum(
+        xp.minimum(point_segment_distance(a0x, a0y, b0x, b0y, b1x, b1y, xp),
+                   point_segment_distance(a1x, a1y, b0x, b0y, b1x, b1y, xp)),
+        xp.minimum(point_segment_distance(b0x, b0y, a0x, a0y, a1x, a1y, xp),
+                   point_segment_distance(b1x, b1y, a0x, a0y, a1x, a1y, xp)))
+    return xp.where(meet, 0.0, d)
+
+
+def point_in_ring(px, py, ring, xp=np):
+    """Points strictly inside closed vertex loops (crossing number, ray to +x).
+
+    ``px, py`` (..., Q); ``ring`` (..., V, 2) with the loop's vertices (not
+    repeated), broadcast against the points' leading axes. Returns (..., Q).
+    """
+    ax, ay = ring[..., None, :, 0], ring[..., None, :, 1]               # (..., 1, V)
+    bx = xp.roll(ring[..., 0], -1, axis=-1)[..., None, :]
+    by = xp.roll(ring[..., 1], -1, axis=-1)[..., None, :]
+    qx, qy = px[..., None], py[..., None]                               # (..., Q, 1)
+    straddle = (ay > qy) != (by > qy)
+    dy = xp.where(straddle, by - ay, 1.0)
+    xint = ax + (qy - ay) * (bx - ax) / dy
+    cnt = xp.sum((straddle & (xint > qx)).astype(np.int32), axis=-1)
+    return (cnt % 2) == 1
 
 
 def point_in_polygons(points, seg, owner, n_poly, xp=np):
@@ -355,3 +397,53 @@ class EdgeGrid:
             first = xp.minimum(first, xp.min(xp.where(touch, own, big), axis=1))
         hit = first < big
         return hit, xp.where(hit, first, -1)
+
+    def polygon_hits(self, verts, center, margin, xp=np):
+        """Posed polygons ``verts`` (N, V, 2) around ``center`` (N, 2) (every
+        vertex within ``reach - margin`` of it) against every obstacle.
+
+        Returns ``(hit (N,), first (N,) int32)`` like :meth:`disc_hits`:
+        ``dist(polygon, obstacle) <= margin`` (touching or overlapping).
+        """
+        big = np.int32(np.iinfo(np.int32).max)
+        n = verts.shape[0]
+        first = xp.full((n,), big, dtype=np.int32)
+        m = xp.asarray(margin, dtype=verts.dtype)
+        fx0, fy0 = verts[..., 0], verts[..., 1]                            # (N, V)
+        fx1, fy1 = xp.roll(fx0, -1, axis=-1), xp.roll(fy0, -1, axis=-1)
+        if self.n_edges:
+            e, _, _ = self.candidate_edges(center, xp)
+            ee = xp.where(e >= 0, e, self.n_edges)
+            seg = xp.asarray(self.seg)[ee]                                 # (N, K, 2, 2)
+            own = xp.asarray(self.owner)[ee]
+            d = segment_segment_distance(
+                fx0[:, :, None], fy0[:, :, None], fx1[:, :, None], fy1[:, :, None],
+                seg[:, None, :, 0, 0], seg[:, None, :, 0, 1], seg[:, None, :, 1, 0],
+                seg[:, None, :, 1, 1], xp)                                 # (N, V, K)
+            touch = (e >= 0) & ((xp.min(d, axis=1) <= m)
+                                | point_in_ring(seg[..., 0, 0], seg[..., 0, 1], verts, xp))
+            first = xp.minimum(first, xp.min(xp.where(touch, own, big), axis=1))
+            polys, inside = self.inside(verts[:, 0, :], xp)
+            first = xp.minimum(first, xp.min(xp.where(inside, polys, big), axis=1))
+        if self.n_circles:
+            c = self.candidate_circles(center, xp)
+            cc = xp.where(c >= 0, c, self.n_circles)
+            cen = xp.asarray(self.circle_center)[cc]                       # (N, Kc, 2)
+            rad = xp.asarray(self.circle_radius)[cc]
+            d = point_segment_distance(cen[:, None, :, 0], cen[:, None, :, 1],
+                                       fx0[:, :, None], fy0[:, :, None],
+                                       fx1[:, :, None], fy1[:, :, None], xp)
+            inn = point_in_ring(cen[..., 0], cen[..., 1], verts, xp)
+            touch = (c >= 0) & ((xp.min(d, axis=1) <= rad + m) | inn)
+            own = xp.asarray(self.circle_owner)[cc]
+            first = xp.minimum(first, xp.min(xp.where(touch, own, big), axis=1))
+        hit = first < big
+        return hit, xp.where(hit, first, -1)
+
+    def exceeded(self, need):
+        """A sentence when a query asked for more than ``reach`` (else None)."""
+        r = float(np.max(np.asarray(need.reach)))
+        if r > self.reach * (1 + 1e-12) + 1e-12:
+            return (f"an obstacle query asked for radius {r:g}, the edge grid was built "
+                    f"for {self.reach:g}")
+        return None

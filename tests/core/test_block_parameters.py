@@ -357,7 +357,7 @@ def test_gossip_reads_radius_and_loss_live(cls):
 
 # blocks whose functions use NumPy-only libraries (k-d trees, shapely,
 # ray casting): their parameters change NumPy runs only
-NUMPY_ONLY = {"controllers.Coverage", "environment.Broadcast", "environment.Collision",
+NUMPY_ONLY = {"controllers.Coverage", "environment.Broadcast",
               "environment.CommChannel", "environment.Gossip", "environment.Neighbors",
               "environment.RangeSensor", "environment.TargetDetection"}
 TRACEABLE = [n for n in WITH_PARAMS if n not in NUMPY_ONLY]

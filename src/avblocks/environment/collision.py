@@ -49,6 +49,7 @@ from scipy.spatial import cKDTree
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
 from .edges import EdgeGrid, point_in_ring, segment_segment_distance
@@ -290,12 +291,17 @@ class Collision(Block):
         the compiled engine (see :class:`~avblocks.utility.spatial.NeighborSearch`).
         Default: ``n`` when ``n <= SMALL_N`` (never overflows), else
         planned by the compiled engine from the first positions.
+    reach : float, optional
+        Largest ``bounding radius + margin`` the static grid and neighbour
+        search serve (structural). Default: twice the value at
+        construction, so a compiled run may raise ``margin`` up to
+        ``bounding radius + 2 margin`` without a rebuild.
 
     Equations
     ---------
-    See :func:`collide`; touching counts. The grid is built for the margin
-    given here: a larger margin set later re-builds it in the NumPy engine
-    and is reported as an overflow by a compiled run.
+    See :func:`collide`; touching counts. The grid is built for ``reach``:
+    a larger margin set later re-builds it in the NumPy engine and is
+    reported as an overflow by a compiled run.
 
     Example
     -------
@@ -308,7 +314,8 @@ class Collision(Block):
     """
 
     def __init__(self, world, n, *, footprint=None, input="pose", margin=0.0,
-                 agents=True, period=None, method="grid", capacity=None):
+                 agents=True, period=None, method="grid", capacity=None,
+                 reach=None):
         super().__init__()
         if not isinstance(world, World):
             raise ParameterError("world must be an avblocks.environment.World",
@@ -345,7 +352,9 @@ class Collision(Block):
             #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
             self.traceable = False
             return
-        reach = float(np.max(footprint.bounding_radius(n))) + float(margin)
+        if reach is None:
+            reach = 2.0 * (float(np.max(footprint.bounding_radius(n))) + float(margin))
+        reach = positive_scalar(reach, "Collision", "reach", allow_zero=True)
         self._grids = {}
         self.edges = self._grid(reach)
         if capacity is None and n <= SMALL_N:

@@ -241,6 +241,8 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
     else:
         ha = xp.zeros((n,), dtype=bool)
         ai_ = xp.full((n,), -1, dtype=np.int32)
+    if xp is np:                                   # the declared dtype (traced: cast
+        first, ai_ = first.astype(np.int64), ai_.astype(np.int64)   # by the engine)
     return {"hit_obstacle": ho, "hit_agent": ha, "collision": ho | ha,
             "hit_index": first, "hit_agent_index": ai_}
 

@@ -359,7 +359,7 @@ def test_gossip_reads_radius_and_loss_live(cls):
 # their parameters change NumPy runs only; and RangeSensor here, whose
 # output is a noisy draw (the backends draw different numbers by design;
 # tests/environment/test_range_sensor.py compares its traced scans)
-NUMPY_ONLY = {"controllers.Coverage", "environment.Broadcast",
+NUMPY_ONLY = {"environment.Broadcast",
               "environment.CommChannel", "environment.Gossip", "environment.Neighbors",
               "environment.RangeSensor", "environment.TargetDetection"}
 TRACEABLE = [n for n in WITH_PARAMS if n not in NUMPY_ONLY]

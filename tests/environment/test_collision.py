@@ -256,7 +256,7 @@ def test_grid_method_hand_cases():
 
 def test_grid_margin_raised_later_rebuilds():
     w = World([SQUARE])
-    c = Collision(w, 1, footprint=Disc(0.5))
+    c = Collision(w, 1, footprint=Disc(0.5), method="grid")
     u = {"pose": np.array([[0.3, 0.0, 0.0]])}
     assert not c.output(0.0, {}, u, np)["collision"][0]
     c.set_parameter("margin", 0.25)
@@ -273,9 +273,23 @@ def test_grid_method_traced_equals_numpy(fp):
     gen = np.random.default_rng(3)
     w = _random_world(gen)
     pose = np.c_[gen.uniform(0, 50, (200, 2)), gen.uniform(-np.pi, np.pi, 200)]
-    c = Collision(w, 200, footprint=fp, capacity=16)
+    c = Collision(w, 200, footprint=fp, capacity=16, method="grid")
     want = c.output(0.0, {}, {"pose": pose}, np)
     with x64(True):
         got = jax.jit(lambda p: c.output(0.0, {}, {"pose": p}, jnp))(pose)
     for k in want:
         np.testing.assert_array_equal(np.asarray(got[k]), want[k], err_msg=k)
+
+
+@pytest.mark.jax
+def test_shapely_method_refused_by_the_compiled_engine_by_name():
+    pytest.importorskip("jax")
+    d = av.Diagram()
+    f = d.add(av.vehicles.Unicycle(pose0=[[0.0, 0.0, 0.0]]), name="f")
+    c = d.add(av.blocks.Constant([[1.0, 0.0]]), name="c")
+    cl = d.add(Collision(World([SQUARE]), 1, method="shapely"), name="col")
+    d.connect(c.y, f.cmd)
+    d.connect(f.pose, cl.pose)
+    with pytest.raises(Exception, match="col"):
+        av.simulate(d, 1.0, dt=0.1, log=[cl.collision], backend="jax")
+    assert Collision(World([SQUARE]), 1).traceable        # the default traces

@@ -138,7 +138,7 @@ def test_grid_method_equals_shapely(agents):
     pose = np.c_[gen.uniform(-1, 31, (n, 2)), gen.uniform(-np.pi, np.pi, n)]
     pose[:3, :2] = [[15.0, 15.0], [12.0, 15.0], [11.0, 11.0]]   # in the hole, on its edge
     kw = dict(n_rays=24, max_range=6.0, agent_radius=agents)
-    g = RangeSensor(w, n, **kw)
+    g = RangeSensor(w, n, method="grid", **kw)
     s = RangeSensor(w, n, method="shapely", **kw)
     a = g.output(0.0, {}, {"pose": pose}, np)["ranges"]
     b = s.output(0.0, {}, {"pose": pose}, np)["ranges"]
@@ -163,7 +163,7 @@ def test_grid_method_equals_shapely(agents):
 
 def test_grid_method_max_range_raised_later():
     w = World([rectangle(5, -1, 6, 1)])
-    s = RangeSensor(w, 1, n_rays=1, fov=0.1, max_range=3.0)
+    s = RangeSensor(w, 1, n_rays=1, fov=0.1, max_range=3.0, method="grid")
     y = s.output(0.0, {}, {"pose": np.zeros((1, 3))}, np)["ranges"]
     assert y.tolist() == [[3.0]]
     s.set_parameter("max_range", 8.0)
@@ -181,7 +181,8 @@ def test_grid_method_traced_equals_numpy():
     w = _concave_world(gen)
     n = 100
     pose = np.c_[gen.uniform(0, 30, (n, 2)), gen.uniform(-np.pi, np.pi, n)]
-    s = RangeSensor(w, n, n_rays=16, max_range=5.0, agent_radius=0.3, capacity=16)
+    s = RangeSensor(w, n, n_rays=16, max_range=5.0, agent_radius=0.3, capacity=16,
+                    method="grid")
     want = s.output(0.0, {}, {"pose": pose}, np)["ranges"]
     with x64(True):
         got = jax.jit(lambda p: s.output(0.0, {}, {"pose": p}, jnp)["ranges"])(pose)

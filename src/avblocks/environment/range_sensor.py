@@ -23,8 +23,8 @@ arrays.
 That is :func:`cast_rays`, the NumPy/shapely method
 (``RangeSensor(..., method="shapely")``).
 
-Traceable method (the default, ``method="grid"``)
---------------------------------------------------
+Traceable method (``method="grid"``; the default ``"auto"`` uses it when compiled)
+-----------------------------------------------------------------------------------
 :func:`cast_rays_grid` uses the same two hit formulas in ``xp`` code with
 static shapes: the world's edges and circles as padded arrays with a
 uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`
@@ -35,6 +35,12 @@ candidates only, an (N, R, K) product (no angular culling: every ray
 tests every candidate). Other agents come from a
 :class:`~avblocks.utility.spatial.NeighborSearch` within ``max_range +
 max(agent_radius)``: (N, R, M). Both methods agree to 1e-9 m (tests).
+
+The default, ``method="auto"``, is traceable: a compiled run uses the grid
+method and the NumPy engine :func:`cast_rays`, the faster there (it culls
+rays by the arc each edge subtends): 32 rays, 8 m, 200 random obstacles,
+one agent per 16 m^2: 3.3 / 11 / 75 ms at N = 100 / 1,000 / 10,000 against
+29 / 178 / 2,600 ms for the grid code in NumPy (2 cores).
 """
 
 from __future__ import annotations
@@ -310,10 +316,11 @@ class RangeSensor(Block):
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (a scan per hit).
-    method : "grid" or "shapely"
-        ``"grid"`` (default): traceable ``xp`` code
-        (:func:`cast_rays_grid`), both engines. ``"shapely"``: the NumPy
-        :func:`cast_rays` (NumPy engine only). They agree to 1e-9 m.
+    method : "auto", "grid" or "shapely"
+        ``"grid"``: traceable ``xp`` code (:func:`cast_rays_grid`) in both
+        engines. ``"shapely"``: the NumPy :func:`cast_rays` (NumPy engine
+        only). ``"auto"`` (default): grid when compiled, :func:`cast_rays`
+        in the NumPy engine (faster there). They agree to 1e-9 m.
     reach : float, optional
         Largest ``max_range`` the static grid serves (structural; default
         the ``max_range`` given). A larger ``max_range`` set later re-builds
@@ -337,7 +344,7 @@ class RangeSensor(Block):
 
     def __init__(self, world, n, *, n_rays=32, fov=2 * np.pi, max_range=10.0,
                  noise_std=0.0, agent_radius=None, angles=None, input="pose",
-                 period=None, method="grid", reach=None, capacity=None):
+                 period=None, method="auto", reach=None, capacity=None):
         super().__init__()
         name = "RangeSensor"
         if world is not None and not isinstance(world, World):
@@ -378,9 +385,9 @@ class RangeSensor(Block):
         if noisy:
             self.declare_random_state("key")
         maybe_periodic(self, period)
-        if method not in ("grid", "shapely"):
-            raise ParameterError("method must be 'grid' or 'shapely'", block=name,
-                                 param="method", expected=["grid", "shapely"],
+        if method not in ("auto", "grid", "shapely"):
+            raise ParameterError("method must be 'auto', 'grid' or 'shapely'", block=name,
+                                 param="method", expected=["auto", "grid", "shapely"],
                                  found=method)
         self.method = method
         if method == "shapely":
@@ -389,7 +396,7 @@ class RangeSensor(Block):
             return
         reach = positive_scalar(max_range if reach is None else reach, name, "reach")
         self._grids = {}
-        self.edges = self._grid(reach)
+        self._reach = reach
         self.search = None
         if agent_radius is not None and n > 1:
             if capacity is None and n <= SMALL_N:
@@ -406,8 +413,14 @@ class RangeSensor(Block):
             g = self._grids[reach] = EdgeGrid(self.world, reach)
         return g
 
+    @property
+    def edges(self):
+        """The world as an :class:`EdgeGrid` (built on first use; None
+        without a world)."""
+        return self._grid(self._reach)
+
     def output(self, t, x, u, xp):
-        if self.method == "shapely":
+        if self.method == "shapely" or (self.method == "auto" and xp is np):
             r = cast_rays(self.world, np.asarray(u[self.input]), self.angles,
                           float(self.max_range), self.agent_radius)
             xn = np
@@ -429,5 +442,5 @@ class RangeSensor(Block):
         return {"ranges": r}
 
     def update(self, t, x, u, xp):
-        key, _ = _rng.split(x["key"], xp if self.method == "grid" else np)
+        key, _ = _rng.split(x["key"], np if self.method == "shapely" else xp)
         return {"key": key}

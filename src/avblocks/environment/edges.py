@@ -74,13 +74,21 @@ import numpy as np
 
 from ..core.errors import ParameterError
 
-#: Padding coordinate: far from anything, finite (so 0 * pad stays 0).
-_FAR = 1e30
+#: Padding coordinate: far from anything, finite, and small enough that its
+#: square stays finite in float32 (so no inf or NaN reaches a gradient).
+_FAR = 1e9
 
 
 # ----------------------------------------------------------------- kernels
 def _cross(ax, ay, bx, by):
     return ax * by - ay * bx
+
+
+def _norm(x, y, xp):
+    """``sqrt(x^2 + y^2)`` with a finite gradient at 0 (the double ``where``)."""
+    s = x * x + y * y
+    pos = s > 0
+    return xp.where(pos, xp.sqrt(xp.where(pos, s, 1.0)), 0.0)
 
 
 def point_segment_distance(px, py, ax, ay, bx, by, xp=np):
@@ -94,9 +102,8 @@ def point_segment_distance(px, py, ax, ay, bx, by, xp=np):
     ee = ex * ex + ey * ey
     ee_s = xp.where(ee > 0, ee, 1.0)
     t = (wx * ex + wy * ey) / ee_s
-    da = xp.sqrt(wx * wx + wy * wy)
-    vx, vy = px - bx, py - by
-    db = xp.sqrt(vx * vx + vy * vy)
+    da = _norm(wx, wy, xp)
+    db = _norm(px - bx, py - by, xp)
     dp = xp.abs(_cross(wx, wy, ex, ey)) / xp.sqrt(ee_s)
     return xp.where((t <= 0) | (ee <= 0), da, xp.where(t >= 1, db, dp))
 
@@ -137,7 +144,9 @@ def ray_circle(ox, oy, ux, uy, cx, cy, r, xp=np):
     ff = fx * fx + fy * fy
     d2 = ff - tca * tca
     r2 = r * r
-    thc = xp.sqrt(xp.maximum(r2 - d2, 0.0))
+    disc = r2 - d2
+    pos = disc > 0
+    thc = xp.where(pos, xp.sqrt(xp.where(pos, disc, 1.0)), 0.0)
     inside = ff <= r2
     ok = inside | ((d2 <= r2) & (tca - thc >= 0))
     return xp.where(ok, xp.where(inside, 0.0, tca - thc), xp.inf)
@@ -390,8 +399,7 @@ class EdgeGrid:
             c = self.candidate_circles(points, xp)
             cc = xp.where(c >= 0, c, self.n_circles)
             cen = xp.asarray(self.circle_center)[cc]
-            dx, dy = cen[..., 0] - points[:, 0:1], cen[..., 1] - points[:, 1:2]
-            dist = xp.sqrt(dx * dx + dy * dy)
+            dist = _norm(cen[..., 0] - points[:, 0:1], cen[..., 1] - points[:, 1:2], xp)
             touch = (c >= 0) & (dist <= r[:, None] + xp.asarray(self.circle_radius)[cc])
             own = xp.asarray(self.circle_owner)[cc]
             first = xp.minimum(first, xp.min(xp.where(touch, own, big), axis=1))

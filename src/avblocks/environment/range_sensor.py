@@ -257,7 +257,7 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
         seg = xp.asarray(grid.seg)[xp.where(e >= 0, e, grid.n_edges)][:, None]  # (N,1,K,2,2)
         t = ray_segment(ox, oy, ux, uy, seg[..., 0, 0], seg[..., 0, 1], seg[..., 1, 0],
                         seg[..., 1, 1], xp)
-        out = xp.minimum(out, xp.min(t, axis=-1))
+        out = xp.minimum(out, xp.min(xp.where(e[:, None] >= 0, t, xp.inf), axis=-1))
     if grid is not None and grid.n_circles:
         c = grid.candidate_circles(pose[:, :2], xp)
         cc = xp.where(c >= 0, c, grid.n_circles)

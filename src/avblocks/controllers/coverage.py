@@ -29,8 +29,8 @@ Two methods compute ``M_i``, ``C_i`` and ``H``:
   ``M_i = sum_{a_s = i} w_s``, ``C_i = sum_{a_s = i} w_s q_s / M_i``,
   ``H = sum_s w_s |q_s - p_{a_s}|^2`` -- the exact quantities of the sampled
   density, whose Lloyd flow decreases ``H`` just the same. Static shapes:
-  an (S, N) distance array (S samples; about ``resolution^2``), fine for
-  the tens to hundreds of agents coverage is used with. Versus the exact
+  an (S, N) distance array (S samples; about ``resolution^2``) and segment
+  sums, fine for the tens to hundreds of agents coverage is used with. Versus the exact
   cells (uniform density): centroids within 0.5 % of the polygon's
   diameter at the default ``resolution=100`` (measured 0.1-0.2 %; the
   error shrinks about like ``resolution^-1.5``), total mass exact (tests).
@@ -154,11 +154,18 @@ def grid_moments(points, q, w, xp=np):
     d = qq[:, None, :] - points[None, :, :]
     d2 = xp.sum(d * d, axis=-1)                                  # (S, N)
     a = xp.argmin(d2, axis=1)
-    one = (a[:, None] == xp.arange(n)[None, :]).astype(points.dtype)   # (S, N)
-    wq = one * ww[:, None]
-    mass = xp.sum(wq, axis=0)
-    mom = wq.T @ qq                                              # (N, 2)
-    cost = xp.sum(wq * d2, axis=0)
+    dmin = xp.min(d2, axis=1)
+    if xp is np:
+        def seg(v):
+            return np.bincount(a, v, n)
+    else:                                   # traced: a segment sum (jax.ops)
+        import jax
+
+        def seg(v):
+            return jax.ops.segment_sum(v, a, num_segments=n)
+    mass = seg(ww)
+    mom = xp.stack([seg(ww * qq[:, 0]), seg(ww * qq[:, 1])], axis=-1)   # (N, 2)
+    cost = seg(ww * dmin)
     safe = xp.where(mass > 0, mass, 1.0)
     cen = xp.where((mass > 0)[:, None], mom / safe[:, None], points)
     return mass, cen, cost

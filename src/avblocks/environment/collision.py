@@ -302,9 +302,8 @@ class Collision(Block):
         planned by the compiled engine from the first positions.
     reach : float, optional
         Largest ``bounding radius + margin`` the static grid and neighbour
-        search serve (structural). Default: twice the value at
-        construction, so a compiled run may raise ``margin`` up to
-        ``bounding radius + 2 margin`` without a rebuild.
+        search serve (structural). Default ``bounding radius + 2 margin``:
+        a compiled run may double ``margin`` without a rebuild.
 
     Equations
     ---------
@@ -362,7 +361,7 @@ class Collision(Block):
             self.traceable = False
             return
         if reach is None:
-            reach = 2.0 * (float(np.max(footprint.bounding_radius(n))) + float(margin))
+            reach = float(np.max(footprint.bounding_radius(n))) + 2.0 * float(margin)
         reach = positive_scalar(reach, "Collision", "reach", allow_zero=True)
         self._grids = {}
         self._reach = reach

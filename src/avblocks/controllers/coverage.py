@@ -151,10 +151,11 @@ def grid_moments(points, q, w, xp=np):
     n = points.shape[0]
     qq = xp.asarray(q, dtype=points.dtype)
     ww = xp.asarray(w, dtype=points.dtype)
-    d = qq[:, None, :] - points[None, :, :]
-    d2 = xp.sum(d * d, axis=-1)                                  # (S, N)
+    dx = qq[:, 0:1] - points[None, :, 0]
+    dy = qq[:, 1:2] - points[None, :, 1]
+    d2 = dx * dx + dy * dy                                       # (S, N)
     a = xp.argmin(d2, axis=1)
-    dmin = xp.min(d2, axis=1)
+    dmin = xp.take_along_axis(d2, a[:, None], axis=1)[:, 0]
     if xp is np:
         def seg(v):
             return np.bincount(a, v, n)

@@ -49,6 +49,8 @@ against 0.91 / 4.5 / 54 ms for the grid code in NumPy).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import shapely
 from scipy.spatial import cKDTree
@@ -62,9 +64,9 @@ from .edges import EdgeGrid, point_in_ring, segment_segment_distance
 from .footprint import Disc, Footprint
 from .world import World
 
-#: Agent counts up to which the agent-agent search gets a static capacity of
-#: ``n`` by default (a bucket never holds more than all agents: exact, and
-#: small) when none is given.
+#: Agent counts up to which the agent-agent search compares all pairs by
+#: default (an (N, N) product: exact, no capacity to plan) when no capacity
+#: is given.
 SMALL_N = 64
 
 
@@ -298,8 +300,8 @@ class Collision(Block):
     capacity : int, optional
         Static per-cell capacity of the agent-agent neighbour search for
         the compiled engine (see :class:`~avblocks.utility.spatial.NeighborSearch`).
-        Default: ``n`` when ``n <= SMALL_N`` (never overflows), else
-        planned by the compiled engine from the first positions.
+        Default: all pairs when ``n <= SMALL_N`` (exact, nothing to plan),
+        else planned by the compiled engine from the first positions.
     reach : float, optional
         Largest ``bounding radius + margin`` the static grid and neighbour
         search serve (structural). Default ``bounding radius + 2 margin``:
@@ -365,10 +367,10 @@ class Collision(Block):
         reach = positive_scalar(reach, "Collision", "reach", allow_zero=True)
         self._grids = {}
         self._reach = reach
+        sreach = max(2.0 * reach, 1e-9)
         if capacity is None and n <= SMALL_N:
-            capacity = n
-        self.search = (NeighborSearch(reach=max(2.0 * reach, 1e-9), points=self.input,
-                                      capacity=capacity)
+            sreach = math.inf           # all pairs: (N, N), exact, no plan needed
+        self.search = (NeighborSearch(reach=sreach, points=self.input, capacity=capacity)
                        if self.agents and n > 1 else None)
 
     def _grid(self, reach):

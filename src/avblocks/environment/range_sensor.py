@@ -45,6 +45,8 @@ one agent per 16 m^2: 3.3 / 11 / 75 ms at N = 100 / 1,000 / 10,000 against
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -57,8 +59,8 @@ from ._common import agent_count, declare_agents_input, maybe_periodic
 from .edges import EdgeGrid, ray_circle, ray_segment
 from .world import World
 
-#: Agent counts up to which the agent search gets a static capacity of ``n``
-#: by default (exact, small).
+#: Agent counts up to which the agent search compares all pairs by default
+#: (an (N, N) product: exact, no capacity to plan) when no capacity is given.
 SMALL_N = 64
 
 _EPS = 1e-12
@@ -327,7 +329,7 @@ class RangeSensor(Block):
         the grid in the NumPy engine and is reported by a compiled run.
     capacity : int, optional
         Static per-cell capacity of the agent search (compiled engine);
-        default ``n`` for ``n <= SMALL_N``, else planned by the engine.
+        default: all pairs for ``n <= SMALL_N``, else planned by the engine.
 
     Equations
     ---------
@@ -399,11 +401,11 @@ class RangeSensor(Block):
         self._reach = reach
         self.search = None
         if agent_radius is not None and n > 1:
+            sreach = reach + float(np.max(agent_radius))
             if capacity is None and n <= SMALL_N:
-                capacity = n
-            self.search = NeighborSearch(
-                reach=reach + float(np.max(agent_radius)), points=self.input,
-                capacity=capacity)
+                sreach = math.inf       # all pairs: (N, N), exact, no plan needed
+            self.search = NeighborSearch(reach=sreach, points=self.input,
+                                         capacity=capacity)
 
     def _grid(self, reach):
         if self.world is None:

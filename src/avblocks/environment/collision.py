@@ -365,7 +365,7 @@ class Collision(Block):
         if reach is None:
             reach = float(np.max(footprint.bounding_radius(n))) + 2.0 * float(margin)
         reach = positive_scalar(reach, "Collision", "reach", allow_zero=True)
-        self._grids = {}
+        self._grid_cache = {}            # EdgeGrid per reach (a memo: not in the compile key)
         self._reach = reach
         sreach = max(2.0 * reach, 1e-9)
         if capacity is None and n <= SMALL_N:
@@ -374,9 +374,9 @@ class Collision(Block):
                        if self.agents and n > 1 else None)
 
     def _grid(self, reach):
-        g = self._grids.get(reach)
+        g = self._grid_cache.get(reach)
         if g is None:
-            g = self._grids[reach] = EdgeGrid(self.world, reach)
+            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
         return g
 
     @property

@@ -397,7 +397,7 @@ class RangeSensor(Block):
             self.traceable = False
             return
         reach = positive_scalar(max_range if reach is None else reach, name, "reach")
-        self._grids = {}
+        self._grid_cache = {}            # EdgeGrid per reach (a memo: not in the compile key)
         self._reach = reach
         self.search = None
         if agent_radius is not None and n > 1:
@@ -410,9 +410,9 @@ class RangeSensor(Block):
     def _grid(self, reach):
         if self.world is None:
             return None
-        g = self._grids.get(reach)
+        g = self._grid_cache.get(reach)
         if g is None:
-            g = self._grids[reach] = EdgeGrid(self.world, reach)
+            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
         return g
 
     @property

@@ -7,6 +7,12 @@ on random poses. Prints a markdown table; the last columns divide by
 N log2 N to show the growth.
 
 Run: ``python benchmarks/environment.py``
+
+``--methods`` instead compares, for ``Collision`` and ``RangeSensor``, the
+NumPy engine's default (the shapely method) with the traceable grid method
+run by NumPy and jitted by JAX (CPU, float64; the agent search with a
+fixed capacity of 32): ``python benchmarks/environment.py --methods
+[N ...]``.
 """
 
 from __future__ import annotations
@@ -79,5 +85,50 @@ def main():
         print(f"| {n:,} | " + " | ".join(f"{1e6 * res[k] / nl:.0f}" for k in names) + " |")
 
 
+def methods(ns):
+    """Per-call ms: shapely (NumPy default) | grid in NumPy | grid jitted."""
+    gen = np.random.default_rng(0)
+    try:
+        import jax
+        import jax.numpy as jnp
+
+        from avblocks.core.compiled._jax import x64
+    except ImportError:                                   # pragma: no cover
+        jax = None
+    print("| N | block | shapely, NumPy [ms] | grid, NumPy [ms] | grid, jit CPU [ms] |")
+    print("|---:|---|---:|---:|---:|")
+    for n in ns:
+        side = 4.0 * np.sqrt(n)
+        w = make_world(side, gen)
+        pose = np.c_[gen.uniform(0, side, (n, 2)), gen.uniform(-np.pi, np.pi, n)]
+        u = {"pose": pose}
+        reps = 3 if n >= 10_000 else 10
+        makers = {
+            "Collision disc": lambda m: Collision(w, n, footprint=Disc(0.3), method=m,
+                                                  capacity=32),
+            "Collision rect": lambda m: Collision(w, n, footprint=Rectangle(0.6, 0.4),
+                                                  method=m, capacity=32),
+            "RangeSensor 32 rays": lambda m: RangeSensor(w, n, n_rays=32, max_range=8.0,
+                                                         agent_radius=0.3, method=m,
+                                                         capacity=32),
+        }
+        for name, mk in makers.items():
+            row = []
+            for m in ("shapely", "grid"):
+                b = mk(m)
+                row.append(timeit(lambda b=b: b.output(0.0, {}, u, np), reps))
+            if jax is not None:
+                with x64(True):
+                    f = jax.jit(lambda p, b=b: b.output(0.0, {}, {"pose": p}, jnp))
+                    pj = jnp.asarray(pose)
+                    row.append(timeit(lambda: jax.block_until_ready(f(pj)), reps))
+            print(f"| {n:,} | {name} | " + " | ".join(f"{v:.2f}" for v in row) + " |",
+                  flush=True)
+
+
 if __name__ == "__main__":
-    main()
+    import sys
+    if "--methods" in sys.argv:
+        methods([int(a) for a in sys.argv[2:]] or [100, 1_000, 10_000])
+    else:
+        main()

@@ -152,3 +152,20 @@ def test_disc_hits_traced_equal_numpy():
         got = jax.jit(lambda p, r: g.disc_hits(p, r, jnp))(p, r)
     np.testing.assert_array_equal(np.asarray(got[0]), want[0])
     np.testing.assert_array_equal(np.asarray(got[1]), want[1])
+
+
+def test_occupancy_world_edges_on_cell_centres():
+    """An occupancy map whose edges lie on the grid's cell-centre lines
+    (reference points nudged off them): grid answers equal shapely's."""
+    occ = np.random.default_rng(8).random((40, 40)) > 0.8
+    w = World.from_occupancy(occ, 0.5)
+    g = EdgeGrid(w, 0.25, cell=0.5)          # centres at multiples of 0.25 + origin
+    assert np.all(np.abs(g.cell_ref - (g.origin + 0.5 * g.cell
+                                       + g.cell * np.floor((g.cell_ref - g.origin)
+                                                           / g.cell))) < 0.2 * g.cell)
+    rng = np.random.default_rng(9)
+    q = np.concatenate([rng.uniform(-1, 21, (3000, 2)),
+                        np.round(rng.uniform(-1, 21, (1000, 2)) * 4) / 4])   # on lines
+    r = rng.uniform(0, 0.25, len(q))
+    _, first = g.disc_hits(q, r)
+    np.testing.assert_array_equal(first, shapely_disc_hits(w, q, r))

@@ -104,24 +104,24 @@ def methods(ns):
         u = {"pose": pose}
         reps = 3 if n >= 10_000 else 10
         makers = {
-            "Collision disc": lambda m: Collision(w, n, footprint=Disc(0.3), method=m,
-                                                  capacity=32),
-            "Collision rect": lambda m: Collision(w, n, footprint=Rectangle(0.6, 0.4),
-                                                  method=m, capacity=32),
-            "RangeSensor 32 rays": lambda m: RangeSensor(w, n, n_rays=32, max_range=8.0,
-                                                         agent_radius=0.3, method=m,
-                                                         capacity=32),
+            "Collision disc": lambda m, w=w, n=n: Collision(
+                w, n, footprint=Disc(0.3), method=m, capacity=32),
+            "Collision rect": lambda m, w=w, n=n: Collision(
+                w, n, footprint=Rectangle(0.6, 0.4), method=m, capacity=32),
+            "RangeSensor 32 rays": lambda m, w=w, n=n: RangeSensor(
+                w, n, n_rays=32, max_range=8.0, agent_radius=0.3, method=m, capacity=32),
         }
         for name, mk in makers.items():
             row = []
             for m in ("shapely", "grid"):
                 b = mk(m)
-                row.append(timeit(lambda b=b: b.output(0.0, {}, u, np), reps))
+                row.append(timeit(lambda b=b, u=u: b.output(0.0, {}, u, np), reps))
             if jax is not None:
                 with x64(True):
                     f = jax.jit(lambda p, b=b: b.output(0.0, {}, {"pose": p}, jnp))
                     pj = jnp.asarray(pose)
-                    row.append(timeit(lambda: jax.block_until_ready(f(pj)), reps))
+                    row.append(timeit(lambda f=f, pj=pj: jax.block_until_ready(f(pj)),
+                                      reps))
             print(f"| {n:,} | {name} | " + " | ".join(f"{v:.2f}" for v in row) + " |",
                   flush=True)
 

@@ -24,6 +24,7 @@ simulator and are not JAX-traceable.
 
 from .collision import Collision, StopOnCollision, collide, collide_grid
 from .comm import Broadcast, CommChannel, Gossip, gossip_step
+from .edges import EdgeGrid
 from .footprint import (
     FAMILY_FOOTPRINTS,
     Disc,
@@ -40,7 +41,6 @@ from .neighbors import (
     radius_neighbors,
     to_networkx,
 )
-from .edges import EdgeGrid
 from .range_sensor import RangeSensor, cast_rays, cast_rays_grid, ray_angles
 from .targets import TargetDetection, detect_targets
 from .world import Background, Circle, World, rectangle

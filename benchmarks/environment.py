@@ -10,13 +10,14 @@ Run: ``python benchmarks/environment.py``
 
 ``--methods`` instead compares, for ``Collision`` and ``RangeSensor``, the
 NumPy engine's default (the shapely method) with the traceable grid method
-run by NumPy and jitted by JAX (CPU, float64; the agent search with a
-fixed capacity of 32): ``python benchmarks/environment.py --methods
+run by NumPy and jitted by JAX (CPU, float64; the agent search planned
+from the positions, headroom 2): ``python benchmarks/environment.py --methods
 [N ...]``.
 """
 
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
@@ -105,11 +106,11 @@ def methods(ns):
         reps = 3 if n >= 10_000 else 10
         makers = {
             "Collision disc": lambda m, w=w, n=n: Collision(
-                w, n, footprint=Disc(0.3), method=m, capacity=32),
+                w, n, footprint=Disc(0.3), method=m),
             "Collision rect": lambda m, w=w, n=n: Collision(
-                w, n, footprint=Rectangle(0.6, 0.4), method=m, capacity=32),
+                w, n, footprint=Rectangle(0.6, 0.4), method=m),
             "RangeSensor 32 rays": lambda m, w=w, n=n: RangeSensor(
-                w, n, n_rays=32, max_range=8.0, agent_radius=0.3, method=m, capacity=32),
+                w, n, n_rays=32, max_range=8.0, agent_radius=0.3, method=m),
         }
         for name, mk in makers.items():
             row = []
@@ -117,7 +118,9 @@ def methods(ns):
                 b = mk(m)
                 row.append(timeit(lambda b=b, u=u: b.output(0.0, {}, u, np), reps))
             if jax is not None:
-                with x64(True):
+                if b.search is not None and math.isfinite(b.search.reach):
+                    b.search.plan(pose)         # capacity from these positions, as
+                with x64(True):                 # the compiled engine plans it
                     f = jax.jit(lambda p, b=b: b.output(0.0, {}, {"pose": p}, jnp))
                     pj = jnp.asarray(pose)
                     row.append(timeit(lambda f=f, pj=pj: jax.block_until_ready(f(pj)),

@@ -169,3 +169,18 @@ def test_occupancy_world_edges_on_cell_centres():
     r = rng.uniform(0, 0.25, len(q))
     _, first = g.disc_hits(q, r)
     np.testing.assert_array_equal(first, shapely_disc_hits(w, q, r))
+
+
+def test_segment_segment_distance_matches_shapely():
+    from avblocks.environment.edges import segment_segment_dist2, segment_segment_distance
+    rng = np.random.default_rng(4)
+    a0, a1, b0, b1 = rng.uniform(-1, 1, (4, 2000, 2))
+    b0[:50], b1[:50] = a0[:50] + 0.5 * (a1[:50] - a0[:50]), a1[:50] + (a1[:50] - a0[:50])
+    b0[50:100] = a1[50:100]                                # shared endpoint
+    args = (a0[:, 0], a0[:, 1], a1[:, 0], a1[:, 1], b0[:, 0], b0[:, 1], b1[:, 0], b1[:, 1])
+    d = segment_segment_distance(*args)
+    want = shapely.distance(shapely.linestrings(np.stack([a0, a1], 1)),
+                            shapely.linestrings(np.stack([b0, b1], 1)))
+    np.testing.assert_allclose(d, want, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(segment_segment_dist2(*args), want ** 2, rtol=0, atol=1e-12)
+    assert np.all(d[50:100] == 0)

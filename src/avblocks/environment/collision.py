@@ -60,7 +60,7 @@ from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
-from .edges import EdgeGrid, point_in_ring, segment_segment_distance
+from .edges import EdgeGrid, point_in_ring, segment_segment_dist2
 from .footprint import Disc, Footprint
 from .world import World
 
@@ -236,10 +236,10 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
             ai, bi = vi, xp.roll(verts, -1, axis=1)[:, None, :, None, :]
             aj = vj[:, :, None, :, :]
             bj = xp.roll(vj, -1, axis=2)[:, :, None, :, :]
-            dd = segment_segment_distance(ai[..., 0], ai[..., 1], bi[..., 0], bi[..., 1],
-                                          aj[..., 0], aj[..., 1], bj[..., 0], bj[..., 1],
-                                          xp)                   # (N, M, V, V)
-            near = xp.min(dd, axis=(-2, -1)) <= 2.0 * m
+            dd = segment_segment_dist2(ai[..., 0], ai[..., 1], bi[..., 0], bi[..., 1],
+                                       aj[..., 0], aj[..., 1], bj[..., 0], bj[..., 1],
+                                       xp)                      # (N, M, V, V), squared
+            near = xp.min(dd, axis=(-2, -1)) <= 4.0 * m * m
             # one polygon inside the other: a vertex of one inside the other
             j_in_i = point_in_ring(vj[:, :, 0, 0], vj[:, :, 0, 1], verts, xp)
             i0 = xp.broadcast_to(verts[:, None, 0, :], vj[:, :, 0, :].shape)

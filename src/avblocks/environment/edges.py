@@ -49,7 +49,9 @@ Kernels (each broadcasts element-wise, ``xp`` arrays)
   (0 when ``o`` is inside);
 - :func:`point_in_polygons`: crossing number of a horizontal ray against
   all edges (brute force, (N, E): for tests and small worlds);
-- :func:`segment_segment_distance`, :func:`point_in_ring` (a vertex loop);
+- :func:`segment_segment_distance` (and the squared forms
+  :func:`point_segment_dist2`, :func:`segment_segment_dist2` used for
+  ``<=`` tests), :func:`point_in_ring` (a vertex loop);
 - :meth:`EdgeGrid.disc_hits`: circle (disc) vs every obstacle through the
   grid: ``inside(q) or dist(q, boundary) <= r`` for polygons,
   ``|q - c| <= r + R`` for circles;
@@ -152,10 +154,24 @@ def ray_circle(ox, oy, ux, uy, cx, cy, r, xp=np):
     return xp.where(ok, xp.where(inside, 0.0, tca - thc), xp.inf)
 
 
-def segment_segment_distance(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp=np):
-    """Distance between segments ``a0 a1`` and ``b0 b1`` (broadcast): 0 when
-    they meet (closed segments), else the least of the four endpoint-to-
-    segment distances."""
+def point_segment_dist2(px, py, ax, ay, bx, by, xp=np):
+    """Squared :func:`point_segment_distance` (no square root: cheaper for
+    ``<=`` tests)."""
+    ex, ey = bx - ax, by - ay
+    wx, wy = px - ax, py - ay
+    ee = ex * ex + ey * ey
+    ee_s = xp.where(ee > 0, ee, 1.0)
+    t = (wx * ex + wy * ey) / ee_s
+    vx, vy = px - bx, py - by
+    c = _cross(wx, wy, ex, ey)
+    return xp.where((t <= 0) | (ee <= 0), wx * wx + wy * wy,
+                    xp.where(t >= 1, vx * vx + vy * vy, c * c / ee_s))
+
+
+def segment_segment_dist2(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp=np):
+    """Squared distance between segments ``a0 a1`` and ``b0 b1`` (broadcast):
+    0 when they meet (closed segments), else the least of the four squared
+    endpoint-to-segment distances."""
     o1 = _cross(a1x - a0x, a1y - a0y, b0x - a0x, b0y - a0y)
     o2 = _cross(a1x - a0x, a1y - a0y, b1x - a0x, b1y - a0y)
     o3 = _cross(b1x - b0x, b1y - b0y, a0x - b0x, a0y - b0y)
@@ -163,11 +179,20 @@ def segment_segment_distance(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp=np):
     collinear = (o1 == 0) & (o2 == 0) & (o3 == 0) & (o4 == 0)
     meet = (o1 * o2 <= 0) & (o3 * o4 <= 0) & ~collinear
     d = xp.minimum(
-        xp.minimum(point_segment_distance(a0x, a0y, b0x, b0y, b1x, b1y, xp),
-                   point_segment_distance(a1x, a1y, b0x, b0y, b1x, b1y, xp)),
-        xp.minimum(point_segment_distance(b0x, b0y, a0x, a0y, a1x, a1y, xp),
-                   point_segment_distance(b1x, b1y, a0x, a0y, a1x, a1y, xp)))
+        xp.minimum(point_segment_dist2(a0x, a0y, b0x, b0y, b1x, b1y, xp),
+                   point_segment_dist2(a1x, a1y, b0x, b0y, b1x, b1y, xp)),
+        xp.minimum(point_segment_dist2(b0x, b0y, a0x, a0y, a1x, a1y, xp),
+                   point_segment_dist2(b1x, b1y, a0x, a0y, a1x, a1y, xp)))
     return xp.where(meet, 0.0, d)
+
+
+def segment_segment_distance(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp=np):
+    """Distance between segments ``a0 a1`` and ``b0 b1`` (broadcast): 0 when
+    they meet (closed segments), else the least of the four endpoint-to-
+    segment distances."""
+    d2 = segment_segment_dist2(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y, xp)
+    pos = d2 > 0
+    return xp.where(pos, xp.sqrt(xp.where(pos, d2, 1.0)), 0.0)
 
 
 def point_in_ring(px, py, ring, xp=np):
@@ -424,11 +449,11 @@ class EdgeGrid:
             ee = xp.where(e >= 0, e, self.n_edges)
             seg = xp.asarray(self.seg)[ee]                                 # (N, K, 2, 2)
             own = xp.asarray(self.owner)[ee]
-            d = segment_segment_distance(
+            d2 = segment_segment_dist2(
                 fx0[:, :, None], fy0[:, :, None], fx1[:, :, None], fy1[:, :, None],
                 seg[:, None, :, 0, 0], seg[:, None, :, 0, 1], seg[:, None, :, 1, 0],
                 seg[:, None, :, 1, 1], xp)                                 # (N, V, K)
-            touch = (e >= 0) & ((xp.min(d, axis=1) <= m)
+            touch = (e >= 0) & ((xp.min(d2, axis=1) <= m * m)
                                 | point_in_ring(seg[..., 0, 0], seg[..., 0, 1], verts, xp))
             first = xp.minimum(first, xp.min(xp.where(touch, own, big), axis=1))
             polys, inside = self.inside(verts[:, 0, :], xp)

@@ -1,8 +1,9 @@
 """`avblocks run formation --backend jax` prints the NumPy run's outcome
 numbers: integers and strings equal, floats within 1e-4 relative (or 1e-9
 absolute for the ~1e-14 m formation errors, which are rounding noise).
-Run with the default bodies (no contact) and with bodies large enough to
-touch the corridor walls and each other (Collision's counts are non-zero)."""
+Run with the default bodies (no contact; the full run, slow) and with
+bodies large enough to touch the corridor walls and each other for the
+first 50 s (Collision's counts are non-zero)."""
 
 import json
 
@@ -34,7 +35,7 @@ def same(a, b, where=""):
 
 @pytest.mark.jax
 @pytest.mark.parametrize("sets", [pytest.param((), marks=pytest.mark.slow),
-                                  ("body_radius=1.05",)])
+                                  ("body_radius=1.05", "t_final=50")])
 def test_formation_jax_summary_equals_numpy(tmp_path, sets):
     pytest.importorskip("jax")
     a = numbers(tmp_path, "numpy", *sets)
@@ -43,6 +44,7 @@ def test_formation_jax_summary_equals_numpy(tmp_path, sets):
     for k in a:
         same(a[k], b[k], k)
     if sets:
+        assert a["states"] == ["wedge", "column"]
         assert a["samples_touching_wall"] > 100 and a["samples_touching_agent"] > 100
     else:
         assert a["samples_touching_wall"] == a["samples_touching_agent"] == 0

@@ -200,3 +200,138 @@ def test_block_errors():
         Collision(World(), 3, footprint=Disc([0.1, 0.2]))
     with pytest.raises(av.ParameterError):
         Collision(World(), 3, input="velocity")
+
+
+# ---------------------------------------------------------------- grid method
+def _both(w, pose, fp, n=None, **kw):
+    n = len(pose) if n is None else n
+    g = Collision(w, n, footprint=fp, method="grid", **kw)
+    s = Collision(w, n, footprint=fp, method="shapely", **kw)
+    u = {"pose": np.asarray(pose, float)}
+    return g.output(0.0, {}, u, np), s.output(0.0, {}, u, np)
+
+
+PAC = PolygonFootprint([(1, 0), (-0.6, 0.6), (-0.2, 0), (-0.6, -0.6)])
+
+
+@pytest.mark.parametrize("fp", [Disc(0.8), Rectangle(1.6, 0.8), PAC])
+@pytest.mark.parametrize("margin", [0.0, 0.3])
+def test_grid_method_equals_shapely_random(fp, margin):
+    gen = np.random.default_rng(7)
+    w = _random_world(gen)
+    pose = np.c_[gen.uniform(0, 50, (300, 2)), gen.uniform(-np.pi, np.pi, 300)]
+    a, b = _both(w, pose, fp, margin=margin)
+    assert 20 < b["hit_obstacle"].sum() < 280 and b["hit_agent"].sum() > 5
+    for k in b:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+def test_grid_method_hand_cases():
+    """The hand-built cases above through the grid method: touching, holes,
+    exact circles, walls, per-agent radii."""
+    donut = shapely.Polygon([(-5, -5), (5, -5), (5, 5), (-5, 5)],
+                            holes=[[(-2, -2), (2, -2), (2, 2), (-2, 2)]])
+    w = World([donut])
+    a, _ = _both(w, [[0, 0], [1.5, 0], [1.49, 0], [3.5, 0], [0, -1.5]], Disc(0.5))
+    assert a["hit_obstacle"].tolist() == [False, True, False, True, True]
+    w = World([rectangle(10, 10, 11, 11), Circle((0, 0), 1.0), rectangle(-0.2, -0.2, 0.2, 0.2)])
+    p = 1.5 * np.array([np.cos(0.0872665), np.sin(0.0872665)])
+    a, _ = _both(w, [p * (1 - 1e-9), p * 1.0001, [20, 20]], Disc(0.5))
+    assert a["hit_obstacle"].tolist() == [True, False, False]
+    a, _ = _both(w, [[0, 0, 0], [10.5, 10.5, 0], [5, 5, 0]], Disc(0.1))
+    assert a["hit_index"].tolist() == [1, 0, -1]
+    a, _ = _both(w, [[1.5, 0, 0], [2.001, 0, 0]], Rectangle(1.0, 1.0))
+    assert a["hit_obstacle"].tolist() == [True, False]
+    w = World([], bounds=(0, 0, 10, 10), walls=True)
+    a, _ = _both(w, [[0.4, 5], [5, 5], [5, 9.6], [5.0, 6.0]], Disc(0.5))
+    assert a["hit_index"].tolist() == [0, -1, 3, -1]
+    assert a["hit_agent_index"].tolist() == [-1, 3, -1, 1]
+    a, _ = _both(World(), [[0, 0], [1.0, 0], [2.6, 0]], Disc([0.3, 0.7, 0.2]))
+    assert a["hit_agent"].tolist() == [True, True, False]
+    # a footprint swallowing a small obstacle, and one inside a big obstacle
+    w = World([rectangle(-0.1, -0.1, 0.1, 0.1), rectangle(10, 10, 20, 20)])
+    a, _ = _both(w, [[0, 0, 0.3], [15, 15, 0.0], [5, 5, 0]], Rectangle(1.0, 1.0))
+    assert a["hit_index"].tolist() == [0, 1, -1]
+
+
+def test_grid_margin_raised_later_rebuilds():
+    w = World([SQUARE])
+    c = Collision(w, 1, footprint=Disc(0.5), method="grid")
+    u = {"pose": np.array([[0.3, 0.0, 0.0]])}
+    assert not c.output(0.0, {}, u, np)["collision"][0]
+    c.set_parameter("margin", 0.25)
+    assert c.output(0.0, {}, u, np)["collision"][0]
+
+
+@pytest.mark.jax
+@pytest.mark.parametrize("fp", [Disc(0.8), Rectangle(1.6, 0.8)])
+def test_grid_method_traced_equals_numpy(fp):
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+
+    from avblocks.core.compiled._jax import x64
+    gen = np.random.default_rng(3)
+    w = _random_world(gen)
+    pose = np.c_[gen.uniform(0, 50, (200, 2)), gen.uniform(-np.pi, np.pi, 200)]
+    c = Collision(w, 200, footprint=fp, capacity=16, method="grid")
+    want = c.output(0.0, {}, {"pose": pose}, np)
+    with x64(True):
+        got = jax.jit(lambda p: c.output(0.0, {}, {"pose": p}, jnp))(pose)
+    for k in want:
+        np.testing.assert_array_equal(np.asarray(got[k]), want[k], err_msg=k)
+
+
+@pytest.mark.jax
+def test_shapely_method_refused_by_the_compiled_engine_by_name():
+    pytest.importorskip("jax")
+    d = av.Diagram()
+    f = d.add(av.vehicles.Unicycle(pose0=[[0.0, 0.0, 0.0]]), name="f")
+    c = d.add(av.blocks.Constant([[1.0, 0.0]]), name="c")
+    cl = d.add(Collision(World([SQUARE]), 1, method="shapely"), name="col")
+    d.connect(c.y, f.cmd)
+    d.connect(f.pose, cl.pose)
+    with pytest.raises(Exception, match="col"):
+        av.simulate(d, 1.0, dt=0.1, log=[cl.collision], backend="jax")
+    assert Collision(World([SQUARE]), 1).traceable        # the default traces
+
+
+@pytest.mark.jax
+def test_traced_margin_beyond_the_grid_reach_is_reported():
+    """Under JAX the grid is static: a margin raised past its reach is handed
+    to the run's diagnostics (never silent); within it, nothing is exceeded."""
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+
+    from avblocks.core import diagnostics
+    from avblocks.core.compiled._jax import x64
+    from avblocks.utility.spatial import Need
+
+    c = Collision(World([SQUARE]), 2, footprint=Disc(0.5), margin=0.1)  # reach 0.7
+    grid = c.edges
+
+    class Collector:                    # what the compiled engine's collector sees
+        needs = []
+
+        def add(self, owner, need, plan):
+            if owner is grid:           # (the agent search reports too)
+                self.needs.append(need.reach)
+
+    def run(p):
+        Collector.needs.clear()
+        y = c.output(0.0, {}, {"pose": p}, jnp)
+        return y["collision"], list(Collector.needs)
+
+    pose = np.array([[0.3, 0.0, 0.0], [-3.0, 0.0, 0.0]])
+    tok = diagnostics._ACTIVE.set(Collector())
+    try:
+        with x64(True):
+            c.set_parameter("margin", 0.2)      # (a fresh trace per value)
+            hit, needs = jax.jit(lambda p: run(p))(pose)
+            assert np.asarray(hit).tolist() == [True, False]
+            assert grid.exceeded(Need(0, np.asarray(needs[0]))) is None
+            c.set_parameter("margin", 0.3)
+            _, needs = jax.jit(lambda p: run(p))(pose)
+    finally:
+        diagnostics._ACTIVE.reset(tok)
+    msg = grid.exceeded(Need(0, np.asarray(needs[0])))
+    assert "radius 0.8" in msg and "built for 0.7" in msg

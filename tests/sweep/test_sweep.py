@@ -334,7 +334,7 @@ def test_ensemble_sweep_matches_numpy_runs(client, serial, tmp_path):
             assert abs(float(case["final_distance"]) - fd) < 1e-12
     # a scenario JAX cannot trace is refused before any task
     with pytest.raises(SweepError, match="traceable"):
-        av.sweep("formation", grid={"gain": [1.0]}, fixed={"agents": 2},
+        av.sweep(SCEN, grid={"goal": [1.0]}, fixed={**FIXED, "untraceable": True},
                  out=str(tmp_path / "no.zarr"), scheduler=client, ensemble=True)
 
 

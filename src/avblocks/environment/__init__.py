@@ -12,14 +12,19 @@ range sensors and target detection.
   :class:`Broadcast` (information propagation).
 - :class:`RangeSensor` (lidar-like rays) and :func:`cast_rays`.
 - :class:`TargetDetection` (search and pickup).
+- :class:`EdgeGrid` (``edges``): a world's obstacles as padded edge arrays
+  with a uniform-grid broad phase, and the ``xp`` geometry kernels.
 
-These blocks compute with NumPy, SciPy k-d trees and shapely (spatial
-indexes, never an N^2 loop); they run in the NumPy simulator and are not
-JAX-traceable.
+``Collision`` and ``RangeSensor`` are traceable by default (grid method:
+edge arrays and the cell-list neighbour search; the exact shapely method
+is an option). The other blocks compute with NumPy, SciPy k-d trees and
+shapely (spatial indexes, never an N^2 loop); they run in the NumPy
+simulator and are not JAX-traceable.
 """
 
-from .collision import Collision, StopOnCollision, collide
+from .collision import Collision, StopOnCollision, collide, collide_grid
 from .comm import Broadcast, CommChannel, Gossip, gossip_step
+from .edges import EdgeGrid
 from .footprint import (
     FAMILY_FOOTPRINTS,
     Disc,
@@ -36,7 +41,7 @@ from .neighbors import (
     radius_neighbors,
     to_networkx,
 )
-from .range_sensor import RangeSensor, cast_rays, ray_angles
+from .range_sensor import RangeSensor, cast_rays, cast_rays_grid, ray_angles
 from .targets import TargetDetection, detect_targets
 from .world import Background, Circle, World, rectangle
 
@@ -44,10 +49,10 @@ __all__ = [
     "World", "Background", "Circle", "rectangle",
     "Footprint", "Disc", "PolygonFootprint", "Rectangle", "default_footprint",
     "FAMILY_FOOTPRINTS",
-    "Collision", "StopOnCollision", "collide",
+    "Collision", "StopOnCollision", "collide", "collide_grid", "EdgeGrid",
     "Neighbors", "radius_neighbors", "knn", "fov_neighbors", "to_networkx",
     "PAD_DISTANCE",
     "CommChannel", "Gossip", "Broadcast", "gossip_step",
-    "RangeSensor", "cast_rays", "ray_angles",
+    "RangeSensor", "cast_rays", "cast_rays_grid", "ray_angles",
     "TargetDetection", "detect_targets",
 ]

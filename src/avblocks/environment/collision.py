@@ -20,11 +20,36 @@ Method (never an N^2 loop)
 Touching counts as a collision (closed sets). ``margin`` > 0 inflates every
 footprint by that distance (a safety distance).
 
-The computation runs in NumPy/shapely: the block is not traceable by JAX
-(it runs in the NumPy simulator only).
+That is :func:`collide`, the exact NumPy/shapely method
+(``Collision(..., method="shapely")``). ``method="grid"`` computes the same
+predicates with ``xp`` code that the compiled (JAX) engine traces
+(:func:`collide_grid`):
+
+- agents vs obstacles: the world's edges as padded arrays with a
+  uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`,
+  built for the largest footprint reach ``bounding radius + margin``);
+  each agent tests only the candidate edges, circles and polygons of its
+  cell (an (N, K) product, ``K`` the fullest cell's list);
+- agents vs agents: :class:`~avblocks.utility.spatial.NeighborSearch`
+  (a cell list) within twice the largest reach, then the exact test on
+  the candidates: discs ``|c_i - c_j| <= r_i + r_j + 2 m``; polygons:
+  least edge-edge distance ``<= 2 m`` or one polygon's vertex inside the
+  other.
+
+Both methods give the same booleans and indices except for contacts
+within ~1e-12 m of touching (float64 rounding; tests compare them on
+random worlds with concave polygons, holes, circles and walls).
+
+The default, ``method="auto"``, is traceable: a compiled run uses the grid
+method and the NumPy engine the shapely one, the faster there at every N
+measured (``benchmarks/environment.py``, 2 cores, 200 random obstacles, one
+agent per 16 m^2: discs 0.17 / 0.98 / 10.5 ms at N = 100 / 1,000 / 10,000
+against 0.91 / 4.5 / 54 ms for the grid code in NumPy).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 import shapely
@@ -32,9 +57,17 @@ from scipy.spatial import cKDTree
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..core.params import positive_scalar
+from ..utility.spatial import Need, NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
+from .edges import EdgeGrid, point_in_ring, segment_segment_dist2
 from .footprint import Disc, Footprint
 from .world import World, _disc_obstacle_hits
+
+#: Agent counts up to which the agent-agent search compares all pairs by
+#: default (an (N, N) product: exact, no capacity to plan) when no capacity
+#: is given.
+SMALL_N = 64
 
 
 def _poly_obstacle_hits(world, polys, margin):
@@ -133,6 +166,74 @@ def collide(world, pose, footprint, margin=0.0, agents=True):
             "hit_agent_index": agent_index}
 
 
+def _posed_xp(body, pose, xp):
+    """(N, V, 2) world vertices of body-frame polygons (N, V, 2) at poses."""
+    if pose.shape[1] >= 3:
+        c, s = xp.cos(pose[:, 2]), xp.sin(pose[:, 2])
+    else:
+        c = xp.ones(pose.shape[:1], dtype=pose.dtype)
+        s = xp.zeros(pose.shape[:1], dtype=pose.dtype)
+    vx, vy = body[..., 0], body[..., 1]
+    x = c[:, None] * vx - s[:, None] * vy + pose[:, 0:1]
+    y = s[:, None] * vx + c[:, None] * vy + pose[:, 1:2]
+    return xp.stack([x, y], axis=-1)
+
+
+def _first_pair(idx, hit, xp):
+    big = np.int32(np.iinfo(np.int32).max)
+    f = xp.min(xp.where(hit, idx, big), axis=1)
+    any_ = f < big
+    return any_, xp.where(any_, f, -1)
+
+
+def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
+    """:func:`collide` in ``xp`` code (traceable): ``grid`` an
+    :class:`EdgeGrid` of the world built for reach >= the largest footprint
+    reach plus ``margin``; ``search`` a :class:`NeighborSearch` with reach >=
+    twice that (None: no agent-agent test)."""
+    n = pose.shape[0]
+    centers = pose[:, :2]
+    m = xp.asarray(margin, dtype=pose.dtype)
+    if isinstance(footprint, Disc):
+        r = xp.asarray(footprint.radii(n), dtype=pose.dtype) + m
+        ho, first = grid.disc_hits(centers, r, xp)
+        reach = 2.0 * xp.max(r)
+    else:
+        body = xp.asarray(footprint.body(n), dtype=pose.dtype)
+        verts = _posed_xp(body, pose, xp)
+        ho, first = grid.polygon_hits(verts, centers, m, xp)
+        reach = 2.0 * (float(np.max(footprint.bounding_radius(n))) + m)
+    if agents and n > 1 and search is not None:
+        idx, dist = search.within(centers, reach, xp=xp)
+        ok = idx >= 0
+        j = xp.where(ok, idx, 0)
+        if isinstance(footprint, Disc):
+            hit = ok & (dist <= r[:, None] + r[j])
+        else:
+            vi = verts[:, None, :, None, :]                    # (N, 1, V, 1, 2)
+            vj = verts[j]                                       # (N, M, V, 2)
+            ai, bi = vi, xp.roll(verts, -1, axis=1)[:, None, :, None, :]
+            aj = vj[:, :, None, :, :]
+            bj = xp.roll(vj, -1, axis=2)[:, :, None, :, :]
+            dd = segment_segment_dist2(ai[..., 0], ai[..., 1], bi[..., 0], bi[..., 1],
+                                       aj[..., 0], aj[..., 1], bj[..., 0], bj[..., 1],
+                                       xp)                      # (N, M, V, V), squared
+            near = xp.min(dd, axis=(-2, -1)) <= 4.0 * m * m
+            # one polygon inside the other: a vertex of one inside the other
+            j_in_i = point_in_ring(vj[:, :, 0, 0], vj[:, :, 0, 1], verts, xp)
+            i0 = xp.broadcast_to(verts[:, None, 0, :], vj[:, :, 0, :].shape)
+            i_in_j = point_in_ring(i0[..., 0:1], i0[..., 1:2], vj, xp)[..., 0]
+            hit = ok & (near | j_in_i | i_in_j)
+        ha, ai_ = _first_pair(idx, hit, xp)
+    else:
+        ha = xp.zeros((n,), dtype=bool)
+        ai_ = xp.full((n,), -1, dtype=np.int32)
+    if xp is np:                                   # the declared dtype (traced: cast
+        first, ai_ = first.astype(np.int64), ai_.astype(np.int64)   # by the engine)
+    return {"hit_obstacle": ho, "hit_agent": ha, "collision": ho | ha,
+            "hit_index": first, "hit_agent_index": ai_}
+
+
 class Collision(Block):
     """Collision detector for N agents in a :class:`World` (AVLib III.C).
 
@@ -169,14 +270,27 @@ class Collision(Block):
         Make the block discrete (outputs computed at hits and held): a
         period equal to the simulation step computes collisions once per
         step instead of at every solver stage.
+    method : "auto", "grid" or "shapely"
+        ``"grid"``: traceable ``xp`` code (:func:`collide_grid`) in both
+        engines. ``"shapely"``: the exact NumPy/shapely :func:`collide`
+        (NumPy engine only). ``"auto"`` (default): grid when compiled,
+        shapely in the NumPy engine (faster there). They agree except
+        within ~1e-12 m of touching.
+    capacity : int, optional
+        Static per-cell capacity of the agent-agent neighbour search for
+        the compiled engine (see :class:`~avblocks.utility.spatial.NeighborSearch`).
+        Default: all pairs when ``n <= SMALL_N`` (exact, nothing to plan),
+        else planned by the compiled engine from the first positions.
+    reach : float, optional
+        Largest ``bounding radius + margin`` the static grid and neighbour
+        search serve (structural). Default ``bounding radius + 2 margin``:
+        a compiled run may double ``margin`` without a rebuild.
 
     Equations
     ---------
-    See :func:`collide`; touching counts.
-
-    Notes
-    -----
-    NumPy/shapely side computation: not JAX-traceable.
+    See :func:`collide`; touching counts. The grid is built for ``reach``:
+    a larger margin set later re-builds it in the NumPy engine and is
+    reported as an overflow by a compiled run.
 
     Example
     -------
@@ -188,11 +302,9 @@ class Collision(Block):
     ([True, False], [0, -1])
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
     def __init__(self, world, n, *, footprint=None, input="pose", margin=0.0,
-                 agents=True, period=None):
+                 agents=True, period=None, method="auto", capacity=None,
+                 reach=None):
         super().__init__()
         if not isinstance(world, World):
             raise ParameterError("world must be an avblocks.environment.World",
@@ -220,10 +332,51 @@ class Collision(Block):
         self.declare_output("hit_agent_index", (n,), "int64",
                             doc="lowest other agent index touched, -1 if none")
         maybe_periodic(self, period)
+        if method not in ("auto", "grid", "shapely"):
+            raise ParameterError("method must be 'auto', 'grid' or 'shapely'",
+                                 block="Collision", param="method",
+                                 expected=["auto", "grid", "shapely"], found=method)
+        self.method = method
+        if method == "shapely":
+            #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+            self.traceable = False
+            return
+        if reach is None:
+            reach = float(np.max(footprint.bounding_radius(n))) + 2.0 * float(margin)
+        reach = positive_scalar(reach, "Collision", "reach", allow_zero=True)
+        self._grid_cache = {}            # EdgeGrid per reach (a memo: not in the compile key)
+        self._reach = reach
+        sreach = max(2.0 * reach, 1e-9)
+        if capacity is None and n <= SMALL_N:
+            sreach = math.inf           # all pairs: (N, N), exact, no plan needed
+        self.search = (NeighborSearch(reach=sreach, points=self.input, capacity=capacity)
+                       if self.agents and n > 1 else None)
+
+    def _grid(self, reach):
+        g = self._grid_cache.get(reach)
+        if g is None:
+            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
+        return g
+
+    @property
+    def edges(self):
+        """The world as an :class:`EdgeGrid` (built on first use)."""
+        return self._grid(self._reach)
 
     def output(self, t, x, u, xp):
-        return collide(self.world, np.asarray(u[self.input]), self.footprint,
-                       float(self.margin), self.agents)
+        if self.method == "shapely" or (self.method == "auto" and xp is np):
+            return collide(self.world, np.asarray(u[self.input]), self.footprint,
+                           float(self.margin), self.agents)
+        grid = self.edges
+        need = float(np.max(self.footprint.bounding_radius(self.n))) + self.margin
+        if xp is np:
+            if float(need) > grid.reach:
+                grid = self._grid(float(need))
+        else:
+            from ..core import diagnostics
+            diagnostics.report(grid, Need(xp.asarray(0), need), grid)
+        return collide_grid(grid, self.search, u[self.input], self.footprint,
+                            self.margin, self.agents, xp)
 
 
 class StopOnCollision(Block):

@@ -20,10 +20,32 @@ intersected only with the rays inside the arc of directions it subtends
 (found by a binary search in the sorted ray angles), all in flat NumPy
 arrays.
 
-NumPy/shapely side computation: not JAX-traceable.
+That is :func:`cast_rays`, the NumPy/shapely method
+(``RangeSensor(..., method="shapely")``).
+
+Traceable method (``method="grid"``; the default ``"auto"`` uses it when compiled)
+-----------------------------------------------------------------------------------
+:func:`cast_rays_grid` uses the same two hit formulas in ``xp`` code with
+static shapes: the world's edges and circles as padded arrays with a
+uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`
+built for ``reach = max_range``: an agent's cell lists every edge and
+circle within ``max_range`` of any point of the cell, ``K`` and ``Kc`` of
+them at most), so each agent intersects its R rays with its own
+candidates only, an (N, R, K) product (no angular culling: every ray
+tests every candidate). Other agents come from a
+:class:`~avblocks.utility.spatial.NeighborSearch` within ``max_range +
+max(agent_radius)``: (N, R, M). Both methods agree to 1e-9 m (tests).
+
+The default, ``method="auto"``, is traceable: a compiled run uses the grid
+method and the NumPy engine :func:`cast_rays`, the faster there (it culls
+rays by the arc each edge subtends): 32 rays, 8 m, 200 random obstacles,
+one agent per 16 m^2: 3.3 / 11 / 75 ms at N = 100 / 1,000 / 10,000 against
+29 / 178 / 2,600 ms for the grid code in NumPy (2 cores).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -31,8 +53,15 @@ from scipy.spatial import cKDTree
 from ..core import rng as _rng
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..core.params import positive_scalar
+from ..utility.spatial import Need, NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
+from .edges import EdgeGrid, ray_circle, ray_segment
 from .world import World
+
+#: Agent counts up to which the agent search compares all pairs by default
+#: (an (N, N) product: exact, no capacity to plan) when no capacity is given.
+SMALL_N = 64
 
 _EPS = 1e-12
 
@@ -210,6 +239,45 @@ def cast_rays(world, pose, angles, max_range, agent_radius=None):
     return np.minimum(out, max_range)
 
 
+def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=np):
+    """:func:`cast_rays` in ``xp`` code (traceable), (N, R) ranges.
+
+    ``grid``: an :class:`EdgeGrid` of the world built for reach >=
+    ``max_range`` (or None: no world); ``search``: a
+    :class:`NeighborSearch` with reach >= ``max_range + max(agent_radius)``
+    (used when ``agent_radius`` is given and N > 1).
+    """
+    n = pose.shape[0]
+    ox, oy = pose[:, 0:1, None], pose[:, 1:2, None]                     # (N, 1, 1)
+    th = pose[:, 2] if pose.shape[1] >= 3 else xp.zeros((n,), dtype=pose.dtype)
+    phi = th[:, None] + xp.asarray(angles, dtype=pose.dtype)[None, :]   # (N, R)
+    ux, uy = xp.cos(phi)[..., None], xp.sin(phi)[..., None]             # (N, R, 1)
+    rmax = xp.asarray(max_range, dtype=pose.dtype)
+    out = xp.full(phi.shape, xp.inf, dtype=pose.dtype)
+    if grid is not None and grid.n_edges:
+        e, _, _ = grid.candidate_edges(pose[:, :2], xp)
+        seg = xp.asarray(grid.seg)[xp.where(e >= 0, e, grid.n_edges)][:, None]  # (N,1,K,2,2)
+        t = ray_segment(ox, oy, ux, uy, seg[..., 0, 0], seg[..., 0, 1], seg[..., 1, 0],
+                        seg[..., 1, 1], xp)
+        out = xp.minimum(out, xp.min(xp.where(e[:, None] >= 0, t, xp.inf), axis=-1))
+    if grid is not None and grid.n_circles:
+        c = grid.candidate_circles(pose[:, :2], xp)
+        cc = xp.where(c >= 0, c, grid.n_circles)
+        cen = xp.asarray(grid.circle_center)[cc][:, None]               # (N, 1, Kc, 2)
+        rad = xp.asarray(grid.circle_radius)[cc][:, None]
+        t = ray_circle(ox, oy, ux, uy, cen[..., 0], cen[..., 1], rad, xp)
+        out = xp.minimum(out, xp.min(xp.where(c[:, None] >= 0, t, xp.inf), axis=-1))
+    if agent_radius is not None and n > 1 and search is not None:
+        r = xp.broadcast_to(xp.asarray(agent_radius, dtype=pose.dtype), (n,))
+        idx, _ = search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
+        ok = idx >= 0
+        j = xp.where(ok, idx, 0)
+        t = ray_circle(ox, oy, ux, uy, pose[j, 0][:, None], pose[j, 1][:, None],
+                       r[j][:, None], xp)                                # (N, R, M)
+        out = xp.minimum(out, xp.min(xp.where(ok[:, None], t, xp.inf), axis=-1))
+    return xp.minimum(out, rmax)
+
+
 class RangeSensor(Block):
     """A lidar-like range sensor on each of N agents.
 
@@ -250,6 +318,18 @@ class RangeSensor(Block):
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (a scan per hit).
+    method : "auto", "grid" or "shapely"
+        ``"grid"``: traceable ``xp`` code (:func:`cast_rays_grid`) in both
+        engines. ``"shapely"``: the NumPy :func:`cast_rays` (NumPy engine
+        only). ``"auto"`` (default): grid when compiled, :func:`cast_rays`
+        in the NumPy engine (faster there). They agree to 1e-9 m.
+    reach : float, optional
+        Largest ``max_range`` the static grid serves (structural; default
+        the ``max_range`` given). A larger ``max_range`` set later re-builds
+        the grid in the NumPy engine and is reported by a compiled run.
+    capacity : int, optional
+        Static per-cell capacity of the agent search (compiled engine);
+        default: all pairs for ``n <= SMALL_N``, else planned by the engine.
 
     Equations
     ---------
@@ -264,12 +344,9 @@ class RangeSensor(Block):
     array([[ 2., 10., 10., 10.]])
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
     def __init__(self, world, n, *, n_rays=32, fov=2 * np.pi, max_range=10.0,
                  noise_std=0.0, agent_radius=None, angles=None, input="pose",
-                 period=None):
+                 period=None, method="auto", reach=None, capacity=None):
         super().__init__()
         name = "RangeSensor"
         if world is not None and not isinstance(world, World):
@@ -310,16 +387,62 @@ class RangeSensor(Block):
         if noisy:
             self.declare_random_state("key")
         maybe_periodic(self, period)
+        if method not in ("auto", "grid", "shapely"):
+            raise ParameterError("method must be 'auto', 'grid' or 'shapely'", block=name,
+                                 param="method", expected=["auto", "grid", "shapely"],
+                                 found=method)
+        self.method = method
+        if method == "shapely":
+            #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
+            self.traceable = False
+            return
+        reach = positive_scalar(max_range if reach is None else reach, name, "reach")
+        self._grid_cache = {}            # EdgeGrid per reach (a memo: not in the compile key)
+        self._reach = reach
+        self.search = None
+        if agent_radius is not None and n > 1:
+            sreach = reach + float(np.max(agent_radius))
+            if capacity is None and n <= SMALL_N:
+                sreach = math.inf       # all pairs: (N, N), exact, no plan needed
+            self.search = NeighborSearch(reach=sreach, points=self.input,
+                                         capacity=capacity)
+
+    def _grid(self, reach):
+        if self.world is None:
+            return None
+        g = self._grid_cache.get(reach)
+        if g is None:
+            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
+        return g
+
+    @property
+    def edges(self):
+        """The world as an :class:`EdgeGrid` (built on first use; None
+        without a world)."""
+        return self._grid(self._reach)
 
     def output(self, t, x, u, xp):
-        r = cast_rays(self.world, np.asarray(u[self.input]), self.angles,
-                      float(self.max_range), self.agent_radius)
+        if self.method == "shapely" or (self.method == "auto" and xp is np):
+            r = cast_rays(self.world, np.asarray(u[self.input]), self.angles,
+                          float(self.max_range), self.agent_radius)
+            xn = np
+        else:
+            grid, xn = self.edges, xp
+            if grid is not None:
+                if xp is np:
+                    if float(self.max_range) > grid.reach:
+                        grid = self._grid(float(self.max_range))
+                else:
+                    from ..core import diagnostics
+                    diagnostics.report(grid, Need(xp.asarray(0), self.max_range), grid)
+            r = cast_rays_grid(grid, self.search, u[self.input], self.angles,
+                               self.max_range, self.agent_radius, xp)
         if self._noisy:
-            _, sub = _rng.split(x["key"], np)
-            noisy = r + _rng.normal(sub, r.shape, np, 0.0, self.noise_std)
-            r = np.where(r < self.max_range, np.clip(noisy, 0.0, self.max_range), r)
+            _, sub = _rng.split(x["key"], xn)
+            noisy = r + _rng.normal(sub, r.shape, xn, 0.0, self.noise_std)
+            r = xn.where(r < self.max_range, xn.clip(noisy, 0.0, self.max_range), r)
         return {"ranges": r}
 
     def update(self, t, x, u, xp):
-        key, _ = _rng.split(x["key"], np)
+        key, _ = _rng.split(x["key"], np if self.method == "shapely" else xp)
         return {"key": key}

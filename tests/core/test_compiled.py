@@ -120,8 +120,8 @@ def test_multirate_blocks_match_numpy():
 
 
 def test_random_blocks_repeat_from_their_seed():
-    # random blocks draw from jax.random under the compiled backend: the same
-    # seed gives the same run there (not the NumPy backend's Philox numbers)
+    # random blocks draw from the counter-based stream of core.rng: the same
+    # seed gives the same run, and the same run as the NumPy engine
     def build():
         d = av.Diagram()
         rw = d.add(av.controllers.RandomWalk(4, interval=("exponential", 0.3)), name="rw")
@@ -135,6 +135,8 @@ def test_random_blocks_repeat_from_their_seed():
     c = av.simulate(build(), seed=2, **kw)["fleet.pose"]
     np.testing.assert_array_equal(a, b)
     assert np.max(np.abs(a - c)) > 0.1
+    ref = av.simulate(build(), seed=1, **{**kw, "backend": "numpy"})["fleet.pose"]
+    assert np.max(np.abs(a - ref)) < 1e-9
 
 
 def test_analytic_ramp_and_params_argument():

@@ -123,3 +123,18 @@ def test_split_keys_are_independent():
     # same key, same numbers; a neighbouring seed, other numbers
     np.testing.assert_array_equal(rng.uniform(k, (10,), np), rng.uniform(k, (10,), np))
     assert not np.allclose(rng.uniform(rng.key(8), (10,), np), rng.uniform(k, (10,), np))
+
+
+def test_uniform_at_is_layout_free_and_matches_uniform():
+    k = rng.key(11)
+    u = rng.uniform(k, (6,), np)
+    np.testing.assert_array_equal(rng.uniform_at(k, np.arange(6), 0, np), u)
+    i = np.array([[3, 1], [0, 5]])
+    j = np.array([[2, 2], [7, 1]])
+    got = rng.uniform_at(k, i, j, np)
+    for a in range(2):
+        for b in range(2):
+            assert got[a, b] == rng.uniform_at(k, i[a, b], j[a, b], np)
+    with _x64(True):
+        f = jax.jit(lambda kk, a, b: rng.uniform_at(kk, a, b, jnp))
+        np.testing.assert_array_equal(np.asarray(f(jnp.asarray(k), i, j)), got)

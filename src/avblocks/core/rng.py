@@ -104,12 +104,33 @@ def _float_dtype(xp):
 def _unit(k, shape, xp, word=0):
     """Uniform on [0, 1) in the namespace's float type (53 or 24 random bits)."""
     y0, y1 = bits(k, shape, xp, word)
+    return _to_unit(y0, y1, xp)
+
+
+def _to_unit(y0, y1, xp):
     ft = _float_dtype(xp)
     if ft == np.float64:
         hi = (y0 >> _u32(5, xp)).astype(np.float64)
         lo = (y1 >> _u32(6, xp)).astype(np.float64)
         return (hi * 67108864.0 + lo) * (2.0 ** -53)
     return (y0 >> _u32(8, xp)).astype(ft) * ft.type(2.0 ** -24)
+
+
+def uniform_at(k, c0, c1, xp=np):
+    """Uniform on [0, 1) at explicit counters ``(c0, c1)`` (integer arrays,
+    broadcast together, values in ``[0, 2^32)``).
+
+    The draw for a counter does not depend on which other counters are asked
+    for or in what layout: e.g. a link ``i -> j`` gets ``uniform_at(k, i, j)``
+    whatever the shape of the neighbour table it sits in. Counters ``(i, 0)``
+    and ``(i, 1)`` are the ones :func:`uniform` and :func:`normal` use: take
+    a key for one purpose only.
+    """
+    k = _u32(k, xp)
+    c0 = xp.asarray(c0).astype(np.uint32)
+    c1 = xp.asarray(c1).astype(np.uint32)
+    y0, y1 = threefry2x32(k[..., 0], k[..., 1], c0, c1, xp)
+    return _to_unit(y0, y1, xp)
 
 
 def uniform(k, shape, xp=np, low=0.0, high=1.0):

@@ -55,8 +55,9 @@ def _u32(v, xp):
     return xp.asarray(v, dtype=np.uint32)
 
 
-def _rotl(v, r, xp):
-    return (v << _u32(r, xp)) | (v >> _u32(32 - r, xp))
+def _rotl(v, r):
+    # Python-int shift counts keep the uint32 dtype (NumPy >= 2 and JAX alike)
+    return (v << r) | (v >> (32 - r))
 
 
 def threefry2x32(k0, k1, x0, x1, xp=np):
@@ -70,9 +71,9 @@ def threefry2x32(k0, k1, x0, x1, xp=np):
         for i in range(5):                      # 5 groups of 4 rounds
             for r in _ROT[i % 2]:
                 x0 = x0 + x1
-                x1 = _rotl(x1, r, xp) ^ x0
+                x1 = _rotl(x1, r) ^ x0
             x0 = x0 + ks[(i + 1) % 3]
-            x1 = x1 + ks[(i + 2) % 3] + _u32(i + 1, xp)
+            x1 = x1 + (ks[(i + 2) % 3] + _u32(i + 1, xp))
     return x0, x1
 
 

@@ -152,9 +152,10 @@ class CommChannel(Block):
         """One delivery: (sender (N, K), received (N, K, D)) for a random key."""
         pos = xp.asarray(pos)[:, :2]
         idx, _ = self.search.nearest(pos, self.radius, self.k, xp=xp)
-        dst = xp.arange(self.n, dtype=np.int32)[:, None]
-        lost = _link_lost(key, idx, dst, self.p_loss, xp)
-        idx = xp.where(lost, -1, idx).astype(_int(xp))
+        if not (xp is np and float(self.p_loss) == 0.0):
+            dst = xp.arange(self.n, dtype=np.int32)[:, None]
+            idx = xp.where(_link_lost(key, idx, dst, self.p_loss, xp), -1, idx)
+        idx = idx.astype(_int(xp))
         msg = xp.asarray(message)[xp.maximum(idx, 0)]
         msg = xp.where((idx >= 0)[..., None], msg, 0.0)
         return idx, msg
@@ -198,10 +199,18 @@ def gossip_step(informed, pos, radius, p_loss=0.0, key=None, value=None, xp=np,
     src, _ = search.within(pos, radius, xp=xp)             # (N, M): who reaches row j
     dst = xp.arange(n, dtype=np.int32)[:, None]
     ok = (src >= 0) & informed[xp.maximum(src, 0)] & ~informed[:, None]
-    if key is not None:
+    if xp is np:
+        # NumPy: draw only where it matters (the draw of a link does not
+        # depend on which other links are drawn: same numbers as traced)
+        if float(p_loss) > 0.0:
+            if key is None:
+                raise ParameterError("gossip with p_loss > 0 needs a random key",
+                                     param="key")
+            r, c = np.nonzero(ok)
+            ok = ok.copy()
+            ok[r, c] = ~_link_lost(key, src[r, c], r, p_loss, np)
+    else:
         ok = ok & ~_link_lost(key, src, dst, p_loss, xp)
-    elif not (xp is np and float(p_loss) == 0.0):
-        raise ParameterError("gossip with p_loss > 0 needs a random key", param="key")
     reached = xp.any(ok, axis=1)
     new = informed | reached
     if value is None:

@@ -82,8 +82,12 @@ def nest_poses(agents, radius, scouts, seed, margin=0.3):
 
 def make_diagram(agents=500, scouts=5, comm_range=1.0, density=0.5, speed=(0.3, 0.6),
                  mean_interval=2.0, p_loss=0.0, seed=1, t_final=100.0, dt=0.05,
-                 log_every=1):
-    """The nest diagram and its simulation settings (see the module docstring)."""
+                 log_every=1, comm_capacity=16):
+    """The nest diagram and its simulation settings (see the module docstring).
+
+    ``comm_capacity``: most bees per cell of the gossip's neighbour search in
+    a compiled run (``--backend jax``); the NumPy engine sizes itself.
+    """
     n = int(agents)
     radius = hexagon_radius(n, density)
     poly = hexagon(radius)
@@ -95,8 +99,8 @@ def make_diagram(agents=500, scouts=5, comm_range=1.0, density=0.5, speed=(0.3, 
     seeds = np.zeros(n, dtype=bool)
     seeds[:min(int(scouts), n)] = True
     flag = d.add(Constant(seeds), name="scouts")
-    gossip = d.add(Gossip(n, radius=float(comm_range), p_loss=float(p_loss)),
-                   name="gossip")
+    gossip = d.add(Gossip(n, radius=float(comm_range), p_loss=float(p_loss),
+                          capacity=int(comm_capacity)), name="gossip")
     d.connect(bees.pose, walk.pose)
     d.connect(walk.cmd, bees.cmd)
     d.connect(bees.pose, gossip.pose)

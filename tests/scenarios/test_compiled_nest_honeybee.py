@@ -52,7 +52,7 @@ def test_nest_compiles_and_matches_numpy(tmp_path):
     got, _ = _summary(tmp_path, "nest", "jax", sets, 30.0)
     _same_numbers(ref, got)
     assert ref["numbers"]["informed_at_end"] > ref["numbers"]["scouts"]   # it spread
-    _cells_never_overflowed(out, "bees.pose", 16)
+    _cells_never_overflowed(out, "bees.pose", 24)
 
 
 def test_honeybee_compiles_and_matches_numpy(tmp_path):
@@ -63,7 +63,7 @@ def test_honeybee_compiles_and_matches_numpy(tmp_path):
     _same_numbers(ref, got)
     nums = ref["numbers"]
     assert None not in (nums["detected_s"], nums["returned_s"], nums["all_informed_s"])
-    _cells_never_overflowed(out, "bees.pose", 16)
+    _cells_never_overflowed(out, "bees.pose", 24)
 
 
 @pytest.mark.slow

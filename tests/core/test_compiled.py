@@ -442,9 +442,10 @@ def test_cli_backend_option(tmp_path, capsys):
     assert b.meta["backend"] == "jax" and b["fleet.pose"].shape == a["fleet.pose"].shape
     assert np.max(np.abs(a["fleet.pose"] - b["fleet.pose"])) < 1e-9
     capsys.readouterr()
-    # a scenario with NumPy-only environment blocks: one clear line, exit code 2
-    assert main(["run", "nest", "--set", "agents=20", "--t-final", "1", "--quiet",
-                 "--out", str(tmp_path / "nest"), "--backend", "jax"]) == 2
+    # a scenario with NumPy-only environment blocks (flocking's k-d tree
+    # Neighbors; nest compiles now): one clear line, exit code 2
+    assert main(["run", "flocking", "--set", "agents=20", "--t-final", "1", "--quiet",
+                 "--out", str(tmp_path / "flock"), "--backend", "jax"]) == 2
     err = capsys.readouterr().err
     assert "cannot be compiled" in err and "backend='numpy'" in err
 

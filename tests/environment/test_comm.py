@@ -49,12 +49,16 @@ def test_latency_delays_by_exactly_k_steps(latency):
     one = d.add(av.blocks.Constant(np.ones((n, 1))), name="one")
     clock = d.add(av.blocks.Integrator(np.zeros((n, 1))), name="clk")  # message = t
     d.connect(one.y, clock.u)
-    ch = d.add(CommChannel(n, radius=1.5, k=2, latency=latency, input="position"),
-               name="ch")
+    ch = d.add(CommChannel(n, radius=1.5, k=2, latency=latency, input="position",
+                           capacity=4), name="ch")
     d.connect(ps.y, ch.position)
     d.connect(clock.y, ch.message)
     res = av.simulate(d, 2.0, dt=dt, log=[ch.sender, ch.received])
     s, r, t = res[ch.sender], res[ch.received][..., 0], res.t
+    # the compiled engine: the same delay line, sample for sample
+    jr = av.simulate(d, 2.0, dt=dt, log=[ch.sender, ch.received], backend="jax")
+    np.testing.assert_array_equal(jr[ch.sender], s)
+    np.testing.assert_allclose(jr[ch.received], res[ch.received], atol=1e-12)
     L = latency
     assert np.all(s[:L] == -1)
     assert s[L:, 0].tolist() == [[1, -1]] * (len(t) - L)

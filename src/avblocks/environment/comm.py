@@ -35,6 +35,14 @@ def _int(xp):
     return np.int64 if xp is np else xp.asarray(0).dtype
 
 
+def _reach(radius, reach, block):
+    r = float(radius) if reach is None else float(reach)
+    if not r >= float(radius):
+        raise ParameterError("reach must be >= radius", block=block, param="reach",
+                             expected=f">= {float(radius)}", found=reach)
+    return r
+
+
 def _link_lost(key, src, dst, p_loss, xp):
     """True where link ``src -> dst`` loses its packet (``src`` may be -1)."""
     u = _rng.uniform_at(key, xp.maximum(src, 0), dst, xp)
@@ -100,6 +108,11 @@ class CommChannel(Block):
     capacity : int, optional
         Static cell capacity of the neighbour search for compiled runs
         (default: planned by the compiled engine from the first positions).
+    reach : float, optional
+        The largest ``radius`` a compiled run may use (cell edge of the
+        search; default ``radius``). Raise it to vary ``radius`` at run time
+        (``params=``, ensembles); a larger radius than ``reach`` is reported
+        as an overflow.
 
     Example
     -------
@@ -113,7 +126,7 @@ class CommChannel(Block):
     """
 
     def __init__(self, n, *, radius, msg_dim=1, k=None, p_loss=0.0, latency=1,
-                 input="pose", period=None, capacity=None):
+                 input="pose", period=None, capacity=None, reach=None):
         super().__init__()
         name = "CommChannel"
         self.n = n = agent_count(n, name)
@@ -141,7 +154,8 @@ class CommChannel(Block):
                             doc="senders of delivered messages, -1 none")
         self.declare_output("received", (n, k, d), doc="delivered messages")
         self.declare_random_state("key")
-        self.search = NeighborSearch(float(radius), points=self.input, capacity=capacity)
+        self.search = NeighborSearch(_reach(radius, reach, name), points=self.input,
+                                     capacity=capacity)
         if latency:
             self.declare_discrete_state("line_sender",
                                         np.full((latency, n, k), -1, dtype=np.int64))
@@ -271,6 +285,11 @@ class Gossip(Block):
     capacity : int, optional
         Static cell capacity of the neighbour search for compiled runs
         (default: planned by the compiled engine from the first positions).
+    reach : float, optional
+        The largest ``radius`` a compiled run may use (cell edge of the
+        search; default ``radius``). Raise it to vary ``radius`` at run time
+        (``params=``, ensembles); a larger radius than ``reach`` is reported
+        as an overflow.
 
     Example
     -------
@@ -287,7 +306,7 @@ class Gossip(Block):
     """
 
     def __init__(self, n, *, radius, p_loss=0.0, value_dim=None, input="pose",
-                 period=None, capacity=None):
+                 period=None, capacity=None, reach=None):
         super().__init__()
         name = "Gossip"
         self.n = n = agent_count(n, name)
@@ -308,7 +327,8 @@ class Gossip(Block):
             self.declare_output("value", (n, self.value_dim), doc="value carried")
             self.declare_discrete_state("carried", np.zeros((n, self.value_dim)))
         self.declare_random_state("key")
-        self.search = NeighborSearch(float(radius), points=self.input, capacity=capacity)
+        self.search = NeighborSearch(_reach(radius, reach, name), points=self.input,
+                                     capacity=capacity)
         maybe_periodic(self, period)
 
     def _seeded(self, x, u, xp):

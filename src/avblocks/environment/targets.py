@@ -104,6 +104,10 @@ class TargetDetection(Block):
         runs; default: planned from ``targets`` with headroom 2 at build
         time. A run whose targets (a numeric parameter) crowd a cell beyond
         it is reported as an overflow, never silently cut.
+    reach : float, optional
+        The largest ``max R + max r`` a compiled run may use (the search's
+        cell edge; default the constructor's values). Raise it to vary the
+        radii at run time.
 
     Example
     -------
@@ -117,7 +121,7 @@ class TargetDetection(Block):
     """
 
     def __init__(self, n, targets, *, sensing_radius, target_radius=0.0,
-                 pickup=False, input="pose", period=None, capacity=None):
+                 pickup=False, input="pose", period=None, capacity=None, reach=None):
         super().__init__()
         name = "TargetDetection"
         self.n = n = agent_count(n, name)
@@ -139,7 +143,11 @@ class TargetDetection(Block):
         self.declare_parameter("target_radius", r, bounds=(0, None), unit="m")
         self.pickup = bool(pickup)
         # targets are the searched points (known now): plan the static cells here
-        self.search = NeighborSearch(_reach(R, r), points="targets", capacity=capacity)
+        if reach is not None and not float(reach) >= _reach(R, r):
+            raise ParameterError("reach must be >= max sensing_radius + max target_radius",
+                                 block=name, param="reach", found=reach)
+        reach = _reach(R, r) if reach is None else float(reach)
+        self.search = NeighborSearch(reach, points="targets", capacity=capacity)
         if m:
             self.search.plan(t)
         self.input = declare_agents_input(self, n, input)

@@ -73,3 +73,21 @@ def test_full_case_studies_match_numpy(tmp_path, name):
     ref, out = _summary(tmp_path, name, "numpy", [], t_final)
     got, _ = _summary(tmp_path, name, "jax", [], t_final)
     _same_numbers(ref, got)
+
+
+def test_nest_ensemble_of_seeds_equals_numpy_runs():
+    import avblocks as av
+    from avblocks.scenarios import nest
+    d, sim = nest.make_diagram(agents=40, t_final=5.0, p_loss=0.3)
+    kw = {k: v for k, v in sim.items() if k != "seed"}
+    runner = av.compile(d, **kw)
+    seeds = [3, 4, 5]
+    ens = runner.ensemble(seeds=seeds)
+    counts = []
+    for r, s in enumerate(seeds):
+        ref = av.simulate(d, seed=s, progress=False, **kw)
+        np.testing.assert_array_equal(ens.run(r)["gossip.informed"], ref["gossip.informed"])
+        assert np.max(np.abs(ens.run(r)["bees.pose"] - ref["bees.pose"])) < 1e-9
+        counts.append(int(ref["gossip.informed"][-1].sum()))
+    assert len(set(counts)) > 1 or not np.array_equal(       # the seeds differ
+        ens.run(0)["bees.pose"], ens.run(1)["bees.pose"])

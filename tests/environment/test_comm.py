@@ -49,12 +49,16 @@ def test_latency_delays_by_exactly_k_steps(latency):
     one = d.add(av.blocks.Constant(np.ones((n, 1))), name="one")
     clock = d.add(av.blocks.Integrator(np.zeros((n, 1))), name="clk")  # message = t
     d.connect(one.y, clock.u)
-    ch = d.add(CommChannel(n, radius=1.5, k=2, latency=latency, input="position"),
-               name="ch")
+    ch = d.add(CommChannel(n, radius=1.5, k=2, latency=latency, input="position",
+                           capacity=4), name="ch")
     d.connect(ps.y, ch.position)
     d.connect(clock.y, ch.message)
     res = av.simulate(d, 2.0, dt=dt, log=[ch.sender, ch.received])
     s, r, t = res[ch.sender], res[ch.received][..., 0], res.t
+    # the compiled engine: the same delay line, sample for sample
+    jr = av.simulate(d, 2.0, dt=dt, log=[ch.sender, ch.received], backend="jax")
+    np.testing.assert_array_equal(jr[ch.sender], s)
+    np.testing.assert_allclose(jr[ch.received], res[ch.received], atol=1e-12)
     L = latency
     assert np.all(s[:L] == -1)
     assert s[L:, 0].tolist() == [[1, -1]] * (len(t) - L)
@@ -139,3 +143,83 @@ def test_errors():
         CommChannel(3, radius=1.0, latency=-1)
     with pytest.raises(av.ParameterError):
         Gossip(3, radius=0.0)
+
+
+# --------------------------------------------------- compiled == NumPy engine
+def _moving_swarm(n, seed, capacity=None):
+    gen = np.random.default_rng(seed)
+    pose0 = np.column_stack([gen.uniform(0, 4, (n, 2)), gen.uniform(-np.pi, np.pi, n)])
+    cmd = np.column_stack([gen.uniform(0.2, 1.0, n), gen.uniform(-0.5, 0.5, n)])
+    d = av.Diagram()
+    veh = d.add(av.vehicles.Unicycle(pose0=pose0), name="veh")
+    c = d.add(av.blocks.Constant(cmd), name="cmd")
+    d.connect(c.y, veh.cmd)
+    ch = d.add(CommChannel(n, radius=1.0, k=5, msg_dim=2, p_loss=0.3, latency=2,
+                           capacity=capacity), name="ch")
+    m = d.add(av.blocks.Constant(np.column_stack([np.arange(n), -np.arange(n)]) * 1.0),
+              name="m")
+    d.connect(veh.pose, ch.pose)
+    d.connect(m.y, ch.message)
+    flag = np.zeros(n, dtype=bool)
+    flag[0] = True
+    fl = d.add(av.blocks.Constant(flag), name="flag")
+    val = d.add(av.blocks.Constant(np.arange(n, dtype=float)[:, None] + 100.0), name="val")
+    g = d.add(Broadcast(n, radius=0.8, p_loss=0.4, value_dim=1, capacity=capacity),
+              name="g")
+    d.connect(veh.pose, g.pose)
+    d.connect(fl.y, g.flag)
+    d.connect(val.y, g.value)
+    return d
+
+
+def test_compiled_engine_delivers_the_same_messages():
+    n, kw = 40, dict(t_final=3.0, dt=0.05, seed=5,
+                     log=["ch.sender", "ch.received", "g.informed", "g.value"])
+    ref = av.simulate(_moving_swarm(n, 0), **kw)
+    got = av.simulate(_moving_swarm(n, 0, capacity=12), backend="jax", **kw)
+    np.testing.assert_array_equal(got["ch.sender"], ref["ch.sender"])
+    np.testing.assert_array_equal(got["g.informed"], ref["g.informed"])
+    np.testing.assert_allclose(got["ch.received"], ref["ch.received"], atol=1e-12)
+    np.testing.assert_allclose(got["g.value"], ref["g.value"], atol=1e-12)
+    s = ref["ch.sender"][2:]
+    # the run is not trivial: messages get through and get lost, the news spreads
+    assert 0.2 < np.mean(s >= 0) < 0.9
+    inf = ref["g.informed"]
+    assert inf[0].sum() == 1 and inf[-1].sum() > 5
+    # every delivered message is its sender's, and the sender was in range
+    # (at the step it was sent: 2 steps earlier) and not lost, per the link draw
+    pose = av.simulate(_moving_swarm(n, 0), **{**kw, "log": ["veh.pose"]})["veh.pose"]
+    rec = ref["ch.received"]
+    for step in (5, 30, 60):
+        p = pose[step - 2][:, :2]
+        for i in range(n):
+            for kk, j in enumerate(ref["ch.sender"][step, i]):
+                if j >= 0:
+                    assert np.hypot(*(p[j] - p[i])) <= 1.0 + 1e-12
+                    np.testing.assert_array_equal(rec[step, i, kk], [j, -j])
+
+
+def test_gossip_link_loss_rate_and_lowest_index_value():
+    # one informed agent, 30 in range: each is reached iff its link survives
+    n, p = 31, 0.35
+    pos = np.zeros((n, 2))
+    pos[1:, 0] = np.linspace(0.1, 0.9, n - 1)
+    inf0 = np.zeros(n, bool)
+    inf0[0] = True
+    key, got = av.core.rng.key(1), []
+    for _ in range(300):
+        key, sub = av.core.rng.split(key)
+        new, _ = gossip_step(inf0, pos, 1.0, p, sub)
+        assert new[0]
+        got.append(new[1:])
+        # the draw is the documented one, link 0 -> j
+        lost = av.core.rng.uniform_at(sub, 0, np.arange(1, n)) < p
+        np.testing.assert_array_equal(new[1:], ~lost)
+    frac = np.mean(got)
+    assert abs(frac - (1 - p)) < 4 * np.sqrt(p * (1 - p) / np.size(got))
+    # two informed agents reach a third: it takes the lower index's value
+    pos = np.array([[0.0, 0], [0.5, 0], [1, 0]])
+    new, val = gossip_step([False, True, True], pos[[1, 2, 0]], 0.6,
+                           value=np.array([[0.0], [5.0], [6.0]]))
+    # agent 0 sits at x=0.5 (both in range): takes agent 1's value
+    assert new.tolist() == [True, True, True] and val[:, 0].tolist() == [5.0, 5.0, 6.0]

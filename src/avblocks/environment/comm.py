@@ -1,9 +1,19 @@
 """Communication between neighbouring agents: a lossy, delayed channel and
 gossip (a flag or value spreading through contacts).
 
-Both blocks find who can hear whom with a k-d tree (range ``radius``,
-inclusive), draw packet losses from their own random key (so a run is
-repeatable from its seed) and run in NumPy/SciPy (not JAX-traceable).
+Both blocks find who can hear whom with a traceable cell-list search
+(:class:`avblocks.utility.spatial.NeighborSearch`, range ``radius``,
+inclusive) and draw packet losses from their own random key with the
+counter-based stream of :mod:`avblocks.core.rng`: the loss of link ``i -> j``
+at a step is ``uniform_at(key, i, j) < p_loss``, a function of the key and
+the link only. So a run is repeatable from its seed, and the NumPy engine
+and the compiled (JAX) engine deliver the same messages for the same seed.
+All state has static shapes (latency as a fixed-length delay line); both
+blocks compile.
+
+Compiled runs need a static plan of the search (cell capacity): the
+compiled engine plans it from the initial positions, or pass ``capacity=``
+(most agents per cell of edge ``radius``; see :mod:`avblocks.utility.spatial`).
 
 Used for information propagation (AVLib paper, case study IV.B: scouts
 propagating information among ~500 agents in the nest).
@@ -12,14 +22,31 @@ propagating information among ~500 agents in the nest).
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core import rng as _rng
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..utility.spatial import NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
-from .collision import _first_index
-from .neighbors import radius_neighbors
+
+
+def _int(xp):
+    """The index dtype of an output: int64 (the default int of a trace without x64)."""
+    return np.int64 if xp is np else xp.asarray(0).dtype
+
+
+def _reach(radius, reach, block):
+    r = float(radius) if reach is None else float(reach)
+    if not r >= float(radius):
+        raise ParameterError("reach must be >= radius", block=block, param="reach",
+                             expected=f">= {float(radius)}", found=reach)
+    return r
+
+
+def _link_lost(key, src, dst, p_loss, xp):
+    """True where link ``src -> dst`` loses its packet (``src`` may be -1)."""
+    u = _rng.uniform_at(key, xp.maximum(src, 0), dst, xp)
+    return u < p_loss
 
 
 def _probability(p, block):
@@ -35,9 +62,12 @@ class CommChannel(Block):
 
     Every agent broadcasts its ``message`` row at each step (each sample hit
     with ``period``). Agent ``i`` hears up to ``K`` nearest agents within
-    ``radius`` (range checked when the message is sent); each link loses the
-    packet independently with probability ``p_loss``; a message sent at step
-    ``k`` is delivered at step ``k + latency``.
+    ``radius`` (range checked when the message is sent; ties in distance by
+    the smaller index); each link loses the packet independently with
+    probability ``p_loss`` (link ``s -> i`` is lost when
+    ``rng.uniform_at(key, s, i) < p_loss``); a message sent at step ``k`` is
+    delivered at step ``k + latency``. Traceable: the NumPy and compiled
+    engines deliver the same messages for the same seed.
 
     Ports
     -----
@@ -75,6 +105,14 @@ class CommChannel(Block):
     period : float, optional
         Discrete block with this period: one delivery per hit, latency
         counted in hits. Without it, one delivery per major step.
+    capacity : int, optional
+        Static cell capacity of the neighbour search for compiled runs
+        (default: planned by the compiled engine from the first positions).
+    reach : float, optional
+        The largest ``radius`` a compiled run may use (cell edge of the
+        search; default ``radius``). Raise it to vary ``radius`` at run time
+        (``params=``, ensembles); a larger radius than ``reach`` is reported
+        as an overflow.
 
     Example
     -------
@@ -87,11 +125,8 @@ class CommChannel(Block):
     ([[1], [0]], [7.0, 5.0])
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
     def __init__(self, n, *, radius, msg_dim=1, k=None, p_loss=0.0, latency=1,
-                 input="pose", period=None):
+                 input="pose", period=None, capacity=None, reach=None):
         super().__init__()
         name = "CommChannel"
         self.n = n = agent_count(n, name)
@@ -119,65 +154,86 @@ class CommChannel(Block):
                             doc="senders of delivered messages, -1 none")
         self.declare_output("received", (n, k, d), doc="delivered messages")
         self.declare_random_state("key")
+        self.search = NeighborSearch(_reach(radius, reach, name), points=self.input,
+                                     capacity=capacity)
         if latency:
             self.declare_discrete_state("line_sender",
                                         np.full((latency, n, k), -1, dtype=np.int64))
             self.declare_discrete_state("line_message", np.zeros((latency, n, k, d)))
         maybe_periodic(self, period)
 
-    def deliver(self, pos, message, key):
+    def deliver(self, pos, message, key, xp=np):
         """One delivery: (sender (N, K), received (N, K, D)) for a random key."""
-        idx, _ = radius_neighbors(np.asarray(pos)[:, :2], float(self.radius), self.k)
-        if self.p_loss > 0:
-            keep = _rng.uniform(key, idx.shape, np) >= float(self.p_loss)
-            idx = np.where(keep, idx, -1)
-        msg = np.asarray(message)[np.maximum(idx, 0)]
-        msg = np.where((idx >= 0)[..., None], msg, 0.0)
+        pos = xp.asarray(pos)[:, :2]
+        idx, _ = self.search.nearest(pos, self.radius, self.k, xp=xp)
+        if not (xp is np and float(self.p_loss) == 0.0):
+            dst = xp.arange(self.n, dtype=np.int32)[:, None]
+            idx = xp.where(_link_lost(key, idx, dst, self.p_loss, xp), -1, idx)
+        idx = idx.astype(_int(xp))
+        msg = xp.asarray(message)[xp.maximum(idx, 0)]
+        msg = xp.where((idx >= 0)[..., None], msg, 0.0)
         return idx, msg
 
     def output(self, t, x, u, xp):
         if self.latency == 0:
-            _, sub = _rng.split(x["key"], np)
-            s, m = self.deliver(u[self.input], u["message"], sub)
+            _, sub = _rng.split(x["key"], xp)
+            s, m = self.deliver(u[self.input], u["message"], sub, xp)
             return {"sender": s, "received": m}
         return {"sender": x["line_sender"][0], "received": x["line_message"][0]}
 
     def update(self, t, x, u, xp):
-        key, sub = _rng.split(x["key"], np)
+        key, sub = _rng.split(x["key"], xp)
         if self.latency == 0:
             return {"key": key}
-        s, m = self.deliver(u[self.input], u["message"], sub)
+        s, m = self.deliver(u[self.input], u["message"], sub, xp)
         return {"key": key,
-                "line_sender": np.concatenate([x["line_sender"][1:], s[None]]),
-                "line_message": np.concatenate([x["line_message"][1:], m[None]])}
+                "line_sender": xp.concatenate([x["line_sender"][1:],
+                                               s[None].astype(x["line_sender"].dtype)]),
+                "line_message": xp.concatenate([x["line_message"][1:],
+                                                m[None].astype(x["line_message"].dtype)])}
 
 
-def gossip_step(informed, pos, radius, p_loss=0.0, key=None, value=None):
+def gossip_step(informed, pos, radius, p_loss=0.0, key=None, value=None, xp=np,
+                search=None):
     """One round of gossip: every informed agent tells every agent in range.
 
     Returns the new ``informed`` (N,) bool and, when ``value`` (N, D) is
     given, the new values (a newly informed agent takes the value of its
     lowest-index informed neighbour that reached it). Each directed link
-    fails independently with probability ``p_loss`` (drawn from ``key``).
+    ``i -> j`` fails independently with probability ``p_loss``: when
+    ``rng.uniform_at(key, i, j) < p_loss``. ``search`` is the
+    :class:`NeighborSearch` to use (a fresh one of reach ``radius`` if None;
+    a compiled caller passes a planned one).
     """
-    informed = np.asarray(informed, dtype=bool)
-    pos = np.asarray(pos, dtype=float)[:, :2]
-    n = len(informed)
-    pairs = (cKDTree(pos).query_pairs(radius, output_type="ndarray")
-             if n > 1 else np.zeros((0, 2), np.int64))
-    src = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(np.int64)
-    dst = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(np.int64)
-    ok = informed[src] & ~informed[dst]
-    if p_loss > 0 and len(src):
-        ok &= _rng.uniform(key, (len(src),), np) >= p_loss
-    new = informed.copy()
-    new[dst[ok]] = True
+    informed = xp.asarray(informed).astype(bool)
+    pos = xp.asarray(pos)[:, :2]
+    n = informed.shape[0]
+    if search is None:
+        search = NeighborSearch(float(radius), points="position")
+    src, _ = search.within(pos, radius, xp=xp)             # (N, M): who reaches row j
+    dst = xp.arange(n, dtype=np.int32)[:, None]
+    ok = (src >= 0) & informed[xp.maximum(src, 0)] & ~informed[:, None]
+    if xp is np:
+        # NumPy: draw only where it matters (the draw of a link does not
+        # depend on which other links are drawn: same numbers as traced)
+        if float(p_loss) > 0.0:
+            if key is None:
+                raise ParameterError("gossip with p_loss > 0 needs a random key",
+                                     param="key")
+            r, c = np.nonzero(ok)
+            ok = ok.copy()
+            ok[r, c] = ~_link_lost(key, src[r, c], r, p_loss, np)
+    else:
+        ok = ok & ~_link_lost(key, src, dst, p_loss, xp)
+    reached = xp.any(ok, axis=1)
+    new = informed | reached
     if value is None:
         return new, None
-    first = _first_index(n, dst[ok], src[ok])
-    got = first >= 0
-    val = np.array(value, dtype=float, copy=True)
-    val[got] = val[first[got]]
+    big = np.iinfo(np.int32).max
+    first = xp.min(xp.where(ok, src, big), axis=1) if src.shape[1] else \
+        xp.full((n,), big, dtype=np.int32)
+    val = xp.asarray(value)
+    val = xp.where(reached[:, None], val[xp.minimum(first, n - 1)], val)
     return new, val
 
 
@@ -186,9 +242,10 @@ class Gossip(Block):
 
     At each step (each hit with ``period``) every informed agent informs
     every agent within ``radius``; each directed contact fails with
-    probability ``p_loss``. With ``p_loss = 0`` and a static connected
-    contact graph, everyone is informed after exactly the seeds'
-    eccentricity in hops (the graph diameter in the worst case).
+    probability ``p_loss`` (as in :func:`gossip_step`, keyed by the link so
+    the NumPy and compiled engines agree). With ``p_loss = 0`` and a static
+    connected contact graph, everyone is informed after exactly the seeds'
+    eccentricity in hops (the graph diameter in the worst case). Traceable.
 
     Ports
     -----
@@ -225,6 +282,14 @@ class Gossip(Block):
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period.
+    capacity : int, optional
+        Static cell capacity of the neighbour search for compiled runs
+        (default: planned by the compiled engine from the first positions).
+    reach : float, optional
+        The largest ``radius`` a compiled run may use (cell edge of the
+        search; default ``radius``). Raise it to vary ``radius`` at run time
+        (``params=``, ensembles); a larger radius than ``reach`` is reported
+        as an overflow.
 
     Example
     -------
@@ -240,11 +305,8 @@ class Gossip(Block):
     [True, True, True]
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
     def __init__(self, n, *, radius, p_loss=0.0, value_dim=None, input="pose",
-                 period=None):
+                 period=None, capacity=None, reach=None):
         super().__init__()
         name = "Gossip"
         self.n = n = agent_count(n, name)
@@ -265,25 +327,27 @@ class Gossip(Block):
             self.declare_output("value", (n, self.value_dim), doc="value carried")
             self.declare_discrete_state("carried", np.zeros((n, self.value_dim)))
         self.declare_random_state("key")
+        self.search = NeighborSearch(_reach(radius, reach, name), points=self.input,
+                                     capacity=capacity)
         maybe_periodic(self, period)
 
-    def _seeded(self, x, u):
+    def _seeded(self, x, u, xp):
         inf = x["informed"] | u["flag"]
         if not self.value_dim:
             return inf, None
-        val = np.where(x["informed"][:, None], x["carried"],
-                       np.where(u["flag"][:, None], u["value"], 0.0))
+        val = xp.where(x["informed"][:, None], x["carried"],
+                       xp.where(u["flag"][:, None], u["value"], 0.0))
         return inf, val
 
     def output(self, t, x, u, xp):
-        inf, val = self._seeded(x, u)
+        inf, val = self._seeded(x, u, xp)
         return {"informed": inf} if val is None else {"informed": inf, "value": val}
 
     def update(self, t, x, u, xp):
-        key, sub = _rng.split(x["key"], np)
-        inf, val = self._seeded(x, u)
-        new, val = gossip_step(inf, u[self.input], float(self.radius), float(self.p_loss),
-                               sub, val)
+        key, sub = _rng.split(x["key"], xp)
+        inf, val = self._seeded(x, u, xp)
+        new, val = gossip_step(inf, u[self.input], self.radius, self.p_loss, sub, val,
+                               xp=xp, search=self.search)
         out = {"key": key, "informed": new}
         if self.value_dim:
             out["carried"] = val

@@ -2,49 +2,66 @@
 
 Agent ``i`` detects target ``j`` when ``|p_i - q_j| <= R_i + r_j`` (sensing
 radius ``R_i`` of the agent, radius ``r_j`` of the target). Candidate pairs
-come from one k-d tree query (``sparse_distance_matrix``), so the cost is
-~ (N + M) log M plus the pairs in range. NumPy/SciPy: not JAX-traceable.
+come from one cell-list search of the targets around every agent
+(:class:`avblocks.utility.spatial.NeighborSearch` with ``queries=``, cells of
+edge ``max R + max r``), so the cost is ~ N (targets per cell) and no (N, M)
+array is formed. Traceable: the NumPy and compiled engines give the same
+detections (exact: comparisons of the same distances).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..utility.spatial import NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
+_TINY_REACH = 1e-6      # cell edge when every radius is 0 (coincidence only)
 
-def detect_targets(pos, targets, sensing_radius, target_radius, active=None):
+
+def _reach(sensing_radius, target_radius):
+    return max(float(np.max(sensing_radius, initial=0.0)) +
+               float(np.max(target_radius, initial=0.0)), _TINY_REACH)
+
+
+def detect_targets(pos, targets, sensing_radius, target_radius, active=None, xp=np,
+                   search=None):
     """Nearest detected target per agent.
 
     Returns ``target`` (N,) int64 (index of the nearest detected target,
-    -1 if none) and ``hits`` (M,) bool (targets seen by at least one agent).
-    Targets with ``active[j]`` false are ignored.
+    -1 if none; ties in distance go to the smaller index) and ``hits`` (M,)
+    bool (targets seen by at least one agent). Targets with ``active[j]``
+    false are ignored. ``search`` is the :class:`NeighborSearch` over the
+    targets (a fresh one if None; a compiled caller passes a planned one).
     """
-    pos = np.asarray(pos, dtype=float)[:, :2]
-    targets = np.asarray(targets, dtype=float)
-    n, m = len(pos), len(targets)
-    R = np.broadcast_to(np.asarray(sensing_radius, float), (n,))
-    r = np.broadcast_to(np.asarray(target_radius, float), (m,))
-    best = np.full(n, -1, dtype=np.int64)
-    seen = np.zeros(m, dtype=bool)
+    pos = xp.asarray(pos)[:, :2]
+    targets = xp.asarray(targets)
+    n, m = pos.shape[0], targets.shape[0]
+    ity = np.int64 if xp is np else xp.asarray(0).dtype
     if n == 0 or m == 0:
-        return best, seen
-    sdm = cKDTree(pos).sparse_distance_matrix(cKDTree(targets), R.max() + r.max(),
-                                              output_type="ndarray")
-    i, j, d = sdm["i"].astype(np.int64), sdm["j"].astype(np.int64), sdm["v"]
-    ok = d <= R[i] + r[j]
+        return xp.full((n,), -1, dtype=ity), xp.zeros((m,), dtype=bool)
+    R = xp.broadcast_to(xp.asarray(sensing_radius), (n,))
+    r = xp.broadcast_to(xp.asarray(target_radius), (m,))
+    if search is None:
+        search = NeighborSearch(_reach(sensing_radius, target_radius), points="targets")
+    idx, dist = search.within(targets, xp.max(R) + xp.max(r), queries=pos, xp=xp)
+    j = xp.maximum(idx, 0)
+    ok = (idx >= 0) & (dist <= R[:, None] + r[j])
     if active is not None:
-        ok &= np.asarray(active, dtype=bool)[j]
-    i, j, d = i[ok], j[ok], d[ok]
-    seen[j] = True
-    order = np.lexsort((j, d, i))  # by agent, then distance, then target index
-    i, j = i[order], j[order]
-    first = np.r_[True, i[1:] != i[:-1]] if len(i) else np.zeros(0, bool)
-    best[i[first]] = j[first]
-    return best, seen
+        ok = ok & xp.asarray(active)[j]
+    dd = xp.where(ok, dist, xp.inf)
+    dmin = xp.min(dd, axis=1, keepdims=True)
+    big = np.iinfo(np.int32).max
+    best = xp.min(xp.where(ok & (dd == dmin), idx, big), axis=1)
+    best = xp.where(best == big, -1, best).astype(ity)
+    flat, w = xp.where(ok, idx, 0).reshape(-1), ok.reshape(-1).astype(float)
+    if xp is np:
+        hits = np.bincount(flat, weights=w, minlength=m)
+    else:
+        hits = xp.bincount(flat, weights=w, length=m)
+    return best, hits > 0
 
 
 class TargetDetection(Block):
@@ -82,6 +99,15 @@ class TargetDetection(Block):
         step they were found (search-and-pickup). Default False.
     input : "pose" or "position"
     period : float, optional
+    capacity : int, optional
+        Most targets per search cell (edge ``max R + max r``) for compiled
+        runs; default: planned from ``targets`` with headroom 2 at build
+        time. A run whose targets (a numeric parameter) crowd a cell beyond
+        it is reported as an overflow, never silently cut.
+    reach : float, optional
+        The largest ``max R + max r`` a compiled run may use (the search's
+        cell edge; default the constructor's values). Raise it to vary the
+        radii at run time.
 
     Example
     -------
@@ -94,11 +120,8 @@ class TargetDetection(Block):
     ([True, True], [0, 0], [True, False])
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
     def __init__(self, n, targets, *, sensing_radius, target_radius=0.0,
-                 pickup=False, input="pose", period=None):
+                 pickup=False, input="pose", period=None, capacity=None, reach=None):
         super().__init__()
         name = "TargetDetection"
         self.n = n = agent_count(n, name)
@@ -119,6 +142,14 @@ class TargetDetection(Block):
         self.declare_parameter("sensing_radius", R, bounds=(0, None), unit="m")
         self.declare_parameter("target_radius", r, bounds=(0, None), unit="m")
         self.pickup = bool(pickup)
+        # targets are the searched points (known now): plan the static cells here
+        if reach is not None and not float(reach) >= _reach(R, r):
+            raise ParameterError("reach must be >= max sensing_radius + max target_radius",
+                                 block=name, param="reach", found=reach)
+        reach = _reach(R, r) if reach is None else float(reach)
+        self.search = NeighborSearch(reach, points="targets", capacity=capacity)
+        if m:
+            self.search.plan(t)
         self.input = declare_agents_input(self, n, input)
         self.declare_output("detected", (n,), "bool", doc="senses a target")
         self.declare_output("target", (n,), "int64", doc="nearest target, -1 none")
@@ -127,15 +158,15 @@ class TargetDetection(Block):
         self.declare_discrete_state("found", np.zeros(m, dtype=bool), agents=False)
         maybe_periodic(self, period)
 
-    def _detect(self, x, u):
+    def _detect(self, x, u, xp):
         active = ~x["found"] if self.pickup else None
         return detect_targets(u[self.input], self.targets, self.sensing_radius,
-                              self.target_radius, active)
+                              self.target_radius, active, xp=xp, search=self.search)
 
     def output(self, t, x, u, xp):
-        best, seen = self._detect(x, u)
+        best, seen = self._detect(x, u, xp)
         return {"detected": best >= 0, "target": best, "found": x["found"] | seen}
 
     def update(self, t, x, u, xp):
-        _, seen = self._detect(x, u)
+        _, seen = self._detect(x, u, xp)
         return {"found": x["found"] | seen}

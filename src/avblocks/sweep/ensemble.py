@@ -11,7 +11,7 @@ axis). Each run's slice of the logs goes through the same metric functions
 and into the same store layout as the NumPy path.
 
 It needs the diagram to be traceable (every block ``traceable = True``;
-of the built-in scenarios only ``waypoints`` is) and the seeds of a grid
+of the built-in scenarios ``waypoints``, ``nest`` and ``honeybee`` are) and the seeds of a grid
 point to share its structure (same agent count, same blocks): seeds change
 values, not shapes. Metrics agree with the NumPy path to round-off (float64),
 not bit for bit; they are the same whether a case runs in a sweep or is
@@ -80,8 +80,10 @@ def compute_group(spec: Spec, case_ids):
         for k, v in vals.items():
             params.setdefault(k, []).append(v)
         states = Simulator(cd, dt, solver, seed=int(sim["seed"])).initial_states()
-        for name, x in zip(cd.names, states):
+        for name, blk, x in zip(cd.names, cd.blocks, states):
             for k, v in x.items():
+                if k in blk._random:    # random keys come from the seeds
+                    continue
                 x0.setdefault(f"{name}.{k}", []).append(v)
     try:
         runner = av.compile(d0, t_final, dt, solver, log=log,

@@ -286,12 +286,13 @@ def _right_hand(position, u_nom, pairs, radius, right_hand):
 
 
 def joint_safety_filter(position, u_nom, pairs, radius, gamma=1.0, right_hand=0.0):
-    """CBF-filtered velocities (N, D) from ONE QP over all agents.
+    """CBF-filtered velocities (N, D) from ONE QP over all agents (Clarabel).
 
     ``pairs`` (M, 2) int: the constrained pairs (e.g. :func:`pairs_in_range`).
     ``right_hand`` (2-D): the bias of :func:`safety_filter`, applied to the
     nominal velocity of agents with a partner closer than ``2 radius`` (see
-    the module docstring for why it frees symmetric jams). NumPy only.
+    the module docstring for why it frees symmetric jams). NumPy only; the
+    traceable equivalent is :func:`joint_filter`.
     """
     position = np.asarray(position, dtype=float)
     u_nom = np.asarray(u_nom, dtype=float)
@@ -306,6 +307,153 @@ def joint_safety_filter(position, u_nom, pairs, radius, gamma=1.0, right_hand=0.
     return u
 
 
+# ------------------------------------------------- the traceable joint QP (ADMM)
+def scatter_add(n, index, values, xp=np):
+    """``out[index[e]] += values[e]``: (n, ...) sums of (E, ...) rows."""
+    if xp is np:
+        index = np.asarray(index)
+        values = np.asarray(values)
+        if values.ndim == 1:
+            return np.bincount(index, values, minlength=n)
+        flat = values.reshape(len(values), -1)
+        cols = [np.bincount(index, flat[:, c], minlength=n) for c in range(flat.shape[1])]
+        return np.stack(cols, axis=1).reshape((n,) + values.shape[1:])
+    return xp.zeros((n,) + tuple(values.shape[1:]), dtype=values.dtype).at[index].add(values)
+
+
+def neighbor_edges(idx, xp=np):
+    """Padded pair list ``(ei, ej, ok)`` (each (N*K,)) from neighbour lists (N, K).
+
+    Edge ``(i, idx[i, k])`` is kept (``ok``) when the entry is real (``>= 0``,
+    not ``i`` itself) and the pair is not listed twice: where ``j`` also
+    lists ``i``, only the copy with ``i < j`` is kept, so the kept edges are
+    the union of the lists, each pair once (as :func:`pairs_from_neighbors`).
+    Static shapes: masked edges point from an agent to itself.
+    """
+    n, k = idx.shape
+    own = xp.broadcast_to(xp.arange(n)[:, None], (n, k))
+    real = (idx >= 0) & (idx != own)
+    j = xp.where(real, idx, own)
+    recip = xp.any(idx[j] == own[:, :, None], axis=-1)          # j lists i too
+    ok = real & ((own < j) | ~recip)
+    return own.reshape(-1), j.reshape(-1), ok.reshape(-1)
+
+
+def _loop(n_chunks, body, state, xp):
+    """``state = body(state)`` ``n_chunks`` times (NumPy: stops once
+    ``state[-1]`` (done) is true, which leaves the same result because a
+    done state is a fixed point of ``body``)."""
+    if xp is np:
+        for _ in range(n_chunks):
+            if state[-1]:
+                break
+            state = body(state)
+        return state
+    import jax
+    return jax.lax.fori_loop(0, n_chunks, lambda _, s: body(s), state)
+
+
+def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
+                 rho=1.0, alpha=1.6, check=10):
+    r"""``argmin sum_i |u_i - w_i|^2 s.t. a_e^T (u_i - u_j) <= c_e`` (edges e = (i, j)).
+
+    A fixed-iteration, traceable solver (pure ``xp``, static shapes) for
+    the joint QP: consensus ADMM (Boyd et al. 2011, section 7; the
+    over-relaxed form of section 3.4.3). Every edge keeps a copy
+    ``z_e = (z_ei, z_ej)`` of its two agents' velocities, constrained to its
+    half-space ``a_e^T (z_ei - z_ej) <= c_e``; the velocities are the
+    consensus of the copies::
+
+        u_i  = (2 w_i + rho sum_{e ∋ i} (z_e,i - y_e,i)) / (2 + rho deg_i)
+        x_e  = alpha (u_i, u_j) + (1 - alpha) z_e
+        z_e  = projection of x_e + y_e onto the half-space of e (closed form)
+        y_e += x_e - z_e
+
+    Each iteration costs O(N + E) (gathers and one scatter-add), no linear
+    system. ``u_nom`` (N, D); ``ei, ej, ok`` (E,) padded edges (``ok``
+    False: ignored); ``a`` (E, D); ``c`` (E,).
+
+    Stopping: every ``check`` iterations the primal residual
+    ``max |(u_i, u_j) - z_e|`` and the last change ``max |u^k - u^{k-1}|``
+    are compared with ``tol (1 + max |w|)``; once both are below it the
+    iterate is frozen (a no-op under JAX, an early exit under NumPy: the
+    same numbers). At most ``iterations`` (rounded up to a multiple of
+    ``check``). Measured on random jammed 20-agent clusters (about 100
+    pairs): 100 iterations reach about 1e-6 of Clarabel's solution, 200
+    about 1e-9 (``rho = 1``, ``alpha = 1.6``; the problem is invariant to
+    the scale of ``a``, so ``rho`` needs no tuning per problem).
+
+    Returns ``(u, residual)``: (N, D) and the last checked residual (a
+    scalar; ``<= tol (1 + max|w|)`` when it converged).
+    """
+    n = u_nom.shape[0]
+    okf = xp.where(ok, 1.0, 0.0)
+    okc = okf[:, None]
+    a = a * okc
+    c = xp.where(ok, c, 0.0)
+    a2 = 2.0 * xp.sum(a * a, axis=-1)
+    a2 = xp.where(a2 > 0, a2, 1.0)
+    deg = scatter_add(n, ei, okf, xp) + scatter_add(n, ej, okf, xp)
+    denom = (2.0 + rho * deg)[:, None]
+    w2 = 2.0 * u_nom
+    scale = tol * (1.0 + xp.max(xp.abs(u_nom)))
+
+    def step(st):
+        u, zi, zj, yi, yj = st
+        acc = scatter_add(n, ei, (zi - yi) * okc, xp) + scatter_add(n, ej, (zj - yj) * okc, xp)
+        un = (w2 + rho * acc) / denom
+        xi = alpha * un[ei] + (1.0 - alpha) * zi
+        xj = alpha * un[ej] + (1.0 - alpha) * zj
+        vi, vj = xi + yi, xj + yj
+        t = xp.maximum(xp.sum(a * (vi - vj), axis=-1) - c, 0.0) / a2
+        zi2, zj2 = vi - t[:, None] * a, vj + t[:, None] * a
+        return un, zi2, zj2, vi - zi2, vj - zj2
+
+    def chunk(st):
+        u, zi, zj, yi, yj, res, done = st
+        inner = (u, zi, zj, yi, yj)
+        for _ in range(check - 1):
+            inner = step(inner)
+        prev = inner[0]
+        new = step(inner)
+        un, zi2, zj2 = new[0], new[1], new[2]
+        rp = xp.max(xp.where(okc > 0, xp.maximum(xp.abs(un[ei] - zi2),
+                                                   xp.abs(un[ej] - zj2)), 0.0),
+                    initial=0.0)
+        rd = xp.max(xp.abs(un - prev))
+        r = xp.maximum(rp, rd)
+        out = tuple(xp.where(done, o, nw) for o, nw in zip((u, zi, zj, yi, yj), new))
+        return out + (xp.where(done, res, r), done | (r <= scale))
+
+    zi, zj = u_nom[ei], u_nom[ej]
+    zero = xp.zeros_like(zi)
+    st = (u_nom, zi, zj, zero, zero, xp.asarray(xp.inf), xp.asarray(False))
+    n_chunks = max(1, -(-int(iterations) // int(check)))
+    st = _loop(n_chunks, chunk, st, xp)
+    return st[0], st[5]
+
+
+def joint_filter(position, u_nom, idx, radius, gamma=1.0, right_hand=0.0, xp=np, **solver):
+    """The joint CBF QP (see the module docstring) over the pairs listed in
+    the padded neighbour lists ``idx`` (N, K) (their union), solved by
+    :func:`admm_pair_qp`: pure ``xp``, traceable, differentiable.
+
+    ``right_hand`` (2-D): the roundabout bias of :func:`joint_safety_filter`.
+    Returns ``(u, residual)``.
+    """
+    ei, ej, ok = neighbor_edges(idx, xp)
+    dp = position[ei] - position[ej]                      # p_i - p_j, (E, D)
+    d2 = xp.sum(dp * dp, axis=-1)
+    h = d2 - radius * radius
+    if not (isinstance(right_hand, (int, float)) and right_hand == 0):
+        n = position.shape[0]
+        close = xp.where(ok & (d2 < 4 * radius * radius), 1.0, 0.0)
+        near = (scatter_add(n, ei, close, xp) + scatter_add(n, ej, close, xp)) > 0
+        turn = xp.stack([u_nom[:, 1], -u_nom[:, 0]], axis=-1)
+        u_nom = u_nom + xp.where(near[:, None], right_hand * turn, 0.0)
+    return admm_pair_qp(u_nom, ei, ej, ok, -dp, 0.5 * gamma * h, xp, **solver)
+
+
 class CollisionAvoidance(Block):
     """CBF safety filter for N single integrators (or off-axis points).
 
@@ -313,8 +461,8 @@ class CollisionAvoidance(Block):
     -----
     position : in, (N, D), D = 2 or 3.
     velocity_nominal : in, (N, D) — desired velocities.
-    neighbors : in, (N, K) int64 (port mode only) — agents that may come close;
-        use a sensing range well above ``radius`` (K small: cost grows as K^D).
+    neighbors : in, (N, K) int (without ``sensing_range`` only) — agents that
+        may come close; use a sensing range well above ``radius``.
     velocity : out, (N, D) — the minimally modified, safe velocities.
 
     Parameters
@@ -323,31 +471,57 @@ class CollisionAvoidance(Block):
     gamma : float > 0 — barrier gain (1/s).
     right_hand : float >= 0 — roundabout bias against deadlocks (2-D; see
         :func:`safety_filter`), default 0 (pure minimal filter).
-    dim : int (2 or 3);  sensing_range, k_max : compute neighbours inside the
-        block (NumPy only) instead of the port.
-    mode : ``"agent"`` (default) — one small exact QP per agent, half of each
-        pair's constraint each (vectorised, JAX-traceable with the port);
-        ``"joint"`` — one sparse QP over all agents (Clarabel, NumPy only, not
-        traceable; needs the ``safety`` extra). With ``sensing_range`` the
-        joint mode takes every pair within range from a k-d tree (``k_max``
-        is not used); with the port, the union of the neighbour lists.
-        See the module docstring: joint frees jams the split filter keeps.
+    dim : int (2 or 3).
+    sensing_range : float, optional — find the neighbours inside the block
+        (a :class:`~avblocks.utility.spatial.NeighborSearch` cell list, which
+        traces) instead of the port: joint mode takes every pair within
+        range, agent mode the ``k_max`` nearest.
+    capacity : int, optional — points per cell of that search, fixed for
+        compiled runs (without it a compiled run needs the engine to plan
+        the search from the initial positions).
+    mode : ``"joint"`` (default) — one QP over all agents (Wang, Ames &
+        Egerstedt 2017), which lets one agent give way more than the other
+        and frees the jams of the split filter; ``"agent"`` — one small
+        exact QP per agent, half of each pair's constraint each (closed
+        form; jams in dense symmetric swaps, see the module docstring).
+    solver : joint mode only. ``"admm"`` (default) — :func:`admm_pair_qp`,
+        pure ``xp``: traceable, differentiable, no extra dependency; it
+        agrees with Clarabel to about 1e-8 (absolute, velocities of order
+        1) on the tested problems, constraints met to ``tol``.
+        ``"clarabel"`` — the interior-point reference (NumPy only, needs the
+        ``safety`` extra).
+    iterations, tol : the ADMM budget and stopping tolerance (relative to
+        ``1 + max |u_nominal|``).
 
     ``radius``, ``gamma``, ``right_hand`` (2-D) and ``sensing_range`` (when
-    given) are numeric parameters; ``n``, ``dim``, ``k_max`` are structural.
+    given) are numeric parameters; the rest are structural.
     """
 
     def __init__(self, n, radius, *, gamma=1.0, right_hand=0.0, dim=2,
-                 sensing_range=None, k_max=6, mode="agent"):
+                 sensing_range=None, k_max=6, mode="joint", solver="admm",
+                 iterations=500, tol=1e-10, capacity=None):
         super().__init__()
         name = "CollisionAvoidance"
         if not isinstance(mode, str) or mode not in ("agent", "joint"):
             raise ParameterError("mode must be 'agent' or 'joint'", block=name,
                                  param="mode", found=mode)
+        if not isinstance(solver, str) or solver not in ("admm", "clarabel"):
+            raise ParameterError("solver must be 'admm' or 'clarabel'", block=name,
+                                 param="solver", found=solver)
         self.mode = mode
-        if mode == "joint":
+        self.solver = solver
+        if mode == "joint" and solver == "clarabel":
             _clarabel()
             self.traceable = False
+        try:
+            self.iterations = int(iterations)
+            self.tol = float(tol)
+        except (TypeError, ValueError):
+            raise ParameterError("iterations and tol must be numbers", block=name,
+                                 param="iterations") from None
+        if self.iterations < 1 or not self.tol >= 0:
+            raise ParameterError("need iterations >= 1 and tol >= 0", block=name,
+                                 param="iterations", found=(iterations, tol))
         self.n = n = int(n)
         self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
                                bounds=(1e-12, None), unit="m", doc="safety distance")
@@ -366,30 +540,56 @@ class CollisionAvoidance(Block):
             self.right_hand = 0.0
         self.declare_input("position", (n, dim), unit="m")
         self.declare_input("velocity_nominal", (n, dim), unit="m/s")
-        if mode == "joint" and sensing_range is not None and k_max is None:
-            k_max = 1                       # not used: pairs from a k-d tree
-        self.graph = NeighborSource(self, n, radius=sensing_range,
-                                    k_max=k_max if sensing_range is not None else None,
-                                    radius_param="sensing_range")
+        self.search = None
+        if sensing_range is not None:
+            r = positive_scalar(sensing_range, name, "sensing_range", allow_inf=True)
+            self.declare_parameter("sensing_range", r, bounds=(1e-12, None),
+                                   allow_inf=True, unit="m")
+            if mode == "agent":
+                if k_max is None or int(k_max) < 1:
+                    raise ParameterError("k_max must be >= 1", block=name,
+                                         param="k_max", found=k_max)
+                self.k_max = int(k_max)
+            if capacity is not None and int(capacity) < 1:
+                raise ParameterError("capacity must be >= 1", block=name,
+                                     param="capacity", found=capacity)
+            from ..utility.spatial import NeighborSearch
+            self.search = NeighborSearch(r, points="position", capacity=capacity, dim=dim)
+            self.graph = None
+        else:
+            self.graph = NeighborSource(self, n)
         self.declare_output("velocity", (n, dim), unit="m/s")
 
     def configure(self, inputs):
-        self.graph.configure(inputs)
+        if self.graph is not None:
+            self.graph.configure(inputs)
+
+    def _neighbors(self, u, p, xp):
+        if self.search is None:
+            return self.graph.get(u, p, xp)[0]
+        r = self.sensing_range if xp is not np else float(self.sensing_range)
+        if self.mode == "agent":
+            return self.search.nearest(p, r, self.k_max, xp=xp)[0]
+        return self.search.within(p, r, xp=xp)[0]
 
     def output(self, t, x, u, xp):
         p = u["position"]
         rh = self.right_hand
         if self.dim != 2 or not self.param_flag("rh", xp, np.any, "right_hand"):
             rh = 0.0
-        if self.mode == "joint":
+        if self.mode == "joint" and self.solver == "clarabel":
             p = np.asarray(p, dtype=float)
-            if self.graph.mode == "radius":
+            if self.search is not None:
                 pairs = pairs_in_range(p, float(self.sensing_range))
             else:
                 pairs = pairs_from_neighbors(self.graph.get(u, p, np)[0])
             return {"velocity": joint_safety_filter(p, u["velocity_nominal"], pairs,
                                                     float(self.radius), float(self.gamma),
                                                     float(rh))}
-        idx, _ = self.graph.get(u, p, xp)
+        idx = self._neighbors(u, p, xp)
+        if self.mode == "joint":
+            v, _ = joint_filter(p, u["velocity_nominal"], idx, self.radius, self.gamma,
+                                rh, xp, iterations=self.iterations, tol=self.tol)
+            return {"velocity": v}
         return {"velocity": safety_filter(p, u["velocity_nominal"], idx, self.radius,
                                           self.gamma, rh, xp)}

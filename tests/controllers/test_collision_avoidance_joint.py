@@ -134,7 +134,7 @@ def test_block_joint_mode_and_bad_mode():
     p = _random_safe_positions(rng, 12, 2, 0.4, 1.5)
     u_nom = rng.normal(size=(12, 2))
     blk = CollisionAvoidance(12, 0.4, gamma=1.5, right_hand=0.5, sensing_range=1.2,
-                             mode="joint", solver="clarabel")
+                             mode="joint", solver="clarabel", k_max=None)
     assert blk.traceable is False
     out = blk.output(0.0, {}, {"position": p, "velocity_nominal": u_nom}, np)["velocity"]
     want = joint_safety_filter(p, u_nom, pairs_in_range(p, 1.2), 0.4, 1.5, 0.5)

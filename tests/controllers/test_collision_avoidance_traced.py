@@ -205,7 +205,7 @@ def test_jit_vmap_and_grad_of_the_joint_filter():
         assert np.abs(fd).max() > 1e-2                       # not a trivial zero
 
 
-def _swap_diagram(mode, n=10, ratio=4.0, circle=2.0, capacity=None):
+def _swap_diagram(mode, n=10, ratio=4.0, circle=2.0, capacity=None, k_max=4):
     ds = circle / ratio
     ang = 2 * np.pi * np.arange(n) / n
     p0 = circle * np.column_stack([np.cos(ang), np.sin(ang)])
@@ -214,7 +214,7 @@ def _swap_diagram(mode, n=10, ratio=4.0, circle=2.0, capacity=None):
     nom = d.add(HolonomicPointToPoint(-p0[:, None, :], gain=1.0, v_max=1.0, radius=0.05),
                 name="nom")
     ca = d.add(CollisionAvoidance(n, ds, gamma=2.0, right_hand=1.0, sensing_range=3 * ds,
-                                  mode=mode, capacity=capacity, k_max=4), name="ca")
+                                  mode=mode, capacity=capacity, k_max=k_max), name="ca")
     d.connect(ag.y, nom.position)
     d.connect(ag.y, ca.position)
     d.connect(nom.velocity, ca.velocity_nominal)
@@ -223,13 +223,13 @@ def _swap_diagram(mode, n=10, ratio=4.0, circle=2.0, capacity=None):
 
 
 @pytest.mark.jax
-@pytest.mark.parametrize("mode", ["joint", "agent"])
-def test_both_modes_with_sensing_range_compile_and_equal_numpy(mode):
+@pytest.mark.parametrize("mode, k_max", [("joint", 4), ("joint", None), ("agent", 4)])
+def test_both_modes_with_sensing_range_compile_and_equal_numpy(mode, k_max):
     pytest.importorskip("jax")
-    ref = av.simulate(_swap_diagram(mode), 6.0, dt=0.05, solver="euler", log=["ag.y"],
-                      progress=False)
-    got = av.simulate(_swap_diagram(mode, capacity=10), 6.0, dt=0.05, solver="euler",
-                      log=["ag.y"], backend="jax")
+    ref = av.simulate(_swap_diagram(mode, k_max=k_max), 6.0, dt=0.05, solver="euler",
+                      log=["ag.y"], progress=False)
+    got = av.simulate(_swap_diagram(mode, capacity=10, k_max=k_max), 6.0, dt=0.05,
+                      solver="euler", log=["ag.y"], backend="jax")
     assert np.max(np.abs(np.asarray(got["ag.y"]) - np.asarray(ref["ag.y"]))) < 1e-9
     # and the filter did work: the agents met in the middle
     x = np.asarray(ref["ag.y"])

@@ -340,9 +340,11 @@ def neighbor_edges(idx, xp=np):
 
 
 def _loop(n_chunks, body, state, xp):
-    """``state = body(state)`` ``n_chunks`` times (NumPy: stops once
-    ``state[-1]`` (done) is true, which leaves the same result because a
-    done state is a fixed point of ``body``)."""
+    """``state = body(state)`` ``n_chunks`` times, skipping the calls once
+    ``state[-1]`` (done) is true: a done state is a fixed point of ``body``,
+    so the result is the same as calling it every time. NumPy: an early
+    exit; JAX: ``lax.cond`` inside a ``fori_loop`` with a static trip count
+    (reverse-mode differentiable; under ``vmap`` both branches run)."""
     if xp is np:
         for _ in range(n_chunks):
             if state[-1]:
@@ -350,7 +352,8 @@ def _loop(n_chunks, body, state, xp):
             state = body(state)
         return state
     import jax
-    return jax.lax.fori_loop(0, n_chunks, lambda _, s: body(s), state)
+    return jax.lax.fori_loop(
+        0, n_chunks, lambda _, s: jax.lax.cond(s[-1], lambda s: s, body, s), state)
 
 
 def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
@@ -386,51 +389,62 @@ def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
     Returns ``(u, residual)``: (N, D) and the last checked residual (a
     scalar; ``<= tol (1 + max|w|)`` when it converged).
     """
-    n = u_nom.shape[0]
-    okf = xp.where(ok, 1.0, 0.0)
-    okc = okf[:, None]
-    a = a * okc
+    n, dim = u_nom.shape
+    if xp is np:
+        # NumPy: drop the padding (it only adds exact zeros: same numbers)
+        keep = np.flatnonzero(ok)
+        ei, ej, ok, a, c = ei[keep], ej[keep], ok[keep], a[keep], c[keep]
+    m = ei.shape[0]
+    # both copies of every edge stacked: rows 0..m-1 for agent i, m..2m-1
+    # for agent j; the half-space reads a2_e^T z_e,i + a2_e'^T z_e,j <= c_e
+    idx2 = xp.concatenate([ei, ej])
+    ok2 = xp.concatenate([ok, ok])
+    okc = xp.where(ok2, 1.0, 0.0)[:, None]
+    a2 = xp.concatenate([a, -a]) * okc                     # (2m, D)
     c = xp.where(ok, c, 0.0)
-    a2 = 2.0 * xp.sum(a * a, axis=-1)
-    a2 = xp.where(a2 > 0, a2, 1.0)
-    deg = scatter_add(n, ei, okf, xp) + scatter_add(n, ej, okf, xp)
+    an2 = 2.0 * xp.sum(a2[:m] * a2[:m], axis=-1)           # |(a, -a)|^2
+    an2 = xp.where(an2 > 0, an2, 1.0)
+    deg = scatter_add(n, idx2, okc[:, 0], xp)
     denom = (2.0 + rho * deg)[:, None]
     w2 = 2.0 * u_nom
     scale = tol * (1.0 + xp.max(xp.abs(u_nom)))
+    if xp is np:
+        flat = (idx2[:, None] * dim + np.arange(dim)).ravel()
+
+        def gather_sum(v):                                  # scatter-add of (2m, D)
+            return np.bincount(flat, v.ravel(), minlength=n * dim).reshape(n, dim)
+    else:
+        def gather_sum(v):
+            return scatter_add(n, idx2, v, xp)
 
     def step(st):
-        u, zi, zj, yi, yj = st
-        acc = scatter_add(n, ei, (zi - yi) * okc, xp) + scatter_add(n, ej, (zj - yj) * okc, xp)
-        un = (w2 + rho * acc) / denom
-        xi = alpha * un[ei] + (1.0 - alpha) * zi
-        xj = alpha * un[ej] + (1.0 - alpha) * zj
-        vi, vj = xi + yi, xj + yj
-        t = xp.maximum(xp.sum(a * (vi - vj), axis=-1) - c, 0.0) / a2
-        zi2, zj2 = vi - t[:, None] * a, vj + t[:, None] * a
-        return un, zi2, zj2, vi - zi2, vj - zj2
+        u, z, y = st
+        un = (w2 + rho * gather_sum((z - y) * okc)) / denom
+        v = alpha * un[idx2] + (1.0 - alpha) * z + y
+        g = xp.sum(a2 * v, axis=-1)
+        t = xp.maximum(g[:m] + g[m:] - c, 0.0) / an2
+        z2 = v - xp.concatenate([t, t])[:, None] * a2
+        return un, z2, v - z2
 
     def chunk(st):
-        u, zi, zj, yi, yj, res, done = st
-        inner = (u, zi, zj, yi, yj)
+        u, z, y, res, done = st
+        inner = (u, z, y)
         for _ in range(check - 1):
             inner = step(inner)
         prev = inner[0]
         new = step(inner)
-        un, zi2, zj2 = new[0], new[1], new[2]
-        rp = xp.max(xp.where(okc > 0, xp.maximum(xp.abs(un[ei] - zi2),
-                                                   xp.abs(un[ej] - zj2)), 0.0),
-                    initial=0.0)
+        un, z2 = new[0], new[1]
+        rp = xp.max(xp.abs(un[idx2] - z2) * okc, initial=0.0)
         rd = xp.max(xp.abs(un - prev))
         r = xp.maximum(rp, rd)
-        out = tuple(xp.where(done, o, nw) for o, nw in zip((u, zi, zj, yi, yj), new))
+        out = tuple(xp.where(done, o, nw) for o, nw in zip((u, z, y), new))
         return out + (xp.where(done, res, r), done | (r <= scale))
 
-    zi, zj = u_nom[ei], u_nom[ej]
-    zero = xp.zeros_like(zi)
-    st = (u_nom, zi, zj, zero, zero, xp.asarray(xp.inf), xp.asarray(False))
+    z = u_nom[idx2]
+    st = (u_nom, z, xp.zeros_like(z), xp.asarray(xp.inf), xp.asarray(False))
     n_chunks = max(1, -(-int(iterations) // int(check)))
     st = _loop(n_chunks, chunk, st, xp)
-    return st[0], st[5]
+    return st[0], st[3]
 
 
 def joint_filter(position, u_nom, idx, radius, gamma=1.0, right_hand=0.0, xp=np, **solver):
@@ -442,6 +456,9 @@ def joint_filter(position, u_nom, idx, radius, gamma=1.0, right_hand=0.0, xp=np,
     Returns ``(u, residual)``.
     """
     ei, ej, ok = neighbor_edges(idx, xp)
+    if xp is np:                          # the padding only adds exact zeros
+        keep = np.flatnonzero(ok)
+        ei, ej, ok = ei[keep], ej[keep], ok[keep]
     dp = position[ei] - position[ej]                      # p_i - p_j, (E, D)
     d2 = xp.sum(dp * dp, axis=-1)
     h = d2 - radius * radius
@@ -474,8 +491,11 @@ class CollisionAvoidance(Block):
     dim : int (2 or 3).
     sensing_range : float, optional — find the neighbours inside the block
         (a :class:`~avblocks.utility.spatial.NeighborSearch` cell list, which
-        traces) instead of the port: joint mode takes every pair within
-        range, agent mode the ``k_max`` nearest.
+        traces) instead of the port: the ``k_max`` nearest agents within
+        range (joint mode: the union of these lists, each pair once;
+        ``k_max=None`` in joint mode: every pair within range, which costs
+        ``(N, 3^D capacity)`` padded pairs in a compiled run).
+    k_max : int or None — see ``sensing_range`` (default 6).
     capacity : int, optional — points per cell of that search, fixed for
         compiled runs (without it a compiled run needs the engine to plan
         the search from the initial positions).
@@ -545,11 +565,13 @@ class CollisionAvoidance(Block):
             r = positive_scalar(sensing_range, name, "sensing_range", allow_inf=True)
             self.declare_parameter("sensing_range", r, bounds=(1e-12, None),
                                    allow_inf=True, unit="m")
-            if mode == "agent":
-                if k_max is None or int(k_max) < 1:
-                    raise ParameterError("k_max must be >= 1", block=name,
-                                         param="k_max", found=k_max)
-                self.k_max = int(k_max)
+            if k_max is None and mode == "agent":
+                raise ParameterError("k_max is needed in agent mode", block=name,
+                                     param="k_max")
+            if k_max is not None and int(k_max) < 1:
+                raise ParameterError("k_max must be >= 1", block=name,
+                                     param="k_max", found=k_max)
+            self.k_max = None if k_max is None else int(k_max)
             if capacity is not None and int(capacity) < 1:
                 raise ParameterError("capacity must be >= 1", block=name,
                                      param="capacity", found=capacity)
@@ -568,7 +590,7 @@ class CollisionAvoidance(Block):
         if self.search is None:
             return self.graph.get(u, p, xp)[0]
         r = self.sensing_range if xp is not np else float(self.sensing_range)
-        if self.mode == "agent":
+        if self.k_max is not None:
             return self.search.nearest(p, r, self.k_max, xp=xp)[0]
         return self.search.within(p, r, xp=xp)[0]
 
@@ -579,8 +601,10 @@ class CollisionAvoidance(Block):
             rh = 0.0
         if self.mode == "joint" and self.solver == "clarabel":
             p = np.asarray(p, dtype=float)
-            if self.search is not None:
+            if self.search is not None and self.k_max is None:
                 pairs = pairs_in_range(p, float(self.sensing_range))
+            elif self.search is not None:
+                pairs = pairs_from_neighbors(self._neighbors(u, p, np))
             else:
                 pairs = pairs_from_neighbors(self.graph.get(u, p, np)[0])
             return {"velocity": joint_safety_filter(p, u["velocity_nominal"], pairs,

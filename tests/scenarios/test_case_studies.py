@@ -117,8 +117,10 @@ def test_swap_is_safe_and_everyone_arrives():
     np.testing.assert_allclose(p[0], start)
     assert np.asarray(res["drive.done"])[-1].all()
     assert np.linalg.norm(p[-1] - goal, axis=1).max() < 0.06
-    # they really crossed the middle (not a detour around the circle)
-    assert np.linalg.norm(p, axis=2).min() < 2.0
+    # they really crossed the middle (not a detour around the circle of
+    # radius 5): the joint filter's roundabout passes within 2.1 m of the
+    # centre, a ring of 20 agents 0.6 m apart has radius 1.9 m
+    assert np.linalg.norm(p, axis=2).min() < 2.5
 
 
 def test_swap_without_symmetry_breaking_jams_but_stays_safe():

@@ -31,8 +31,8 @@ Unicycles: filter the velocities of their off-axis points (positions from
 :class:`OffAxisPoint`, output to :class:`HolonomicToUnicycle`); the body
 centres then stay ``D_s - 2 d`` apart.
 
-Joint mode (``mode="joint"``)
-----------------------------
+Joint mode (``mode="joint"``, the default)
+-----------------------------------------
 One QP over all agents' velocities ``u = (u_1, ..., u_N)`` (Wang, Ames &
 Egerstedt 2017, the centralised barrier certificate):
 
@@ -40,18 +40,32 @@ Egerstedt 2017, the centralised barrier certificate):
 
     u = \arg\min_u \sum_i |u_i - \hat u_i|^2 \quad\text{s.t.}\quad
         -(p_i - p_j)^T (u_i - u_j) \le \tfrac{\gamma}{2} h_{ij}
-        \quad (i < j,\ |p_i - p_j| \le r_s)
+        \quad (\text{pairs } (i, j) \text{ that see each other})
 
 (``dh_ij/dt = 2 (p_i - p_j)^T (u_i - u_j) >= -gamma h_ij``). The pairs
-come from a ``scipy.spatial.cKDTree`` (``query_pairs``, sensing range
-``r_s``) or from the union of the neighbour lists of the port; the
-constraint matrix is sparse (two ``D``-blocks per row) and the QP is solved
-by Clarabel (interior point, sparse, Apache-2.0, wheels for every
-platform; chosen over OSQP, whose ADMM iterates are only accurate to about
-1e-3 without polishing, and quadprog, which is dense). Unlike the per-agent
+are the union of the neighbour lists (the port, or the block's own cell
+list search with ``sensing_range``: the ``k_max`` nearest within range,
+or every pair within range with ``k_max=None``). Unlike the per-agent
 split, the joint QP lets one agent give way more than the other, which is
 what frees the jams of the split filter. ``u = 0`` is feasible while every
-``h_ij >= 0``, so the QP has a solution while the agents are safe.
+``h_ij >= 0``, so the QP has a solution while the agents are safe (and
+even when they overlap, a uniform expansion about the centroid satisfies
+every constraint, unless two agents coincide).
+
+Why the joint QP is the default: the per-agent filter leaves 2 of 20
+agents of the Robotarium swap (circle / safety radius 5.88) jammed for
+good, the joint QP brings all home (tested for ratios 3 to 8). It needs
+no optional dependency and compiles: the default solver
+(``solver="admm"``, :func:`admm_pair_qp`) is consensus ADMM written in
+``xp`` with static shapes (padded pairs) and a fixed budget, so the same
+code runs in the NumPy engine and under ``jit``/``vmap``/``grad``. Its
+stated tolerance: stopped when the primal residual and the last change
+are below ``tol (1 + max |u_nominal|)`` (``tol = 1e-10``, at most 500
+iterations); on jammed 20-agent clusters it agrees with an exact
+active-set solution (quadprog) to 1e-9 and meets every constraint to 1e-9
+relative (tests). ``solver="clarabel"`` solves the same QP by Clarabel
+(interior point, sparse; the ``safety`` extra, NumPy only; about 3e-7
+from quadprog on the same clusters), kept as a reference.
 
 Deadlocks: the pure joint QP still stops in symmetric configurations
 (``\hat u_i`` a non-negative combination of the active constraint normals,
@@ -75,7 +89,7 @@ configuration (in floating point the unbiased joint QP often escapes the
 symmetric swap as well, through round-off). The tests show the perfectly
 symmetric 20-agent swap completing for circle / safety radius ratios 4 to
 10 (right-hand bias 1), where the per-agent filter jams, and the jittered
-swap scenario completing at Robotarium's ratio 5.88. Note that the bias
+swap scenario completing for ratios 3 to 8. Note that the bias
 adds speed: up to ``sqrt(1 + rho^2)`` times the nominal one.
 
 Reference: L. Wang, A. D. Ames & M. Egerstedt, "Safety barrier certificates

@@ -22,6 +22,7 @@ from avblocks.controllers.collision_avoidance import (
     neighbor_edges,
     pairs_from_neighbors,
 )
+from avblocks.core.errors import AvError
 from avblocks.environment.neighbors import radius_neighbors
 
 # stated accuracy of the ADMM solver (defaults: at most 500 iterations,
@@ -234,3 +235,12 @@ def test_both_modes_with_sensing_range_compile_and_equal_numpy(mode, k_max):
     # and the filter did work: the agents met in the middle
     x = np.asarray(ref["ag.y"])
     assert np.linalg.norm(x, axis=2).min() < 1.0
+
+
+@pytest.mark.jax
+def test_compiled_sensing_range_without_capacity_is_refused_by_name():
+    pytest.importorskip("jax")
+    with pytest.raises(AvError, match="capacity") as e:
+        av.simulate(_swap_diagram("joint"), 0.2, dt=0.05, solver="euler", log=["ag.y"],
+                    backend="jax")
+    assert "CollisionAvoidance" in str(e.value)

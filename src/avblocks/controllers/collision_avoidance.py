@@ -603,6 +603,12 @@ class CollisionAvoidance(Block):
     def _neighbors(self, u, p, xp):
         if self.search is None:
             return self.graph.get(u, p, xp)[0]
+        if xp is not np and self.search.cells is None:
+            raise ParameterError(
+                "a compiled run needs a static plan for the neighbour search",
+                block="CollisionAvoidance", param="capacity",
+                expected="capacity=<agents per cell> (the number of agents never "
+                         "overflows)", found=None)
         r = self.sensing_range if xp is not np else float(self.sensing_range)
         if self.k_max is not None:
             return self.search.nearest(p, r, self.k_max, xp=xp)[0]

@@ -52,8 +52,11 @@ def test_swap_completes_without_collision_for_ratios_3_to_8(ratio):
     assert pdist(start).min() >= params["safety"]          # a safe start
     assert closest >= params["safety"] - SAFETY_TOL, (closest, params["safety"])
     assert np.linalg.norm(p[-1] - goal, axis=1).max() < 0.06  # every agent home
-    assert np.asarray(res["drive.done"])[-1].all()
-    assert np.linalg.norm(p, axis=2).min() < 0.5 * params["radius"]   # through the middle
+    done = np.asarray(res["drive.done"])
+    assert done[-1].all()
+    # no long detour: all home by 25 s (10 m straight at <= 1 m/s takes >= 10 s;
+    # measured 15.9 to 18.6 s)
+    assert res.t[np.argmax(done.all(axis=1))] < 25.0
 
 
 def _summary(tmp_path, backend, *sets):

@@ -244,3 +244,36 @@ def test_compiled_sensing_range_without_capacity_is_refused_by_name():
         av.simulate(_swap_diagram("joint"), 0.2, dt=0.05, solver="euler", log=["ag.y"],
                     backend="jax")
     assert "CollisionAvoidance" in str(e.value)
+
+
+@pytest.mark.jax
+def test_gradient_through_a_compiled_run_equals_finite_differences():
+    """d cost / d (gamma, radius) by reverse mode through a compiled run of
+    the joint filter, against central differences of NumPy runs (the
+    neighbour sets do not change under the small perturbations)."""
+    jax = pytest.importorskip("jax")
+    jnp = jax.numpy
+    # ratio 2.5: sensing 1.2 m, hexagon sides 1 m (at ratio 3 they would sit
+    # exactly at the sensing range, and round-off would pick the pairs)
+    n, t_final = 6, 2.0
+    c = np.random.default_rng(4).normal(size=(n, 2))
+
+    def cost_np(res):
+        return float(np.sum(c * np.asarray(res["ag.y"])[-1]))
+
+    def run_np(**params):
+        return cost_np(av.simulate(_swap_diagram("joint", n=n, ratio=2.5, circle=1.0,
+                                                 k_max=None),
+                                   t_final, dt=0.05, solver="euler", log=["ag.y"],
+                                   params=params, progress=False))
+
+    g = av.grad(lambda r: jnp.sum(jnp.asarray(c) * r["ag.y"][-1]),
+                _swap_diagram("joint", n=n, ratio=2.5, circle=1.0, capacity=n, k_max=None),
+                ["ca.gamma", "ca.radius"], t_final, dt=0.05, solver="euler", log=["ag.y"])
+    base = {"ca.gamma": 2.0, "ca.radius": 0.4}
+    for name, eps in (("ca.gamma", 1e-5), ("ca.radius", 1e-6)):
+        hi = dict(base, **{name: base[name] + eps})
+        lo = dict(base, **{name: base[name] - eps})
+        fd = (run_np(**hi) - run_np(**lo)) / (2 * eps)
+        assert abs(fd) > 1e-3, name                          # the filter acted
+        assert float(g[name]) == pytest.approx(fd, rel=1e-4, abs=1e-7), name

@@ -99,3 +99,20 @@ def test_swap_on_the_compiled_backend_prints_the_numpy_summary(tmp_path):
         else:
             assert vb == pytest.approx(va, rel=1e-4), k
     assert na[".at_goal_end"] == 20
+
+
+@pytest.mark.jax
+def test_swap_sweep_as_a_compiled_ensemble_equals_the_numpy_sweep(tmp_path):
+    pytest.importorskip("jax")
+    from avblocks.sweep import Study
+    common = ["sweep", "swap", "--grid", "safety=0.6,0.85", "--seeds", "2",
+              "--set", "agents=6", "--set", "t_final=20", "--quiet"]
+    assert main(common + ["--ensemble", "--out", str(tmp_path / "e.zarr")]) == 0
+    assert main(common + ["--out", str(tmp_path / "n.zarr")]) == 0
+    a = Study.open(tmp_path / "e.zarr").to_xarray()
+    b = Study.open(tmp_path / "n.zarr").to_xarray()
+    for k in ("min_gap", "done_fraction", "time_to_done"):
+        np.testing.assert_allclose(np.asarray(a[k], float), np.asarray(b[k], float),
+                                   rtol=1e-9, err_msg=k)
+    assert np.all(np.asarray(a["done_fraction"]) == 1.0)
+    assert np.all(np.asarray(a["min_gap"]) >= np.asarray(a["safety"])[:, None] - SAFETY_TOL)

@@ -16,7 +16,6 @@ from scipy.optimize import minimize
 import avblocks as av
 from avblocks.controllers import CollisionAvoidance, HolonomicPointToPoint
 from avblocks.controllers.collision_avoidance import (
-    admm_pair_qp,
     joint_filter,
     joint_safety_filter,
     neighbor_edges,

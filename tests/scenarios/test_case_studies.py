@@ -1,6 +1,5 @@
 """The built-in case-study scenarios, run small: the outcome a researcher checks."""
 
-import os
 
 import numpy as np
 import pytest

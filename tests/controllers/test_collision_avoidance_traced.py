@@ -276,3 +276,23 @@ def test_gradient_through_a_compiled_run_equals_finite_differences():
         fd = (run_np(**hi) - run_np(**lo)) / (2 * eps)
         assert abs(fd) > 1e-3, name                          # the filter acted
         assert float(g[name]) == pytest.approx(fd, rel=1e-4, abs=1e-7), name
+
+
+def test_overlapping_and_coincident_agents_give_finite_separating_velocities():
+    """Agents already inside the safety radius (h < 0): the joint QP is
+    still feasible (a uniform expansion satisfies every pair) and the solver
+    meets each constraint; two coincident agents (no direction to push)
+    leave their own constraint unmet and nothing else broken."""
+    p = np.array([[0.0, 0.0], [0.3, 0.0], [0.3, 0.0], [0.15, 0.2]])
+    w = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    idx = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    radius, gamma = 0.5, 1.0
+    u, res = joint_filter(p, w, idx, radius, gamma)
+    assert np.all(np.isfinite(u)) and res < 1e-9
+    for i in range(4):
+        for j in range(i + 1, 4):
+            e = p[i] - p[j]
+            if e @ e == 0:
+                continue
+            # -(p_i - p_j).(u_i - u_j) <= gamma/2 h_ij < 0: they separate
+            assert -e @ (u[i] - u[j]) <= 0.5 * gamma * (e @ e - radius ** 2) + 1e-9

@@ -396,9 +396,12 @@ def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
     iterate is frozen (a no-op under JAX, an early exit under NumPy: the
     same numbers). At most ``iterations`` (rounded up to a multiple of
     ``check``). Measured on random jammed 20-agent clusters (about 100
-    pairs): 100 iterations reach about 1e-6 of Clarabel's solution, 200
-    about 1e-9 (``rho = 1``, ``alpha = 1.6``; the problem is invariant to
-    the scale of ``a``, so ``rho`` needs no tuning per problem).
+    pairs, many active): 100 iterations reach about 1e-6 of the exact
+    solution, 200 about 1e-9; the defaults stop after 40 iterations on
+    average in the swap case study, within 3e-10 of quadprog's exact
+    active-set solution on the test clusters (``rho = 1``, ``alpha =
+    1.6``; the problem is invariant to the scale of ``a``, so ``rho``
+    needs no tuning per problem).
 
     Returns ``(u, residual)``: (N, D) and the last checked residual (a
     scalar; ``<= tol (1 + max|w|)`` when it converged).

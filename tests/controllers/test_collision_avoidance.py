@@ -61,7 +61,7 @@ def test_antipodal_swap_20_agents_safe_and_all_arrive():
     nom = d.add(HolonomicPointToPoint(goals[:, None, :], gain=1.0, v_max=1.0,
                                       radius=0.05), name="nom")
     ca = d.add(CollisionAvoidance(n, ds, gamma=2.0, right_hand=0.5,
-                                      sensing_range=2.0, k_max=4), name="ca")
+                                  sensing_range=2.0, k_max=4, mode="agent"), name="ca")
     d.connect(ag.y, nom.position)
     d.connect(ag.y, ca.position)
     d.connect(nom.velocity, ca.velocity_nominal)
@@ -74,7 +74,7 @@ def test_antipodal_swap_20_agents_safe_and_all_arrive():
     assert np.linalg.norm(x[-1] - goals, axis=1).max() < 0.1
     # neighbours given through the port give the same velocities
     idx, _ = radius_neighbors(x[100], 2.0, 4)
-    blk = CollisionAvoidance(n, ds, gamma=2.0)
+    blk = CollisionAvoidance(n, ds, gamma=2.0, mode="agent")
     u_nom = np.ones((n, 2))
     np.testing.assert_allclose(
         blk.output(0, {}, {"position": x[100], "velocity_nominal": u_nom,

@@ -134,23 +134,30 @@ def test_block_joint_mode_and_bad_mode():
     p = _random_safe_positions(rng, 12, 2, 0.4, 1.5)
     u_nom = rng.normal(size=(12, 2))
     blk = CollisionAvoidance(12, 0.4, gamma=1.5, right_hand=0.5, sensing_range=1.2,
-                             mode="joint")
+                             mode="joint", solver="clarabel", k_max=None)
     assert blk.traceable is False
     out = blk.output(0.0, {}, {"position": p, "velocity_nominal": u_nom}, np)["velocity"]
     want = joint_safety_filter(p, u_nom, pairs_in_range(p, 1.2), 0.4, 1.5, 0.5)
     np.testing.assert_allclose(out, want)
     # the port: the union of the neighbour lists
-    port = CollisionAvoidance(12, 0.4, gamma=1.5, right_hand=0.5, mode="joint")
+    port = CollisionAvoidance(12, 0.4, gamma=1.5, right_hand=0.5, mode="joint",
+                              solver="clarabel")
     idx, _ = radius_neighbors(p, 1.2, 11)
     np.testing.assert_allclose(
         port.output(0.0, {}, {"position": p, "velocity_nominal": u_nom,
                               "neighbors": idx}, np)["velocity"], want, atol=1e-9)
-    assert CollisionAvoidance(3, 0.4).traceable is True      # default stays "agent"
+    # the default (joint, built-in ADMM) and the per-agent mode both trace
+    assert CollisionAvoidance(3, 0.4).traceable is True
+    assert CollisionAvoidance(3, 0.4).mode == "joint"
+    assert CollisionAvoidance(3, 0.4, mode="agent").traceable is True
     with pytest.raises(ParameterError, match="mode"):
         CollisionAvoidance(3, 0.4, mode="central")
+    with pytest.raises(ParameterError, match="solver"):
+        CollisionAvoidance(3, 0.4, solver="osqp")
 
 
-def _swap(ratio, mode, n=20, circle=3.0, dt=0.05, t_final=30.0, right_hand=1.0):
+def _swap(ratio, mode, n=20, circle=3.0, dt=0.05, t_final=30.0, right_hand=1.0,
+          solver="admm"):
     """Perfectly symmetric antipodal swap (no jitter, equal speed caps)."""
     ds = circle / ratio
     ang = 2 * np.pi * np.arange(n) / n
@@ -161,7 +168,8 @@ def _swap(ratio, mode, n=20, circle=3.0, dt=0.05, t_final=30.0, right_hand=1.0):
     nom = d.add(HolonomicPointToPoint(goals[:, None, :], gain=1.0, v_max=1.0,
                                       radius=0.05), name="nom")
     ca = d.add(CollisionAvoidance(n, ds, gamma=2.0, right_hand=right_hand,
-                                  sensing_range=4 * ds, mode=mode), name="ca")
+                                  sensing_range=4 * ds, mode=mode, solver=solver),
+                name="ca")
     d.connect(ag.y, nom.position)
     d.connect(ag.y, ca.position)
     d.connect(nom.velocity, ca.velocity_nominal)
@@ -180,6 +188,13 @@ def test_joint_swap_20_agents_completes_safely(ratio):
     assert closest >= ds - 1e-6, (closest, ds)
     assert t_arrive is not None and final < 0.1, final
     assert t_arrive < 12.0                    # 7.3-8.3 s measured; straight lines: 6 s
+
+
+@pytest.mark.parametrize("ratio", [4.0, 5.88, 8.0])
+def test_joint_swap_with_clarabel_completes_too(ratio):
+    ds, closest, t_arrive, final = _swap(ratio, "joint", solver="clarabel")
+    assert closest >= ds - 1e-6, (closest, ds)
+    assert t_arrive is not None and final < 0.1, final
 
 
 def test_split_filter_jams_where_joint_completes():

@@ -143,6 +143,11 @@ LINE = np.array([[0.0, 0.0], [0.6, 0.0], [1.4, 0.0]])
 GOSSIP = np.array([[0.0, 0.0], [1.4, 0.0], [0.6, 0.0]])   # 2 hears 0 (and 1 at 0.8)
 LEVEL = np.tile([[1.0, 0.1, -0.1, 0.05]], (N, 1)) / np.sqrt(1.0225)
 INPUTS = {
+    # three agents 0.8 m apart driving into each other: the joint barrier
+    # constraints are active (radius 0.5, gamma 2)
+    "controllers.CollisionAvoidance": {
+        "position": np.array([[0.0, 0.0], [0.8, 0.0], [0.4, 0.7]]),
+        "velocity_nominal": np.array([[1.0, 0.4], [-1.0, 0.5], [0.1, -1.0]])},
     "environment.Broadcast": {"position": GOSSIP,
                               "flag": np.array([True, True, False])},
     "environment.CommChannel": {"position": LINE},

@@ -1,6 +1,5 @@
 """The built-in case-study scenarios, run small: the outcome a researcher checks."""
 
-import os
 
 import numpy as np
 import pytest
@@ -117,8 +116,10 @@ def test_swap_is_safe_and_everyone_arrives():
     np.testing.assert_allclose(p[0], start)
     assert np.asarray(res["drive.done"])[-1].all()
     assert np.linalg.norm(p[-1] - goal, axis=1).max() < 0.06
-    # they really crossed the middle (not a detour around the circle)
-    assert np.linalg.norm(p, axis=2).min() < 2.0
+    # they really crossed the middle (not a detour around the circle of
+    # radius 5): the joint filter's roundabout passes within 2.1 m of the
+    # centre, a ring of 20 agents 0.6 m apart has radius 1.9 m
+    assert np.linalg.norm(p, axis=2).min() < 2.5
 
 
 def test_swap_without_symmetry_breaking_jams_but_stays_safe():
@@ -129,19 +130,20 @@ def test_swap_without_symmetry_breaking_jams_but_stays_safe():
     assert not np.asarray(res["drive.done"])[-1].any()
 
 
-def test_swap_at_robotarium_ratio_jams_per_agent_and_completes_jointly():
+def test_swap_at_robotarium_ratio_jams_per_agent_and_completes_by_default(monkeypatch):
     """Circle / safety radius 5.88 (Robotarium's default): the per-agent
-    filter leaves two agents stuck, the joint QP (mode="joint") brings all
-    20 home, both without ever breaking the safety radius."""
-    if not os.environ.get("CI"):
-        pytest.importorskip("clarabel")           # the safety extra; CI has it
+    filter leaves two agents stuck, the default (the joint QP, built-in
+    ADMM solver, no optional dependency: Clarabel is made unimportable
+    here) brings all 20 home, both without ever breaking the safety radius."""
+    import sys
+    monkeypatch.setitem(sys.modules, "clarabel", None)      # import clarabel fails
     out = {}
-    for mode in ("agent", "joint"):
-        mod, res = run("swap", safety=0.85, mode=mode)
+    for mode in ("agent", None):
+        mod, res = run("swap", safety=0.85, **({"mode": mode} if mode else {}))
         p = np.asarray(res["fleet.position"])
-        assert min(pdist(x).min() for x in p) >= 0.85 - 1e-3
-        out[mode] = int(np.asarray(res["drive.done"])[-1].sum())
-    assert out == {"agent": 18, "joint": 20}
+        assert min(pdist(x).min() for x in p) >= 0.85 - 1e-6
+        out[mode or "default"] = int(np.asarray(res["drive.done"])[-1].sum())
+    assert out == {"agent": 18, "default": 20}
 
 
 def test_cli_runs_a_case_study(tmp_path):

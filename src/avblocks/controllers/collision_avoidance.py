@@ -31,8 +31,8 @@ Unicycles: filter the velocities of their off-axis points (positions from
 :class:`OffAxisPoint`, output to :class:`HolonomicToUnicycle`); the body
 centres then stay ``D_s - 2 d`` apart.
 
-Joint mode (``mode="joint"``)
-----------------------------
+Joint mode (``mode="joint"``, the default)
+-----------------------------------------
 One QP over all agents' velocities ``u = (u_1, ..., u_N)`` (Wang, Ames &
 Egerstedt 2017, the centralised barrier certificate):
 
@@ -40,18 +40,32 @@ Egerstedt 2017, the centralised barrier certificate):
 
     u = \arg\min_u \sum_i |u_i - \hat u_i|^2 \quad\text{s.t.}\quad
         -(p_i - p_j)^T (u_i - u_j) \le \tfrac{\gamma}{2} h_{ij}
-        \quad (i < j,\ |p_i - p_j| \le r_s)
+        \quad (\text{pairs } (i, j) \text{ that see each other})
 
 (``dh_ij/dt = 2 (p_i - p_j)^T (u_i - u_j) >= -gamma h_ij``). The pairs
-come from a ``scipy.spatial.cKDTree`` (``query_pairs``, sensing range
-``r_s``) or from the union of the neighbour lists of the port; the
-constraint matrix is sparse (two ``D``-blocks per row) and the QP is solved
-by Clarabel (interior point, sparse, Apache-2.0, wheels for every
-platform; chosen over OSQP, whose ADMM iterates are only accurate to about
-1e-3 without polishing, and quadprog, which is dense). Unlike the per-agent
+are the union of the neighbour lists (the port, or the block's own cell
+list search with ``sensing_range``: the ``k_max`` nearest within range,
+or every pair within range with ``k_max=None``). Unlike the per-agent
 split, the joint QP lets one agent give way more than the other, which is
 what frees the jams of the split filter. ``u = 0`` is feasible while every
-``h_ij >= 0``, so the QP has a solution while the agents are safe.
+``h_ij >= 0``, so the QP has a solution while the agents are safe (and
+even when they overlap, a uniform expansion about the centroid satisfies
+every constraint, unless two agents coincide).
+
+Why the joint QP is the default: the per-agent filter leaves 2 of 20
+agents of the Robotarium swap (circle / safety radius 5.88) jammed for
+good, the joint QP brings all home (tested for ratios 3 to 8). It needs
+no optional dependency and compiles: the default solver
+(``solver="admm"``, :func:`admm_pair_qp`) is consensus ADMM written in
+``xp`` with static shapes (padded pairs) and a fixed budget, so the same
+code runs in the NumPy engine and under ``jit``/``vmap``/``grad``. Its
+stated tolerance: stopped when the primal residual and the last change
+are below ``tol (1 + max |u_nominal|)`` (``tol = 1e-10``, at most 500
+iterations); on jammed 20-agent clusters it agrees with an exact
+active-set solution (quadprog) to 1e-9 and meets every constraint to 1e-9
+relative (tests). ``solver="clarabel"`` solves the same QP by Clarabel
+(interior point, sparse; the ``safety`` extra, NumPy only; about 3e-7
+from quadprog on the same clusters), kept as a reference.
 
 Deadlocks: the pure joint QP still stops in symmetric configurations
 (``\hat u_i`` a non-negative combination of the active constraint normals,
@@ -75,7 +89,7 @@ configuration (in floating point the unbiased joint QP often escapes the
 symmetric swap as well, through round-off). The tests show the perfectly
 symmetric 20-agent swap completing for circle / safety radius ratios 4 to
 10 (right-hand bias 1), where the per-agent filter jams, and the jittered
-swap scenario completing at Robotarium's ratio 5.88. Note that the bias
+swap scenario completing for ratios 3 to 8. Note that the bias
 adds speed: up to ``sqrt(1 + rho^2)`` times the nominal one.
 
 Reference: L. Wang, A. D. Ames & M. Egerstedt, "Safety barrier certificates
@@ -286,12 +300,13 @@ def _right_hand(position, u_nom, pairs, radius, right_hand):
 
 
 def joint_safety_filter(position, u_nom, pairs, radius, gamma=1.0, right_hand=0.0):
-    """CBF-filtered velocities (N, D) from ONE QP over all agents.
+    """CBF-filtered velocities (N, D) from ONE QP over all agents (Clarabel).
 
     ``pairs`` (M, 2) int: the constrained pairs (e.g. :func:`pairs_in_range`).
     ``right_hand`` (2-D): the bias of :func:`safety_filter`, applied to the
     nominal velocity of agents with a partner closer than ``2 radius`` (see
-    the module docstring for why it frees symmetric jams). NumPy only.
+    the module docstring for why it frees symmetric jams). NumPy only; the
+    traceable equivalent is :func:`joint_filter`.
     """
     position = np.asarray(position, dtype=float)
     u_nom = np.asarray(u_nom, dtype=float)
@@ -306,6 +321,173 @@ def joint_safety_filter(position, u_nom, pairs, radius, gamma=1.0, right_hand=0.
     return u
 
 
+# ------------------------------------------------- the traceable joint QP (ADMM)
+def scatter_add(n, index, values, xp=np):
+    """``out[index[e]] += values[e]``: (n, ...) sums of (E, ...) rows."""
+    if xp is np:
+        index = np.asarray(index)
+        values = np.asarray(values)
+        if values.ndim == 1:
+            return np.bincount(index, values, minlength=n)
+        flat = values.reshape(len(values), -1)
+        cols = [np.bincount(index, flat[:, c], minlength=n) for c in range(flat.shape[1])]
+        return np.stack(cols, axis=1).reshape((n,) + values.shape[1:])
+    return xp.zeros((n,) + tuple(values.shape[1:]), dtype=values.dtype).at[index].add(values)
+
+
+def neighbor_edges(idx, xp=np):
+    """Padded pair list ``(ei, ej, ok)`` (each (N*K,)) from neighbour lists (N, K).
+
+    Edge ``(i, idx[i, k])`` is kept (``ok``) when the entry is real (``>= 0``,
+    not ``i`` itself) and the pair is not listed twice: where ``j`` also
+    lists ``i``, only the copy with ``i < j`` is kept, so the kept edges are
+    the union of the lists, each pair once (as :func:`pairs_from_neighbors`).
+    Static shapes: masked edges point from an agent to itself.
+    """
+    n, k = idx.shape
+    own = xp.broadcast_to(xp.arange(n)[:, None], (n, k))
+    real = (idx >= 0) & (idx != own)
+    j = xp.where(real, idx, own)
+    recip = xp.any(idx[j] == own[:, :, None], axis=-1)          # j lists i too
+    ok = real & ((own < j) | ~recip)
+    return own.reshape(-1), j.reshape(-1), ok.reshape(-1)
+
+
+def _loop(n_chunks, body, state, xp):
+    """``state = body(state)`` ``n_chunks`` times, skipping the calls once
+    ``state[-1]`` (done) is true: a done state is a fixed point of ``body``,
+    so the result is the same as calling it every time. NumPy: an early
+    exit; JAX: ``lax.cond`` inside a ``fori_loop`` with a static trip count
+    (reverse-mode differentiable; under ``vmap`` both branches run)."""
+    if xp is np:
+        for _ in range(n_chunks):
+            if state[-1]:
+                break
+            state = body(state)
+        return state
+    import jax
+    return jax.lax.fori_loop(
+        0, n_chunks, lambda _, s: jax.lax.cond(s[-1], lambda s: s, body, s), state)
+
+
+def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
+                 rho=1.0, alpha=1.6, check=10):
+    r"""``argmin sum_i |u_i - w_i|^2 s.t. a_e^T (u_i - u_j) <= c_e`` (edges e = (i, j)).
+
+    A fixed-iteration, traceable solver (pure ``xp``, static shapes) for
+    the joint QP: consensus ADMM (Boyd et al. 2011, section 7; the
+    over-relaxed form of section 3.4.3). Every edge keeps a copy
+    ``z_e = (z_ei, z_ej)`` of its two agents' velocities, constrained to its
+    half-space ``a_e^T (z_ei - z_ej) <= c_e``; the velocities are the
+    consensus of the copies::
+
+        u_i  = (2 w_i + rho sum_{e ∋ i} (z_e,i - y_e,i)) / (2 + rho deg_i)
+        x_e  = alpha (u_i, u_j) + (1 - alpha) z_e
+        z_e  = projection of x_e + y_e onto the half-space of e (closed form)
+        y_e += x_e - z_e
+
+    Each iteration costs O(N + E) (gathers and one scatter-add), no linear
+    system. ``u_nom`` (N, D); ``ei, ej, ok`` (E,) padded edges (``ok``
+    False: ignored); ``a`` (E, D); ``c`` (E,).
+
+    Stopping: every ``check`` iterations the primal residual
+    ``max |(u_i, u_j) - z_e|`` and the last change ``max |u^k - u^{k-1}|``
+    are compared with ``tol (1 + max |w|)``; once both are below it the
+    iterate is frozen (a no-op under JAX, an early exit under NumPy: the
+    same numbers). At most ``iterations`` (rounded up to a multiple of
+    ``check``). Measured on random jammed 20-agent clusters (about 100
+    pairs, many active): 100 iterations reach about 1e-6 of the exact
+    solution, 200 about 1e-9; the defaults stop after 40 iterations on
+    average in the swap case study, within 3e-10 of quadprog's exact
+    active-set solution on the test clusters (``rho = 1``, ``alpha =
+    1.6``; the problem is invariant to the scale of ``a``, so ``rho``
+    needs no tuning per problem).
+
+    Returns ``(u, residual)``: (N, D) and the last checked residual (a
+    scalar; ``<= tol (1 + max|w|)`` when it converged).
+    """
+    n, dim = u_nom.shape
+    if xp is np:
+        # NumPy: drop the padding (it only adds exact zeros: same numbers)
+        keep = np.flatnonzero(ok)
+        ei, ej, ok, a, c = ei[keep], ej[keep], ok[keep], a[keep], c[keep]
+    m = ei.shape[0]
+    # both copies of every edge stacked: rows 0..m-1 for agent i, m..2m-1
+    # for agent j; the half-space reads a2_e^T z_e,i + a2_e'^T z_e,j <= c_e
+    idx2 = xp.concatenate([ei, ej])
+    ok2 = xp.concatenate([ok, ok])
+    okc = xp.where(ok2, 1.0, 0.0)[:, None]
+    a2 = xp.concatenate([a, -a]) * okc                     # (2m, D)
+    c = xp.where(ok, c, 0.0)
+    an2 = 2.0 * xp.sum(a2[:m] * a2[:m], axis=-1)           # |(a, -a)|^2
+    an2 = xp.where(an2 > 0, an2, 1.0)
+    deg = scatter_add(n, idx2, okc[:, 0], xp)
+    denom = (2.0 + rho * deg)[:, None]
+    w2 = 2.0 * u_nom
+    scale = tol * (1.0 + xp.max(xp.abs(u_nom)))
+    if xp is np:
+        flat = (idx2[:, None] * dim + np.arange(dim)).ravel()
+
+        def gather_sum(v):                                  # scatter-add of (2m, D)
+            return np.bincount(flat, v.ravel(), minlength=n * dim).reshape(n, dim)
+    else:
+        def gather_sum(v):
+            return scatter_add(n, idx2, v, xp)
+
+    def step(st):
+        u, z, y = st
+        un = (w2 + rho * gather_sum((z - y) * okc)) / denom
+        v = alpha * un[idx2] + (1.0 - alpha) * z + y
+        g = xp.sum(a2 * v, axis=-1)
+        t = xp.maximum(g[:m] + g[m:] - c, 0.0) / an2
+        z2 = v - xp.concatenate([t, t])[:, None] * a2
+        return un, z2, v - z2
+
+    def chunk(st):
+        u, z, y, res, done = st
+        inner = (u, z, y)
+        for _ in range(check - 1):
+            inner = step(inner)
+        prev = inner[0]
+        new = step(inner)
+        un, z2 = new[0], new[1]
+        rp = xp.max(xp.abs(un[idx2] - z2) * okc, initial=0.0)
+        rd = xp.max(xp.abs(un - prev))
+        r = xp.maximum(rp, rd)
+        out = tuple(xp.where(done, o, nw) for o, nw in zip((u, z, y), new))
+        return out + (xp.where(done, res, r), done | (r <= scale))
+
+    z = u_nom[idx2]
+    st = (u_nom, z, xp.zeros_like(z), xp.asarray(xp.inf), xp.asarray(False))
+    n_chunks = max(1, -(-int(iterations) // int(check)))
+    st = _loop(n_chunks, chunk, st, xp)
+    return st[0], st[3]
+
+
+def joint_filter(position, u_nom, idx, radius, gamma=1.0, right_hand=0.0, xp=np, **solver):
+    """The joint CBF QP (see the module docstring) over the pairs listed in
+    the padded neighbour lists ``idx`` (N, K) (their union), solved by
+    :func:`admm_pair_qp`: pure ``xp``, traceable, differentiable.
+
+    ``right_hand`` (2-D): the roundabout bias of :func:`joint_safety_filter`.
+    Returns ``(u, residual)``.
+    """
+    ei, ej, ok = neighbor_edges(idx, xp)
+    if xp is np:                          # the padding only adds exact zeros
+        keep = np.flatnonzero(ok)
+        ei, ej, ok = ei[keep], ej[keep], ok[keep]
+    dp = position[ei] - position[ej]                      # p_i - p_j, (E, D)
+    d2 = xp.sum(dp * dp, axis=-1)
+    h = d2 - radius * radius
+    if not (isinstance(right_hand, (int, float)) and right_hand == 0):
+        n = position.shape[0]
+        close = xp.where(ok & (d2 < 4 * radius * radius), 1.0, 0.0)
+        near = (scatter_add(n, ei, close, xp) + scatter_add(n, ej, close, xp)) > 0
+        turn = xp.stack([u_nom[:, 1], -u_nom[:, 0]], axis=-1)
+        u_nom = u_nom + xp.where(near[:, None], right_hand * turn, 0.0)
+    return admm_pair_qp(u_nom, ei, ej, ok, -dp, 0.5 * gamma * h, xp, **solver)
+
+
 class CollisionAvoidance(Block):
     """CBF safety filter for N single integrators (or off-axis points).
 
@@ -313,8 +495,8 @@ class CollisionAvoidance(Block):
     -----
     position : in, (N, D), D = 2 or 3.
     velocity_nominal : in, (N, D) — desired velocities.
-    neighbors : in, (N, K) int64 (port mode only) — agents that may come close;
-        use a sensing range well above ``radius`` (K small: cost grows as K^D).
+    neighbors : in, (N, K) int (without ``sensing_range`` only) — agents that
+        may come close; use a sensing range well above ``radius``.
     velocity : out, (N, D) — the minimally modified, safe velocities.
 
     Parameters
@@ -323,31 +505,60 @@ class CollisionAvoidance(Block):
     gamma : float > 0 — barrier gain (1/s).
     right_hand : float >= 0 — roundabout bias against deadlocks (2-D; see
         :func:`safety_filter`), default 0 (pure minimal filter).
-    dim : int (2 or 3);  sensing_range, k_max : compute neighbours inside the
-        block (NumPy only) instead of the port.
-    mode : ``"agent"`` (default) — one small exact QP per agent, half of each
-        pair's constraint each (vectorised, JAX-traceable with the port);
-        ``"joint"`` — one sparse QP over all agents (Clarabel, NumPy only, not
-        traceable; needs the ``safety`` extra). With ``sensing_range`` the
-        joint mode takes every pair within range from a k-d tree (``k_max``
-        is not used); with the port, the union of the neighbour lists.
-        See the module docstring: joint frees jams the split filter keeps.
+    dim : int (2 or 3).
+    sensing_range : float, optional — find the neighbours inside the block
+        (a :class:`~avblocks.utility.spatial.NeighborSearch` cell list, which
+        traces) instead of the port: the ``k_max`` nearest agents within
+        range (joint mode: the union of these lists, each pair once;
+        ``k_max=None`` in joint mode: every pair within range, which costs
+        ``(N, 3^D capacity)`` padded pairs in a compiled run).
+    k_max : int or None — see ``sensing_range`` (default 6).
+    capacity : int, optional — points per cell of that search, fixed for
+        compiled runs (without it a compiled run needs the engine to plan
+        the search from the initial positions).
+    mode : ``"joint"`` (default) — one QP over all agents (Wang, Ames &
+        Egerstedt 2017), which lets one agent give way more than the other
+        and frees the jams of the split filter; ``"agent"`` — one small
+        exact QP per agent, half of each pair's constraint each (closed
+        form; jams in dense symmetric swaps, see the module docstring).
+    solver : joint mode only. ``"admm"`` (default) — :func:`admm_pair_qp`,
+        pure ``xp``: traceable, differentiable, no extra dependency; it
+        agrees with Clarabel to about 1e-8 (absolute, velocities of order
+        1) on the tested problems, constraints met to ``tol``.
+        ``"clarabel"`` — the interior-point reference (NumPy only, needs the
+        ``safety`` extra).
+    iterations, tol : the ADMM budget and stopping tolerance (relative to
+        ``1 + max |u_nominal|``).
 
     ``radius``, ``gamma``, ``right_hand`` (2-D) and ``sensing_range`` (when
-    given) are numeric parameters; ``n``, ``dim``, ``k_max`` are structural.
+    given) are numeric parameters; the rest are structural.
     """
 
     def __init__(self, n, radius, *, gamma=1.0, right_hand=0.0, dim=2,
-                 sensing_range=None, k_max=6, mode="agent"):
+                 sensing_range=None, k_max=6, mode="joint", solver="admm",
+                 iterations=500, tol=1e-10, capacity=None):
         super().__init__()
         name = "CollisionAvoidance"
         if not isinstance(mode, str) or mode not in ("agent", "joint"):
             raise ParameterError("mode must be 'agent' or 'joint'", block=name,
                                  param="mode", found=mode)
+        if not isinstance(solver, str) or solver not in ("admm", "clarabel"):
+            raise ParameterError("solver must be 'admm' or 'clarabel'", block=name,
+                                 param="solver", found=solver)
         self.mode = mode
-        if mode == "joint":
+        self.solver = solver
+        if mode == "joint" and solver == "clarabel":
             _clarabel()
             self.traceable = False
+        try:
+            self.iterations = int(iterations)
+            self.tol = float(tol)
+        except (TypeError, ValueError):
+            raise ParameterError("iterations and tol must be numbers", block=name,
+                                 param="iterations") from None
+        if self.iterations < 1 or not self.tol >= 0:
+            raise ParameterError("need iterations >= 1 and tol >= 0", block=name,
+                                 param="iterations", found=(iterations, tol))
         self.n = n = int(n)
         self.declare_parameter("radius", positive_scalar(radius, name, "radius"),
                                bounds=(1e-12, None), unit="m", doc="safety distance")
@@ -366,30 +577,66 @@ class CollisionAvoidance(Block):
             self.right_hand = 0.0
         self.declare_input("position", (n, dim), unit="m")
         self.declare_input("velocity_nominal", (n, dim), unit="m/s")
-        if mode == "joint" and sensing_range is not None and k_max is None:
-            k_max = 1                       # not used: pairs from a k-d tree
-        self.graph = NeighborSource(self, n, radius=sensing_range,
-                                    k_max=k_max if sensing_range is not None else None,
-                                    radius_param="sensing_range")
+        self.search = None
+        if sensing_range is not None:
+            r = positive_scalar(sensing_range, name, "sensing_range", allow_inf=True)
+            self.declare_parameter("sensing_range", r, bounds=(1e-12, None),
+                                   allow_inf=True, unit="m")
+            if k_max is None and mode == "agent":
+                raise ParameterError("k_max is needed in agent mode", block=name,
+                                     param="k_max")
+            if k_max is not None and int(k_max) < 1:
+                raise ParameterError("k_max must be >= 1", block=name,
+                                     param="k_max", found=k_max)
+            self.k_max = None if k_max is None else int(k_max)
+            if capacity is not None and int(capacity) < 1:
+                raise ParameterError("capacity must be >= 1", block=name,
+                                     param="capacity", found=capacity)
+            from ..utility.spatial import NeighborSearch
+            self.search = NeighborSearch(r, points="position", capacity=capacity, dim=dim)
+            self.graph = None
+        else:
+            self.graph = NeighborSource(self, n)
         self.declare_output("velocity", (n, dim), unit="m/s")
 
     def configure(self, inputs):
-        self.graph.configure(inputs)
+        if self.graph is not None:
+            self.graph.configure(inputs)
+
+    def _neighbors(self, u, p, xp):
+        if self.search is None:
+            return self.graph.get(u, p, xp)[0]
+        if xp is not np and self.search.cells is None:
+            raise ParameterError(
+                "a compiled run needs a static plan for the neighbour search",
+                block="CollisionAvoidance", param="capacity",
+                expected="capacity=<agents per cell> (the number of agents never "
+                         "overflows)", found=None)
+        r = self.sensing_range if xp is not np else float(self.sensing_range)
+        if self.k_max is not None:
+            return self.search.nearest(p, r, self.k_max, xp=xp)[0]
+        return self.search.within(p, r, xp=xp)[0]
 
     def output(self, t, x, u, xp):
         p = u["position"]
         rh = self.right_hand
         if self.dim != 2 or not self.param_flag("rh", xp, np.any, "right_hand"):
             rh = 0.0
-        if self.mode == "joint":
+        if self.mode == "joint" and self.solver == "clarabel":
             p = np.asarray(p, dtype=float)
-            if self.graph.mode == "radius":
+            if self.search is not None and self.k_max is None:
                 pairs = pairs_in_range(p, float(self.sensing_range))
+            elif self.search is not None:
+                pairs = pairs_from_neighbors(self._neighbors(u, p, np))
             else:
                 pairs = pairs_from_neighbors(self.graph.get(u, p, np)[0])
             return {"velocity": joint_safety_filter(p, u["velocity_nominal"], pairs,
                                                     float(self.radius), float(self.gamma),
                                                     float(rh))}
-        idx, _ = self.graph.get(u, p, xp)
+        idx = self._neighbors(u, p, xp)
+        if self.mode == "joint":
+            v, _ = joint_filter(p, u["velocity_nominal"], idx, self.radius, self.gamma,
+                                rh, xp, iterations=self.iterations, tol=self.tol)
+            return {"velocity": v}
         return {"velocity": safety_filter(p, u["velocity_nominal"], idx, self.radius,
                                           self.gamma, rh, xp)}

@@ -48,6 +48,7 @@ duplicates, points exactly at the radius and on cell borders).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -56,19 +57,18 @@ import numpy as np
 
 from ..core.errors import ParameterError
 
-# large odd multipliers of a spatial hash (Teschner et al. 2003 style)
-_PRIMES = (73856093, 19349663, 83492791)
-
-
 class Need(NamedTuple):
     """What a search needed: compare with the :class:`CellList`'s plan.
 
-    ``capacity``: points in the fullest bucket (an int array scalar);
-    ``reach``: the largest radius asked for (a float array scalar).
+    ``capacity``: the most candidates one query point had (points in the
+    cells around it; an int array scalar); ``reach``: the largest radius
+    asked for (a float array scalar); ``hits``: the most points one query
+    point had within the radius (0 when not counted).
     """
 
     capacity: object
     reach: object
+    hits: object = 0
 
 
 @dataclass(frozen=True)
@@ -80,15 +80,22 @@ class CellList:
     reach : float
         Cell edge lower bound: the largest radius a search may ask for.
         ``inf`` means "no range limit": searches compare every pair
-        (O(N^2) work, chunk-free; use only for small N).
+        (O(N^2) work; use only for small N).
     capacity : int or None
-        Most points per bucket. ``None``: as many as found (NumPy only).
+        Most candidates per query point (points in the cells around it).
+        ``None``: as many as found (NumPy only).
     table : int or None
-        Number of hash buckets (``None``: chosen from N at search time).
+        Accepted for compatibility; unused (the grid needs no hash table).
     box : tuple of float or None
         Periodic box edge lengths (origin at 0), or ``None`` (free space).
     dim : int
         2 or 3.
+    hits : int or None
+        Most points within the radius of one query point: the width of
+        :func:`within`'s rows. ``None``: as many as found (NumPy only).
+    split : int
+        Cells per ``reach`` along an axis: a query point looks at ``2 split
+        + 1`` cells per axis (finer cells: fewer candidates, more ranges).
     """
 
     reach: float
@@ -96,6 +103,8 @@ class CellList:
     table: int | None = None
     box: tuple | None = None
     dim: int = 2
+    hits: int | None = None
+    split: int = 2
 
     def __post_init__(self):
         r = float(self.reach)
@@ -104,9 +113,11 @@ class CellList:
                                  found=self.reach)
         if self.dim not in (2, 3):
             raise ParameterError("dim must be 2 or 3", param="dim", found=self.dim)
-        if self.capacity is not None and int(self.capacity) < 1:
-            raise ParameterError("capacity must be >= 1", param="capacity",
-                                 found=self.capacity)
+        for name in ("capacity", "hits"):
+            v = getattr(self, name)
+            if v is not None and int(v) < 1:
+                raise ParameterError(f"{name} must be >= 1", param=name, expected=">= 1",
+                                     found=v)
         if self.box is not None:
             box = tuple(float(b) for b in np.ravel(self.box))
             if len(box) != self.dim or not all(math.isfinite(b) and b > 0 for b in box):
@@ -129,150 +140,373 @@ class CellList:
         """Cells along each axis of a periodic box (``None`` in free space)."""
         if self.box is None:
             return None
-        return tuple(max(1, int(b // self.reach)) for b in self.box)
+        return tuple(max(1, int(b // (self.reach / self.split))) for b in self.box)
 
     def cell_edges(self):
-        """Edge length of a cell along each axis."""
+        """Edge length of a cell along each axis (``>= reach / split``)."""
         if self.box is None:
-            return (self.reach,) * self.dim
+            return (self.reach / self.split,) * self.dim
         return tuple(b / c for b, c in zip(self.box, self.cells_per_axis()))
-
-    def offsets(self):
-        """(3^D or fewer, D) integer offsets of the cells searched around a cell."""
-        per_axis = []
-        ncell = self.cells_per_axis()
-        for a in range(self.dim):
-            if ncell is None or ncell[a] >= 3:
-                per_axis.append((-1, 0, 1))
-            else:                           # fewer than 3 cells: no cell twice
-                per_axis.append(tuple(range(ncell[a])))
-        grid = np.stack(np.meshgrid(*per_axis, indexing="ij"), axis=-1)
-        return grid.reshape(-1, self.dim)
-
-    def table_size(self, n):
-        if self.table is not None:
-            return int(self.table)
-        return table_size(n)
 
     def exceeded(self, need) -> str | None:
         """A sentence saying what ``need`` exceeds in this plan, or None."""
         cap = int(np.max(np.asarray(need.capacity)))
+        hits = int(np.max(np.asarray(need.hits)))
         reach = float(np.max(np.asarray(need.reach)))
         msgs = []
-        if self.capacity is not None and cap > self.capacity:
-            msgs.append(f"a cell held {cap} points, capacity is {self.capacity}")
+        if self.capacity is not None and not self.brute and cap > self.capacity:
+            msgs.append(f"capacity: a point had {cap} candidates around it, "
+                        f"capacity is {self.capacity}")
+        if self.hits is not None and hits > self.hits:
+            msgs.append(f"hits: a point had {hits} others within range, "
+                        f"room for {self.hits}")
         if reach > self.reach * (1 + 1e-12):
             msgs.append(f"a search asked for radius {reach:g}, the cells were planned "
                         f"for {self.reach:g}")
         return "; ".join(msgs) or None
 
+    def grown(self, need, headroom=1.5) -> "CellList":
+        """This plan with room for ``need`` (times ``headroom``)."""
+        cap = int(np.max(np.asarray(need.capacity)))
+        hits = int(np.max(np.asarray(need.hits)))
+        new_cap = self.capacity
+        if self.capacity is not None and cap > self.capacity:
+            new_cap = int(math.ceil(headroom * cap))
+        new_hits = self.hits
+        if self.hits is not None and hits > self.hits:
+            new_hits = int(math.ceil(headroom * hits))
+        return CellList(self.reach, new_cap, self.table, self.box, self.dim, new_hits,
+                        self.split)
 
-def table_size(n) -> int:
-    """Default number of hash buckets for ``n`` points: a power of two >= 2 n."""
-    return 1 << max(4, int(2 * max(int(n), 1) - 1).bit_length())
 
-
-def plan_cells(points, reach, *, capacity=None, headroom=2.0, box=None, table=None,
-               min_capacity=4) -> CellList:
+def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=None,
+               min_capacity=8, hits=None) -> CellList:
     """Plan a :class:`CellList` from sample positions (build time, NumPy).
 
-    ``capacity`` defaults to ``max(min_capacity, ceil(headroom * fullest))``
-    where ``fullest`` is the fullest bucket for ``points``.
+    ``capacity`` defaults to ``max(min_capacity, ceil(headroom * most))``
+    where ``most`` is the largest candidate count of a point at ``points``;
+    ``hits`` likewise from the most points within ``reach`` of one point.
     """
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
         raise ParameterError("points must be (N, 2) or (N, 3)", param="points",
                              found=pts.shape)
     base = CellList(reach, None, table, box, pts.shape[1])
-    if capacity is None:
-        if base.brute:
-            cap = 1
-        else:
-            need = cell_index(base, pts, np)[3]
-            cap = max(int(min_capacity), int(math.ceil(float(headroom) * int(need))))
-    else:
-        cap = int(capacity)
-    return CellList(base.reach, cap, table, base.box, base.dim)
+    n = pts.shape[0]
+    if base.brute:
+        return CellList(base.reach, 1, table, base.box, base.dim,
+                        max(1, n - 1) if hits is None else int(hits))
+    if capacity is None or hits is None:
+        _, _, need = within(base, pts, base.reach, None, np)
+        if capacity is None:
+            capacity = max(int(min_capacity),
+                           int(math.ceil(float(headroom) * int(need.capacity))))
+        if hits is None:
+            hits = max(int(min_capacity), int(math.ceil(float(headroom) * int(need.hits))))
+    return CellList(base.reach, int(capacity), table, base.box, base.dim, int(hits))
 
 
 # ---------------------------------------------------------------- internals
-def _cell_coords(cells, pos, xp):
-    """Integer cell coordinates (N, D) of positions (wrapped into a periodic box)."""
+def _int_type(points, xp):
+    """Integer type of cell keys: 64-bit unless a traced run is 32-bit."""
+    if xp is np or np.dtype(points.dtype).itemsize == 8:
+        return np.int64
+    return np.int32
+
+
+def _sort(keys, xp):
+    if xp is np:
+        return np.argsort(keys, kind="stable")
+    return xp.argsort(keys, stable=True)
+
+
+class _Layout(NamedTuple):
+    """Points sorted by cell (see :func:`layout`)."""
+
+    order: object      # (N,) point indices sorted by cell key (stable)
+    skey: object       # (N,) sorted cell keys
+    coords: object     # (N, D) cell coordinates of the points (grid frame)
+    shift: object      # (D,) grid frame origin in cells (free space) or None
+    dims: object       # (D,) cells per axis of the grid frame
+    strides: tuple     # key strides per axis (array scalars)
+
+
+def _cells_of(cells, pos, xp, it):
     edges = xp.asarray(cells.cell_edges(), dtype=pos.dtype)
     if cells.box is not None:
         box = xp.asarray(cells.box, dtype=pos.dtype)
         pos = pos - box * xp.floor(pos / box)
-        c = xp.floor(pos / edges).astype(np.int32)
-        ncell = xp.asarray(cells.cells_per_axis(), dtype=np.int32)
-        return xp.clip(c, 0, ncell - 1)      # a point exactly at L rounds up
-    return xp.floor(pos / edges).astype(np.int32)
+        ncell = xp.asarray(cells.cells_per_axis(), dtype=it)
+        return xp.clip(xp.floor(pos / edges).astype(it), 0, ncell - 1)
+    return xp.floor(pos / edges).astype(it)
 
 
-def _hash(c, t, xp):
-    """Bucket of integer cell coordinates (N, D) in a table of ``t`` (power of 2)."""
-    h = c[..., 0].astype(np.uint32) * np.uint32(_PRIMES[0])
-    for a in range(1, c.shape[-1]):
-        h = h ^ (c[..., a].astype(np.uint32) * np.uint32(_PRIMES[a]))
-    return (h & np.uint32(t - 1)).astype(np.int32)
+def layout(cells, points, xp=np):
+    """Sort ``points`` by cell: a :class:`_Layout`.
 
-
-def cell_index(cells, points, xp=np):
-    """Sort ``points`` into buckets.
-
-    Returns ``(order, start, count, fullest, coords)``: point indices sorted
-    by bucket (stable), each bucket's first slot in ``order`` and its count
-    (T,), the fullest bucket's count, and each point's cell coordinates.
+    Free space: cell coordinates are taken relative to the lowest occupied
+    cell minus one, so the grid frame has an empty border layer on every
+    side; cell ``(c_0, c_1[, c_2])`` has key ``c_0 + W_0 (c_1 + W_1 c_2)``
+    (the frame's extent ``W`` is data, not shape). Periodic box: the grid
+    is the box's (static) cells.
     """
+    it = _int_type(points, xp)
+    c = _cells_of(cells, points, xp, it)
+    if cells.box is not None:
+        shift = None
+        dims = xp.asarray(cells.cells_per_axis(), dtype=it)
+    else:
+        shift = xp.min(c, axis=0) - cells.split
+        c = c - shift
+        dims = xp.max(c, axis=0) + cells.split + 1
+    strides = [xp.asarray(1, dtype=it)]
+    for a in range(1, cells.dim):
+        strides.append(strides[-1] * dims[a - 1])
+    key = c[:, 0]
+    for a in range(1, cells.dim):
+        key = key + c[:, a] * strides[a]
+    order = _sort(key, xp)
+    return _Layout(order, key[order], c, shift, dims, tuple(strides))
+
+
+def _query_cells(cells, lay, queries, xp):
+    it = lay.coords.dtype
+    c = _cells_of(cells, queries, xp, it)
+    if lay.shift is None:
+        return c
+    return xp.clip(c - lay.shift, 0, lay.dims - 1)
+
+
+def _windows(cells, lay, qc, xp):
+    """Key ranges ``[lo, hi)`` (each (Q,)) covering the cells around each query.
+
+    One contiguous range per row of cells (``2 split + 1`` cells along axis
+    0; in a periodic box a row that wraps adds a second range)."""
+    d, s = cells.dim, cells.split
+    ncell = cells.cells_per_axis()
+    whole = [ncell is not None and ncell[a] <= 2 * s + 1 for a in range(d)]
+    per_axis = []
+    for a in range(1, d):
+        per_axis.append(tuple(range(ncell[a])) if whole[a] else tuple(range(-s, s + 1)))
+    out = []
+    q0 = qc[:, 0]
+    for r in itertools.product(*per_axis):
+        row = 0
+        for a in range(1, d):
+            if whole[a]:
+                ca = xp.full_like(q0, r[a - 1])
+            elif ncell is not None:
+                ca = xp.mod(qc[:, a] + r[a - 1], ncell[a])
+            else:
+                ca = qc[:, a] + r[a - 1]
+            row = row + ca * lay.strides[a]
+        if ncell is None:
+            out.append((row + q0 - s, row + q0 + s + 1))
+        elif whole[0]:
+            out.append((row + 0 * q0, row + ncell[0]))
+        else:
+            n0 = ncell[0]
+            out.append((row + xp.maximum(q0 - s, 0),
+                        row + xp.minimum(q0 + s, n0 - 1) + 1))
+            under = xp.minimum(q0 - s, 0)               # -(cells wrapped below 0)
+            over = xp.maximum(q0 + s - (n0 - 1), 0)     # cells wrapped past the end
+            lo = xp.where(under < 0, row + n0 + under, row)
+            hi = xp.where(under < 0, row + n0, row + over)
+            out.append((lo, hi))
+    return out
+
+
+def _bounds(cells, lay, wins, xp):
+    """Slots ``[a, b)`` in the sorted order of each key range."""
+    n = lay.skey.shape[0]
+    g = None
+    if cells.box is not None:
+        g = int(np.prod(cells.cells_per_axis()))
+    elif xp is np:
+        g = int(np.prod(np.asarray(lay.dims)))
+    if g is not None and g <= 4 * n + 4096:          # dense table of cell starts
+        it = lay.skey.dtype
+        if xp is np:
+            count = np.bincount(lay.skey, minlength=g)
+        else:
+            count = xp.bincount(lay.skey, length=g)
+        start = xp.concatenate([xp.zeros(1, dtype=it), xp.cumsum(count).astype(it)])
+        return [(start[xp.clip(lo, 0, g)], start[xp.clip(hi, 0, g)]) for lo, hi in wins]
+    out = []
+    for lo, hi in wins:
+        out.append((xp.searchsorted(lay.skey, lo, side="left"),
+                    xp.searchsorted(lay.skey, hi, side="left")))
+    return out
+
+
+def _gather_slots(bounds, cap, xp):
+    """(Q, cap) slots of the concatenated ranges, a validity mask, and the
+    largest total a query needed."""
+    a0, b0 = bounds[0]
+    it = a0.dtype
+    s = xp.arange(cap, dtype=it)[None, :]
+    pos = a0[:, None] + s
+    end = b0 - a0
+    for a, b in bounds[1:]:
+        e = end[:, None]
+        pos = xp.where(s >= e, a[:, None] + (s - e), pos)
+        end = end + (b - a)
+    ok = s < end[:, None]
+    return xp.where(ok, pos, 0), ok, xp.max(end)
+
+
+class _Hits(NamedTuple):
+    """Candidates of every query, in the order the queries were processed."""
+
+    pos: object      # (Q, M) slots into the sorted points (or point indices)
+    ok: object       # (Q, M) slot holds a candidate
+    idx: object      # (Q, M) point index of each slot
+    d: object        # (Q, M, D) displacement candidate - query (minimum image)
+    rows: object     # (Q,) the query each processed row is, or None (identity)
+    need: object     # largest candidate count
+
+
+def _search(cells, points, queries, xp, *, sort_queries=True):
+    """Candidates of each query point (rows sorted by cell when the queries
+    are the points, for locality; ``rows`` maps them back)."""
     n = points.shape[0]
-    t = cells.table_size(n)
-    c = _cell_coords(cells, points, xp)
-    b = _hash(c, t, xp)
-    order = xp.argsort(b, stable=True) if xp is not np else np.argsort(b, kind="stable")
-    count = xp.bincount(b, length=t) if xp is not np else np.bincount(b, minlength=t)
-    start = xp.cumsum(count) - count
-    return order, start, count, xp.max(count), c
-
-
-def candidates(cells, points, queries=None, xp=np, *, index=None):
-    """Candidate neighbours of each query point: ``(cand, need)``.
-
-    ``cand`` is (Q, M) int32 point indices, ``-1`` where empty, ``M = (cells
-    searched) * capacity``; every point within ``cells.reach`` of a query
-    point is in its row when ``need.capacity <= capacity``. ``queries``
-    defaults to ``points``. ``index`` is a precomputed :func:`cell_index`.
-    """
     if cells.brute:
-        n = points.shape[0]
-        q = points.shape[0] if queries is None else queries.shape[0]
-        cand = xp.broadcast_to(xp.arange(n, dtype=np.int32)[None, :], (q, n))
-        return cand, Need(xp.asarray(0), xp.asarray(0.0))
-    order, start, count, fullest, pc = index if index is not None else \
-        cell_index(cells, points, xp)
+        q = points if queries is None else queries
+        qn = q.shape[0]
+        it = _int_type(points, xp)
+        pos = xp.broadcast_to(xp.arange(n, dtype=it)[None, :], (qn, n))
+        d = points[None, :, :] - q[:, None, :]
+        if cells.box is not None:
+            box = xp.asarray(cells.box, dtype=d.dtype)
+            d = d - box * xp.round(d / box)
+        return _Hits(pos, xp.ones((qn, n), dtype=bool), pos, d, None, xp.asarray(n))
+    lay = layout(cells, points, xp)
+    ps = points[lay.order]
+    if queries is None and sort_queries:
+        q, qc, rows = ps, lay.coords[lay.order], lay.order
+    elif queries is None:
+        q, qc, rows = points, lay.coords, None
+    else:
+        q, qc, rows = queries, _query_cells(cells, lay, queries, xp), None
+    bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp)
     cap = cells.capacity
     if cap is None:
         if xp is not np:
             raise ParameterError("a traced search needs a static capacity",
                                  param="capacity", hint="plan it with plan_cells()")
-        cap = max(int(fullest), 1)
-    qc = pc if queries is None else _cell_coords(cells, queries, xp)
-    t = cells.table_size(points.shape[0])
-    offs = cells.offsets()
-    ncell = cells.cells_per_axis()
-    cols = []
-    slot = xp.arange(cap, dtype=np.int32)
-    for o in offs:
-        want = qc + xp.asarray(o, dtype=np.int32)
-        if ncell is not None:
-            want = xp.mod(want, xp.asarray(ncell, dtype=np.int32))
-        b = _hash(want, t, xp)                               # (Q,)
-        s, k = start[b], count[b]
-        pos = s[:, None] + slot[None, :]                     # (Q, cap)
-        ok = slot[None, :] < k[:, None]
-        j = order[xp.where(ok, pos, 0)]
-        same = xp.all(pc[j] == want[:, None, :], axis=-1)    # true cell, not a bucket mate
-        cols.append(xp.where(ok & same, j, -1).astype(np.int32))
-    cand = xp.concatenate(cols, axis=1)
-    return cand, Need(fullest, xp.asarray(0.0))
+        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if n else 1
+    pos, ok, need = _gather_slots(bounds, cap, xp)
+    d = ps[pos] - q[:, None, :]
+    if cells.box is not None:
+        box = xp.asarray(cells.box, dtype=d.dtype)
+        d = d - box * xp.round(d / box)
+    return _Hits(pos, ok, lay.order[pos], d, rows, need)
+
+
+def _unsort(rows, arrays, xp):
+    """Put rows processed in ``rows`` order back into query order."""
+    if rows is None:
+        return arrays
+    n = rows.shape[0]
+    if xp is np:
+        inv = np.empty(n, dtype=rows.dtype)
+        inv[rows] = np.arange(n, dtype=rows.dtype)
+    else:
+        inv = xp.zeros(n, dtype=rows.dtype).at[rows].set(xp.arange(n, dtype=rows.dtype))
+    return [a[inv] for a in arrays]
+
+
+def _filter(cells, hits, radius, xp, *, exclude_self, heading=None, fov=None):
+    """(valid mask, squared distances) of the candidates."""
+    d2 = xp.sum(hits.d * hits.d, axis=-1)
+    r = xp.asarray(radius, dtype=d2.dtype)
+    ok = hits.ok & (d2 <= r * r)
+    if exclude_self:
+        qn = hits.idx.shape[0]
+        if hits.rows is None:
+            me = xp.arange(qn, dtype=hits.idx.dtype)
+        else:
+            me = hits.rows.astype(hits.idx.dtype)
+        ok = ok & (hits.idx != me[:, None])
+    if fov is not None:
+        h = heading if hits.rows is None else heading[hits.rows]
+        rel = xp.arctan2(hits.d[..., 1], hits.d[..., 0]) - h[:, None]
+        rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
+        ok = ok & (rel <= 0.5 * fov + 1e-12)
+    return ok, d2
+
+
+def _compact(ok, cols, width, xp):
+    """Move the valid entries of each row to its front: arrays (Q, width)
+    of each of ``cols`` (first fill value given with it), and the largest
+    count (the width needed)."""
+    it = np.int64 if xp is np else cols[0][0].dtype
+    cnt = xp.sum(ok, axis=1)
+    need = xp.max(cnt) if ok.shape[1] else xp.asarray(0)
+    if width is None:
+        width = max(1, int(need))
+    qn = ok.shape[0]
+    dest = xp.cumsum(ok, axis=1) - 1
+    outs = []
+    if xp is np:
+        r, c = np.nonzero(ok)
+        dcol = dest[r, c]
+        keep = dcol < width
+        r, c, dcol = r[keep], c[keep], dcol[keep]
+        for a, fill in cols:
+            o = np.full((qn, width), fill, dtype=a.dtype)
+            o[r, dcol] = a[r, c]
+            outs.append(o)
+        return outs, need
+    dest = xp.where(ok, dest, width)
+    rr = xp.broadcast_to(xp.arange(qn)[:, None], ok.shape)
+    for a, fill in cols:
+        o = xp.full((qn, width), fill, dtype=a.dtype)
+        outs.append(o.at[rr, dest].set(a, mode="drop"))
+    del it
+    return outs, need
+
+
+def _smallest(d2, idx, k, xp):
+    """The ``k`` smallest ``(d2, idx)`` pairs of each row, sorted: ``k``
+    passes of a row minimum (distance first, then the smaller index among
+    equal distances), each removing what it took. Exact; O(k M) per row.
+    ``idx`` entries must be unique per row where ``d2`` is finite."""
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    big = np.iinfo(np.int64).max if np.dtype(idx.dtype).itemsize == 8 else \
+        np.iinfo(np.int32).max
+    od, oi = [], []
+    for _ in range(kk):
+        m = xp.min(d2, axis=1)
+        j = xp.min(xp.where(d2 == m[:, None], idx, big), axis=1)
+        od.append(m)
+        oi.append(j)
+        d2 = xp.where(idx == j[:, None], xp.inf, d2)
+    if kk == 0:
+        return xp.zeros((qn, 0), dtype=d2.dtype), xp.zeros((qn, 0), dtype=idx.dtype)
+    return xp.stack(od, axis=1), xp.stack(oi, axis=1)
+
+
+def _pad_cols(a, k, fill, xp):
+    if a.shape[1] >= k:
+        return a[:, :k]
+    pad = xp.full((a.shape[0], k - a.shape[1]), fill, dtype=a.dtype)
+    return xp.concatenate([a, pad], axis=1)
+
+
+def candidates(cells, points, queries=None, xp=np):
+    """Candidate neighbours of each query point: ``(cand, need)``.
+
+    ``cand`` is (Q, M) int point indices, ``-1`` where empty, ``M =
+    capacity``; every point within ``cells.reach`` of a query point is in
+    its row when ``need.capacity <= capacity``. ``queries`` defaults to
+    ``points``.
+    """
+    hits = _search(cells, points, queries, xp)
+    cand = xp.where(hits.ok, hits.idx, -1)
+    (cand,) = _unsort(hits.rows, [cand], xp)
+    return cand, Need(hits.need, xp.asarray(0.0))
 
 
 def displacement(cells, points, cand, queries=None, xp=np):
@@ -285,64 +519,46 @@ def displacement(cells, points, cand, queries=None, xp=np):
     return d
 
 
-def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True,
-           index=None):
+def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
     """Every point within ``radius`` (inclusive) of each query point.
 
-    Returns ``(idx, dist, need)``: (Q, M) int32 indices (``-1`` where none;
-    unsorted) and their distances (``inf`` where none). With ``queries``
-    None the query points are the points and ``exclude_self`` drops each
-    point from its own row.
+    Returns ``(idx, dist, need)``: (Q, H) indices (``-1`` where none; in
+    no particular order) and their distances (``inf`` where none); ``H =
+    cells.hits`` (NumPy without a plan: the largest count found). With
+    ``queries`` None the query points are the points and ``exclude_self``
+    drops each point from its own row.
     """
-    cand, need = candidates(cells, points, queries, xp, index=index)
-    d = displacement(cells, points, cand, queries, xp)
-    d2 = xp.sum(d * d, axis=-1)
-    r = xp.asarray(radius, dtype=d2.dtype)
-    ok = (cand >= 0) & (d2 <= r * r)
-    if exclude_self and queries is None:
-        ok = ok & (cand != xp.arange(points.shape[0], dtype=np.int32)[:, None])
-    idx = xp.where(ok, cand, -1)
-    dist = xp.where(ok, xp.sqrt(xp.where(ok, d2, 0.0)), xp.inf)
-    return idx, dist, Need(need.capacity, r)
+    hits = _search(cells, points, queries, xp)
+    ok, d2 = _filter(cells, hits, radius, xp, exclude_self=exclude_self and queries is None)
+    (ci, cd), hneed = _compact(ok, [(hits.idx, -1), (d2, np.inf)], cells.hits, xp)
+    dist = xp.sqrt(cd)
+    ci, dist = _unsort(hits.rows, [ci, dist], xp)
+    return ci, dist, Need(hits.need, xp.asarray(radius, dtype=dist.dtype), hneed)
 
 
 def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
-            fov=None, exclude_self=True, index=None):
+            fov=None, exclude_self=True):
     """The ``k`` nearest points within ``radius`` of each query point.
 
     Sorted by distance, ties by index. With ``heading`` (Q,) and ``fov``
     (full angle), only points whose bearing from the query point relative
     to its heading lies in ``[-fov/2, fov/2]`` count.
 
-    Returns ``(idx, dist, need)``: (Q, k) int32 (``-1`` padded) and float
+    Returns ``(idx, dist, need)``: (Q, k) int (``-1`` padded) and float
     (``inf`` padded).
     """
-    idx, dist, need = within(cells, points, radius, queries, xp,
-                             exclude_self=exclude_self, index=index)
-    if fov is not None:
-        d = displacement(cells, points, idx, queries, xp)
-        rel = xp.arctan2(d[..., 1], d[..., 0]) - heading[:, None]
-        rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
-        ok = (idx >= 0) & (rel <= 0.5 * fov + 1e-12)
-        idx = xp.where(ok, idx, -1)
-        dist = xp.where(ok, dist, xp.inf)
-    big = np.iinfo(np.int32).max
-    key_i = xp.where(idx >= 0, idx, big)
-    m = idx.shape[1]
-    if xp is np:
-        order = np.lexsort((key_i, dist), axis=-1)[:, :k]
-    else:
-        import jax
-        cols = xp.broadcast_to(xp.arange(m, dtype=np.int32), idx.shape)
-        order = jax.lax.sort((dist, key_i, cols), dimension=1, num_keys=2)[2][:, :k]
-    idx = xp.take_along_axis(idx, order, axis=1)
-    dist = xp.take_along_axis(dist, order, axis=1)
-    if m < k:
-        pad = k - m
-        idx = xp.concatenate([idx, xp.full((idx.shape[0], pad), -1, dtype=idx.dtype)], 1)
-        dist = xp.concatenate([dist, xp.full((dist.shape[0], pad), xp.inf,
-                                             dtype=dist.dtype)], 1)
-    return idx, dist, need
+    hits = _search(cells, points, queries, xp)
+    ok, d2 = _filter(cells, hits, radius, xp, exclude_self=exclude_self and queries is None,
+                     heading=heading, fov=fov)
+    hneed = xp.max(xp.sum(ok, axis=1)) if ok.shape[1] else xp.asarray(0)
+    od, oi = _smallest(xp.where(ok, d2, xp.inf), hits.idx, int(k), xp)
+    fin = xp.isfinite(od)
+    oi = xp.where(fin, oi, -1)
+    od = _pad_cols(xp.sqrt(xp.where(fin, od, 0.0)) + xp.where(fin, 0.0, xp.inf), int(k),
+                   np.inf, xp)
+    oi = _pad_cols(oi, int(k), -1, xp)
+    oi, od = _unsort(hits.rows, [oi, od], xp)
+    return oi, od, Need(hits.need, xp.asarray(radius, dtype=od.dtype), hneed)
 
 
 class NeighborSearch:
@@ -365,7 +581,7 @@ class NeighborSearch:
     """
 
     def __init__(self, reach, *, points="pose", capacity=None, box=None, dim=2,
-                 headroom=2.0, table=None):
+                 headroom=1.5, table=None, hits=None):
         self.reach = float(reach)
         self.points = points
         self.box = box
@@ -373,16 +589,26 @@ class NeighborSearch:
         self.headroom = float(headroom)
         self.table = table
         self.capacity = None if capacity is None else int(capacity)
+        if hits is None and self.capacity is not None:
+            hits = self.capacity            # never more hits than candidates
+        self.hits = None if hits is None else int(hits)
         self.cells = None
-        CellList(self.reach, self.capacity, table, box, self.dim)   # validates
-        if self.capacity is not None or not math.isfinite(self.reach):
-            self.cells = CellList(self.reach, self.capacity or 1, table, box, self.dim)
+        CellList(self.reach, self.capacity, table, box, self.dim, self.hits)  # validates
+        if self.capacity is not None:
+            self.cells = CellList(self.reach, self.capacity, table, box, self.dim,
+                                  self.hits)
+
+    @property
+    def fixed(self) -> bool:
+        """True when the user fixed the capacity (the engine never re-plans it)."""
+        return self.capacity is not None
 
     def plan(self, points):
         """Fix the static plan from concrete sample positions (NumPy)."""
         pts = np.asarray(points, dtype=float)[:, : self.dim]
         self.cells = plan_cells(pts, self.reach, capacity=self.capacity,
-                                headroom=self.headroom, box=self.box, table=self.table)
+                                headroom=self.headroom, box=self.box, table=self.table,
+                                hits=self.hits)
         return self.cells
 
     def _cells(self, xp, radius):

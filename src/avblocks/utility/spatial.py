@@ -355,52 +355,105 @@ def _gather_slots(bounds, cap, xp):
     return xp.where(ok, pos, 0), ok, xp.max(end)
 
 
-class _Hits(NamedTuple):
-    """Candidates of every query, in the order the queries were processed."""
-
-    pos: object      # (Q, M) slots into the sorted points (or point indices)
-    ok: object       # (Q, M) slot holds a candidate
-    idx: object      # (Q, M) point index of each slot
-    d: object        # (Q, M, D) displacement candidate - query (minimum image)
-    rows: object     # (Q,) the query each processed row is, or None (identity)
-    need: object     # largest candidate count
+#: Query rows handled together (bounds the (rows, candidates) temporaries).
+CHUNK = 4096
 
 
-def _search(cells, points, queries, xp, *, sort_queries=True):
-    """Candidates of each query point (rows sorted by cell when the queries
-    are the points, for locality; ``rows`` maps them back)."""
+class _Query(NamedTuple):
+    """Per-query data of a search, rows in processing order."""
+
+    q: object        # (Q, D) query positions
+    me: object       # (Q,) point index of the query (self) or -1
+    a: tuple         # per key range: (Q,) first slot in the sorted points
+    b: tuple         # per key range: (Q,) end slot
+    rows: object     # (Q,) query index of each processed row, or None (identity)
+
+
+def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
+    """Sort the points by cell and find every query's slot ranges.
+
+    Returns ``(ps, order, query, cap)``: the points in sorted order, the
+    sorting permutation, a :class:`_Query` and the candidate width."""
     n = points.shape[0]
+    it = _int_type(points, xp)
     if cells.brute:
         q = points if queries is None else queries
         qn = q.shape[0]
-        it = _int_type(points, xp)
-        pos = xp.broadcast_to(xp.arange(n, dtype=it)[None, :], (qn, n))
-        d = points[None, :, :] - q[:, None, :]
-        if cells.box is not None:
-            box = xp.asarray(cells.box, dtype=d.dtype)
-            d = d - box * xp.round(d / box)
-        return _Hits(pos, xp.ones((qn, n), dtype=bool), pos, d, None, xp.asarray(n))
+        me = xp.arange(qn, dtype=it) if (queries is None and exclude_self) else \
+            xp.full((qn,), -1, dtype=it)
+        if ids is not None:
+            me = xp.asarray(ids).astype(it)
+        z = xp.zeros((qn,), dtype=it)
+        order = xp.arange(n, dtype=it)
+        return points, order, _Query(q, me, (z,), (z + n,), None), max(n, 1)
     lay = layout(cells, points, xp)
     ps = points[lay.order]
-    if queries is None and sort_queries:
+    if queries is None:            # process the points in cell order (locality)
         q, qc, rows = ps, lay.coords[lay.order], lay.order
-    elif queries is None:
-        q, qc, rows = points, lay.coords, None
+        me = rows.astype(it) if exclude_self else xp.full((n,), -1, dtype=it)
     else:
         q, qc, rows = queries, _query_cells(cells, lay, queries, xp), None
+        me = xp.full((queries.shape[0],), -1, dtype=it) if ids is None else \
+            xp.asarray(ids).astype(it)
     bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp)
     cap = cells.capacity
     if cap is None:
         if xp is not np:
             raise ParameterError("a traced search needs a static capacity",
                                  param="capacity", hint="plan it with plan_cells()")
-        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if n else 1
-    pos, ok, need = _gather_slots(bounds, cap, xp)
-    d = ps[pos] - q[:, None, :]
-    if cells.box is not None:
-        box = xp.asarray(cells.box, dtype=d.dtype)
-        d = d - box * xp.round(d / box)
-    return _Hits(pos, ok, lay.order[pos], d, rows, need)
+        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if q.shape[0] else 1
+    return ps, lay.order, _Query(q, me, tuple(a for a, _ in bounds),
+                                 tuple(b for _, b in bounds), rows), int(cap)
+
+
+def _rowmap(fn, arrays, xp, size=None):
+    """``fn`` over row chunks of ``arrays`` (all with Q leading rows),
+    outputs concatenated: a Python loop of a few chunks under NumPy,
+    ``lax.map`` when traced."""
+    size = CHUNK if size is None else size
+    qn = arrays[0].shape[0]
+    if qn <= size:
+        return fn(*arrays)
+    if xp is np:
+        outs = [fn(*[x[i:i + size] for x in arrays]) for i in range(0, qn, size)]
+        return tuple(np.concatenate(parts, axis=0) for parts in zip(*outs))
+    import jax
+    m = -(-qn // size)
+    pad = m * size - qn
+
+    def fold(x):
+        if pad:
+            x = xp.concatenate([x, xp.broadcast_to(x[-1:], (pad,) + x.shape[1:])], 0)
+        return x.reshape((m, size) + x.shape[1:])
+
+    outs = jax.lax.map(lambda xs: fn(*xs), [fold(x) for x in arrays])
+    return tuple(o.reshape((m * size,) + o.shape[2:])[:qn] for o in outs)
+
+
+def _chunk_fn(cells, ps, order, cap, radius, xp, *, fov=None):
+    """Row function: candidates, squared distances and validity of a chunk."""
+    def hits(q, me, heading, *ab):
+        k = len(ab) // 2
+        bounds = list(zip(ab[:k], ab[k:]))
+        pos, ok, _ = _gather_slots(bounds, cap, xp)
+        d = ps[pos] - q[:, None, :]
+        if cells.box is not None:
+            box = xp.asarray(cells.box, dtype=d.dtype)
+            d = d - box * xp.round(d / box)
+        idx = order[pos]
+        d2 = xp.sum(d * d, axis=-1)
+        cnt = sum(b - a for a, b in bounds)
+        val = ok
+        if radius is not None:
+            r = xp.asarray(radius, dtype=d2.dtype)
+            val = ok & (d2 <= r * r) & (idx != me[:, None])
+            if fov is not None:
+                rel = xp.arctan2(d[..., 1], d[..., 0]) - heading[:, None]
+                rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
+                val = val & (rel <= 0.5 * fov + 1e-12)
+        return idx, ok, val, d2, cnt
+
+    return hits
 
 
 def _unsort(rows, arrays, xp):
@@ -416,24 +469,13 @@ def _unsort(rows, arrays, xp):
     return [a[inv] for a in arrays]
 
 
-def _filter(cells, hits, radius, xp, *, exclude_self, heading=None, fov=None):
-    """(valid mask, squared distances) of the candidates."""
-    d2 = xp.sum(hits.d * hits.d, axis=-1)
-    r = xp.asarray(radius, dtype=d2.dtype)
-    ok = hits.ok & (d2 <= r * r)
-    if exclude_self:
-        qn = hits.idx.shape[0]
-        if hits.rows is None:
-            me = xp.arange(qn, dtype=hits.idx.dtype)
-        else:
-            me = hits.rows.astype(hits.idx.dtype)
-        ok = ok & (hits.idx != me[:, None])
-    if fov is not None:
-        h = heading if hits.rows is None else heading[hits.rows]
-        rel = xp.arctan2(hits.d[..., 1], hits.d[..., 0]) - h[:, None]
-        rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
-        ok = ok & (rel <= 0.5 * fov + 1e-12)
-    return ok, d2
+def _args(query, heading, xp):
+    h = heading
+    if h is None:
+        h = xp.zeros(query.q.shape[0], dtype=query.q.dtype)
+    elif query.rows is not None:
+        h = h[query.rows]
+    return [query.q, query.me, h, *query.a, *query.b]
 
 
 def _compact(ok, cols, width, xp):
@@ -503,10 +545,16 @@ def candidates(cells, points, queries=None, xp=np):
     its row when ``need.capacity <= capacity``. ``queries`` defaults to
     ``points``.
     """
-    hits = _search(cells, points, queries, xp)
-    cand = xp.where(hits.ok, hits.idx, -1)
-    (cand,) = _unsort(hits.rows, [cand], xp)
-    return cand, Need(hits.need, xp.asarray(0.0))
+    ps, order, query, cap = _prepare(cells, points, queries, xp)
+    f = _chunk_fn(cells, ps, order, cap, None, xp)
+
+    def row(*args):
+        idx, ok, _, _, cnt = f(*args)
+        return xp.where(ok, idx, -1), cnt
+
+    cand, cnt = _rowmap(row, _args(query, None, xp), xp)
+    (cand,) = _unsort(query.rows, [cand], xp)
+    return cand, Need(xp.max(cnt), xp.asarray(0.0))
 
 
 def displacement(cells, points, cand, queries=None, xp=np):
@@ -528,37 +576,101 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
     ``queries`` None the query points are the points and ``exclude_self``
     drops each point from its own row.
     """
-    hits = _search(cells, points, queries, xp)
-    ok, d2 = _filter(cells, hits, radius, xp, exclude_self=exclude_self and queries is None)
-    (ci, cd), hneed = _compact(ok, [(hits.idx, -1), (d2, np.inf)], cells.hits, xp)
+    ps, order, query, cap = _prepare(cells, points, queries, xp,
+                                     exclude_self=exclude_self)
+    f = _chunk_fn(cells, ps, order, cap, radius, xp)
+
+    def row(*args):
+        idx, _, val, d2, cnt = f(*args)
+        return idx, val, d2, cnt, xp.sum(val, axis=1)
+
+    idx, val, d2, cnt, nh = _rowmap(row, _args(query, None, xp), xp)
+    (ci, cd), _ = _compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     dist = xp.sqrt(cd)
-    ci, dist = _unsort(hits.rows, [ci, dist], xp)
-    return ci, dist, Need(hits.need, xp.asarray(radius, dtype=dist.dtype), hneed)
+    ci, dist = _unsort(query.rows, [ci, dist], xp)
+    return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh))
 
 
 def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
-            fov=None, exclude_self=True):
+            fov=None, exclude_self=True, ids=None):
     """The ``k`` nearest points within ``radius`` of each query point.
 
     Sorted by distance, ties by index. With ``heading`` (Q,) and ``fov``
     (full angle), only points whose bearing from the query point relative
     to its heading lies in ``[-fov/2, fov/2]`` count.
 
+    ``ids`` (Q,): the point index of each query point, left out of its own
+    row (for queries that are some of the points).
+
     Returns ``(idx, dist, need)``: (Q, k) int (``-1`` padded) and float
     (``inf`` padded).
     """
-    hits = _search(cells, points, queries, xp)
-    ok, d2 = _filter(cells, hits, radius, xp, exclude_self=exclude_self and queries is None,
-                     heading=heading, fov=fov)
-    hneed = xp.max(xp.sum(ok, axis=1)) if ok.shape[1] else xp.asarray(0)
-    od, oi = _smallest(xp.where(ok, d2, xp.inf), hits.idx, int(k), xp)
-    fin = xp.isfinite(od)
-    oi = xp.where(fin, oi, -1)
-    od = _pad_cols(xp.sqrt(xp.where(fin, od, 0.0)) + xp.where(fin, 0.0, xp.inf), int(k),
-                   np.inf, xp)
-    oi = _pad_cols(oi, int(k), -1, xp)
-    oi, od = _unsort(hits.rows, [oi, od], xp)
-    return oi, od, Need(hits.need, xp.asarray(radius, dtype=od.dtype), hneed)
+    ps, order, query, cap = _prepare(cells, points, queries, xp,
+                                     exclude_self=exclude_self, ids=ids)
+    f = _chunk_fn(cells, ps, order, cap, radius, xp, fov=fov)
+    k = int(k)
+
+    def row(*args):
+        idx, _, val, d2, cnt = f(*args)
+        od, oi = _smallest(xp.where(val, d2, xp.inf), idx, k, xp)
+        fin = xp.isfinite(od)
+        oi = xp.where(fin, oi, -1)
+        od = xp.where(fin, xp.sqrt(xp.where(fin, od, 0.0)), xp.inf)
+        return (_pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt,
+                xp.sum(val, axis=1))
+
+    oi, od, cnt, nh = _rowmap(row, _args(query, heading, xp), xp)
+    oi, od = _unsort(query.rows, [oi, od], xp)
+    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), xp.max(nh))
+
+
+def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
+    """:func:`nearest` of every point among the points by SciPy's k-d tree
+    (NumPy only): the same neighbours in the same order (ties by index).
+
+    The tree returns the ``k + 2`` nearest; a row whose ``k``-th distance
+    equals the farthest returned one may have tied points the tree left
+    out, and is answered again by the cell list (rare: duplicates, lattices).
+    """
+    from scipy.spatial import cKDTree
+    pts = np.asarray(points, dtype=float)
+    n = pts.shape[0]
+    k = int(k)
+    if n == 0 or k == 0:
+        return np.full((n, k), -1, np.int64), np.full((n, k), np.inf)
+    if box is not None:
+        b = np.asarray(box, dtype=float)
+        pts = pts - b * np.floor(pts / b)
+        pts = np.where(pts >= b, 0.0, pts)
+        tree = cKDTree(pts, boxsize=b)
+    else:
+        tree = cKDTree(pts)
+    kq = min(k + 2, n)
+    d, j = tree.query(pts, k=kq, distance_upper_bound=np.nextafter(float(radius), np.inf))
+    d, j = d.reshape(n, kq), j.reshape(n, kq)
+    out = j >= n                       # fewer than kq points in range
+    full = ~np.any(out, axis=1) & (kq < n)
+    dmax = np.where(out, -np.inf, d).max(axis=1)
+    miss = out | (j == np.arange(n)[:, None]) if exclude_self else out
+    d = np.where(miss, np.inf, d)
+    j = np.where(miss, n, j)
+    o = np.lexsort((j, d), axis=-1)
+    d = np.take_along_axis(d, o, 1)
+    j = np.take_along_axis(j, o, 1)
+    kk = min(k, kq)
+    dk = d[:, kk - 1]
+    amb = np.nonzero(full & np.isfinite(dk) & (dk == dmax))[0]
+    d, j = d[:, :kk], j[:, :kk]
+    j = np.where(np.isfinite(d), j, -1)
+    if kk < k:
+        j = np.pad(j, ((0, 0), (0, k - kk)), constant_values=-1)
+        d = np.pad(d, ((0, 0), (0, k - kk)), constant_values=np.inf)
+    if amb.size:
+        cells = CellList(float(radius), box=box, dim=pts.shape[1])
+        ai, ad, _ = nearest(cells, pts, radius, k, pts[amb], np,
+                            ids=amb if exclude_self else None)
+        j[amb], d[amb] = ai, ad
+    return j.astype(np.int64), d
 
 
 class NeighborSearch:
@@ -643,6 +755,13 @@ class NeighborSearch:
         return idx, dist
 
     def nearest(self, points, radius, k, queries=None, xp=np, **kw):
+        if (xp is np and queries is None and kw.get("fov") is None
+                and kw.get("exclude_self", True) and kw.get("ids") is None
+                and np.ndim(radius) == 0):
+            # NumPy engine: the k-d tree wins at every N measured
+            # (benchmarks/neighbors.py); same neighbours, same order
+            return kd_nearest(np.asarray(points)[:, : self.dim], float(radius), k,
+                              box=self.box)
         cells = self._cells(xp, radius if xp is np else None)
         idx, dist, need = nearest(cells, points[:, : self.dim], radius, k,
                                   None if queries is None else queries[:, : self.dim],

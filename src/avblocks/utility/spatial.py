@@ -692,6 +692,9 @@ class NeighborSearch:
       after the run, never silent.
     """
 
+    #: marks a search for :func:`avblocks.core.diagnostics.searches_of`
+    neighbor_search = True
+
     def __init__(self, reach, *, points="pose", capacity=None, box=None, dim=2,
                  headroom=1.5, table=None, hits=None):
         self.reach = float(reach)

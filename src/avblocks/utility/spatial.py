@@ -175,6 +175,9 @@ class CellList:
         new_hits = self.hits
         if self.hits is not None and hits > self.hits:
             new_hits = int(math.ceil(headroom * hits))
+        if new_cap != self.capacity and new_hits is not None:
+            # the hits counted were cut short by the candidates: allow for all
+            new_hits = max(new_hits, new_cap)
         return CellList(self.reach, new_cap, self.table, self.box, self.dim, new_hits,
                         self.split)
 
@@ -616,12 +619,12 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
         fin = xp.isfinite(od)
         oi = xp.where(fin, oi, -1)
         od = xp.where(fin, xp.sqrt(xp.where(fin, od, 0.0)), xp.inf)
-        return (_pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt,
-                xp.sum(val, axis=1))
+        return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
 
-    oi, od, cnt, nh = _rowmap(row, _args(query, heading, xp), xp)
+    oi, od, cnt = _rowmap(row, _args(query, heading, xp), xp)
     oi, od = _unsort(query.rows, [oi, od], xp)
-    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), xp.max(nh))
+    # nearest keeps no row of hits, so hits are no limit of it (need 0)
+    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0)
 
 
 def kd_nearest(points, radius, k, *, box=None, exclude_self=True):

@@ -699,7 +699,7 @@ class NeighborSearch:
     neighbor_search = True
 
     def __init__(self, reach, *, points="pose", capacity=None, box=None, dim=2,
-                 headroom=1.5, table=None, hits=None):
+                 headroom=2.0, table=None, hits=None):
         self.reach = float(reach)
         self.points = points
         self.box = box

@@ -512,7 +512,7 @@ def _compact(ok, cols, width, xp):
     return outs, need
 
 
-def _smallest_exact(d2, idx, k, xp):
+def _smallest(d2, idx, k, xp):
     """The ``k`` smallest ``(d2, idx)`` pairs of each row, sorted: ``k``
     passes of a row minimum (distance first, then the smaller index among
     equal distances), each removing what it took. Exact; O(k M) per row.
@@ -531,32 +531,6 @@ def _smallest_exact(d2, idx, k, xp):
     if kk == 0:
         return xp.zeros((qn, 0), dtype=d2.dtype), xp.zeros((qn, 0), dtype=idx.dtype)
     return xp.stack(od, axis=1), xp.stack(oi, axis=1)
-
-
-def _smallest(d2, idx, k, xp):
-    """:func:`_smallest_exact`, faster when traced: ``k + 1`` passes of a
-    plain ``argmin`` (one reduction each); when two of the ``k + 1``
-    smallest finite distances of some row are equal (the order among them,
-    or which of them is in, then depends on indices), the exact passes are
-    taken instead (``lax.cond``: only then computed, except under ``vmap``)."""
-    qn, w = d2.shape
-    kk = min(int(k), w)
-    if xp is np or kk == 0:
-        return _smallest_exact(d2, idx, k, xp)
-    import jax
-    passes = min(kk + 1, w)
-    cols = xp.arange(w, dtype=np.int32)[None, :]
-    cur, od, oi = d2, [], []
-    for _ in range(passes):
-        j = xp.argmin(cur, axis=1).astype(np.int32)[:, None]
-        od.append(xp.take_along_axis(cur, j, axis=1))
-        oi.append(xp.take_along_axis(idx, j, axis=1))
-        cur = xp.where(cols == j, xp.inf, cur)
-    od = xp.concatenate(od, axis=1)
-    oi = xp.concatenate(oi, axis=1)
-    tie = xp.any(xp.isfinite(od[:, 1:]) & (od[:, 1:] == od[:, :-1]))
-    return jax.lax.cond(tie, lambda: _smallest_exact(d2, idx, kk, xp),
-                        lambda: (od[:, :kk], oi[:, :kk]))
 
 
 def _pad_cols(a, k, fill, xp):

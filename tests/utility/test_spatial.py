@@ -137,3 +137,28 @@ def test_jit_chunked_lax_map(monkeypatch):
         plan = sp.plan_cells(p, 1.0)
         i = jax.jit(lambda q: sp.nearest(plan, q, 1.0, 6, xp=jnp)[0])(jnp.asarray(p))
     np.testing.assert_array_equal(np.asarray(i), brute(p, 1.0, 6)[0])
+
+
+def test_grad_of_neighbour_distances():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    p = np.random.default_rng(8).uniform(0, 4, (40, 2))
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, 1.0)
+
+        def cost(q):
+            i, d, _ = sp.nearest(plan, q, 1.0, 4, xp=jnp)
+            return jnp.sum(jnp.where(i >= 0, d, 0.0) ** 3)
+
+        g = np.asarray(jax.grad(cost)(jnp.asarray(p)))
+    # central differences with the neighbour sets fixed (none cross r here)
+    h = 1e-6
+    for a in [(0, 0), (5, 1), (17, 0)]:
+        e = np.zeros_like(p)
+        e[a] = h
+
+        def c_np(q):
+            i, d, _ = sp.nearest(sp.CellList(1.0), q, 1.0, 4)
+            return np.sum(np.where(i >= 0, d, 0.0) ** 3)
+        fd = (c_np(p + e) - c_np(p - e)) / (2 * h)
+        assert g[a] == pytest.approx(fd, rel=1e-5, abs=1e-8)

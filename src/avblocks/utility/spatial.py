@@ -683,12 +683,26 @@ def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
     out = j >= n                       # fewer than kq points in range
     full = ~np.any(out, axis=1) & (kq < n)
     dmax = np.where(out, -np.inf, d).max(axis=1)
-    miss = out | (j == np.arange(n)[:, None]) if exclude_self else out
-    d = np.where(miss, np.inf, d)
-    j = np.where(miss, n, j)
-    o = np.lexsort((j, d), axis=-1)
-    d = np.take_along_axis(d, o, 1)
-    j = np.take_along_axis(j, o, 1)
+    d = np.where(out, np.inf, d)
+    j = np.where(out, n, j)
+    if exclude_self:                   # drop self: shift the row left over it
+        me = j == np.arange(n)[:, None]
+        at = np.where(me.any(axis=1), np.argmax(me, axis=1), kq)
+        cols = np.arange(kq)[None, :]
+        src = np.minimum(cols + (cols >= at[:, None]), kq - 1)
+        d = np.take_along_axis(d, src, 1)
+        j = np.take_along_axis(j, src, 1)
+        last = at < kq
+        d[last, -1] = np.inf
+        j[last, -1] = n
+    # the tree sorts by distance; rows with equal finite distances are
+    # put in index order among them
+    tied = np.nonzero(np.any((d[:, 1:] == d[:, :-1]) & np.isfinite(d[:, 1:]),
+                             axis=1))[0]
+    if tied.size:
+        o = np.lexsort((j[tied], d[tied]), axis=-1)
+        d[tied] = np.take_along_axis(d[tied], o, 1)
+        j[tied] = np.take_along_axis(j[tied], o, 1)
     kk = min(k, kq)
     dk = d[:, kk - 1]
     amb = np.nonzero(full & np.isfinite(dk) & (dk == dmax))[0]

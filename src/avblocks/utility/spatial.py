@@ -647,7 +647,7 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
         od, oi = _smallest(xp.where(val, d2, xp.inf), idx, k, xp)
         fin = xp.isfinite(od)
         oi = xp.where(fin, oi, -1)
-        od = xp.where(fin, xp.sqrt(xp.where(fin, od, 0.0)), xp.inf)
+        od = xp.where(fin, xp.sqrt(xp.where(fin, od, 1.0)), xp.inf)
         return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
 
     oi, od, cnt = _rowmap(row, _args(query, heading, xp), xp)

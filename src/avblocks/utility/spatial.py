@@ -394,18 +394,31 @@ CHUNK = 4096
 class _Query(NamedTuple):
     """Per-query data of a search, rows in processing order."""
 
-    q: object        # (Q, D) query positions
+    q: tuple         # per axis: (Q,) query coordinates
     me: object       # (Q,) point index of the query (self) or -1
     a: tuple         # per key range: (Q,) first slot in the sorted points
     b: tuple         # per key range: (Q,) end slot
     rows: object     # (Q,) query index of each processed row, or None (identity)
 
 
+def _rows(a, i, xp):
+    """``a[i]`` for a 2-D ``a``: under JAX one 1-D gather per column (XLA's
+    CPU gather of rows is an order of magnitude slower)."""
+    if xp is np:
+        return a[i]
+    return xp.stack([a[:, c][i] for c in range(a.shape[1])], axis=1)
+
+
+def _cols(a):
+    return tuple(a[:, c] for c in range(a.shape[1]))
+
+
 def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
     """Sort the points by cell and find every query's slot ranges.
 
-    Returns ``(ps, order, query, cap)``: the points in sorted order, the
-    sorting permutation, a :class:`_Query` and the candidate width."""
+    Returns ``(ps, order, query, cap)``: the coordinates (one (N,) array
+    per axis) of the points in sorted order, the sorting permutation, a
+    :class:`_Query` and the candidate width."""
     n = points.shape[0]
     it = _int_type(points, xp)
     if cells.brute:
@@ -417,14 +430,15 @@ def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
             me = xp.asarray(ids).astype(it)
         z = xp.zeros((qn,), dtype=it)
         order = xp.arange(n, dtype=it)
-        return points, order, _Query(q, me, (z,), (z + n,), None), max(n, 1)
+        return _cols(points), order, _Query(_cols(q), me, (z,), (z + n,), None), \
+            max(n, 1)
     lay = layout(cells, points, xp)
-    ps = points[lay.order]
+    ps = tuple(c[lay.order] for c in _cols(points))
     if queries is None:            # process the points in cell order (locality)
-        q, qc, rows = ps, lay.coords[lay.order], lay.order
+        q, qc, rows = ps, _rows(lay.coords, lay.order, xp), lay.order
         me = rows.astype(it) if exclude_self else xp.full((n,), -1, dtype=it)
     else:
-        q, qc, rows = queries, _query_cells(cells, lay, queries, xp), None
+        q, qc, rows = _cols(queries), _query_cells(cells, lay, queries, xp), None
         me = xp.full((queries.shape[0],), -1, dtype=it) if ids is None else \
             xp.asarray(ids).astype(it)
     bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp)
@@ -433,7 +447,7 @@ def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
         if xp is not np:
             raise ParameterError("a traced search needs a static capacity",
                                  param="capacity", hint="plan it with plan_cells()")
-        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if q.shape[0] else 1
+        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if q[0].shape[0] else 1
     return ps, lay.order, _Query(q, me, tuple(a for a, _ in bounds),
                                  tuple(b for _, b in bounds), rows), int(cap)
 
@@ -464,23 +478,30 @@ def _rowmap(fn, arrays, xp, size=None):
 
 def _chunk_fn(cells, ps, order, cap, radius, xp, *, fov=None):
     """Row function: candidates, squared distances and validity of a chunk."""
-    def hits(q, me, heading, *ab):
+    dim = len(ps)
+
+    def hits(me, heading, *rest):
+        q, ab = rest[:dim], rest[dim:]
         k = len(ab) // 2
         bounds = list(zip(ab[:k], ab[k:]))
         pos, ok, _ = _gather_slots(bounds, cap, xp)
-        d = ps[pos] - q[:, None, :]
-        if cells.box is not None:
-            box = xp.asarray(cells.box, dtype=d.dtype)
-            d = d - box * xp.round(d / box)
+        d = []
+        for a in range(dim):
+            da = ps[a][pos] - q[a][:, None]
+            if cells.box is not None:
+                da = da - cells.box[a] * xp.round(da / cells.box[a])
+            d.append(da)
         idx = order[pos]
-        d2 = xp.sum(d * d, axis=-1)
+        d2 = d[0] * d[0]
+        for a in range(1, dim):
+            d2 = d2 + d[a] * d[a]
         cnt = sum(b - a for a, b in bounds)
         val = ok
         if radius is not None:
             r = xp.asarray(radius, dtype=d2.dtype)
             val = ok & (d2 <= r * r) & (idx != me[:, None])
             if fov is not None:
-                rel = xp.arctan2(d[..., 1], d[..., 0]) - heading[:, None]
+                rel = xp.arctan2(d[1], d[0]) - heading[:, None]
                 rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
                 val = val & (rel <= 0.5 * fov + 1e-12)
         return idx, ok, val, d2, cnt
@@ -498,16 +519,16 @@ def _unsort(rows, arrays, xp):
         inv[rows] = np.arange(n, dtype=rows.dtype)
     else:
         inv = xp.zeros(n, dtype=rows.dtype).at[rows].set(xp.arange(n, dtype=rows.dtype))
-    return [a[inv] for a in arrays]
+    return [_rows(a, inv, xp) if a.ndim == 2 else a[inv] for a in arrays]
 
 
 def _args(query, heading, xp):
     h = heading
     if h is None:
-        h = xp.zeros(query.q.shape[0], dtype=query.q.dtype)
+        h = xp.zeros(query.q[0].shape[0], dtype=query.q[0].dtype)
     elif query.rows is not None:
         h = h[query.rows]
-    return [query.q, query.me, h, *query.a, *query.b]
+    return [query.me, h, *query.q, *query.a, *query.b]
 
 
 def _compact(ok, cols, width, xp):

@@ -583,6 +583,40 @@ def _smallest(d2, idx, k, xp):
     return xp.stack(od, axis=1), xp.stack(oi, axis=1)
 
 
+def _smallest_keyed(d2, idx, k, n, xp):
+    """Traced, 64-bit: the ``k`` smallest ``(d2, idx)`` pairs by ``k + 1``
+    passes over one integer key per candidate, the bits of ``d2`` (a float
+    >= 0: its bits order as it does) with the low ``b`` bits replaced by
+    the index (``2^b >= n``). Returns ``(idx (Q, k), exact)``: the key
+    orders like ``(d2, idx)`` unless two of a row's ``k + 1`` smallest
+    distances agree in all but their low ``b`` bits (relative difference
+    below ``2^(b - 52)``); ``exact`` is False when some row has such a
+    pair (equal distances included), and the caller then takes the exact
+    passes of :func:`_smallest_exact`. The distances of the selected points
+    are recomputed by the caller (same arithmetic, same values)."""
+    import jax
+    b = max(1, int(n - 1).bit_length())
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    passes = min(kk + 1, w)
+    bits = jax.lax.bitcast_convert_type(d2, np.int64)
+    low = np.int64((1 << b) - 1)
+    key = (bits & ~low) | idx.astype(np.int64)
+    top = np.int64(np.iinfo(np.int64).max)
+    got = []
+    for _ in range(passes):
+        m = xp.min(key, axis=1)
+        got.append(m)
+        key = xp.where(key == m[:, None], top, key)
+    got = xp.stack(got, axis=1)
+    inf_bits = int(np.array(np.inf).view(np.int64)) & ~int(low)
+    trunc = got & ~low
+    finite = trunc < inf_bits
+    exact = ~xp.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]))
+    sel = xp.where(finite[:, :kk], (got[:, :kk] & low), -1)
+    return sel.astype(idx.dtype), exact
+
+
 def _pad_cols(a, k, fill, xp):
     if a.shape[1] >= k:
         return a[:, :k]
@@ -663,11 +697,36 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     f = _chunk_fn(cells, ps, order, cap, radius, xp, fov=fov)
     k = int(k)
 
+    n = points.shape[0]
+    keyed = (xp is not np and np.dtype(points.dtype).itemsize == 8 and k > 0
+             and n < 2 ** 31 and not cells.brute)
+    pcols = _cols(points)
+
+    def exact(d2, idx):
+        od, oi = _smallest(d2, idx, k, xp)
+        fin = xp.isfinite(od)
+        return xp.where(fin, oi, -1), od
+
     def row(*args):
         idx, _, val, d2, cnt = f(*args)
-        od, oi = _smallest(xp.where(val, d2, xp.inf), idx, k, xp)
-        fin = xp.isfinite(od)
-        oi = xp.where(fin, oi, -1)
+        d2 = xp.where(val, d2, xp.inf)
+        if keyed:
+            import jax
+            sel, ok = _smallest_keyed(d2, idx, k, n, xp)
+            got = sel >= 0
+            safe = xp.where(got, sel, 0)
+            me = args[2:2 + len(pcols)]          # the query coordinates of the chunk
+            dd = 0.0
+            for a, c in enumerate(pcols):
+                da = c[safe] - me[a][:, None]
+                if cells.box is not None:
+                    da = da - cells.box[a] * xp.round(da / cells.box[a])
+                dd = dd + da * da
+            fast = (sel, xp.where(got, dd, xp.inf))
+            oi, od = jax.lax.cond(ok, lambda: fast, lambda: exact(d2, idx))
+        else:
+            oi, od = exact(d2, idx)
+        fin = oi >= 0
         od = xp.where(fin, xp.sqrt(xp.where(fin, od, 1.0)), xp.inf)
         return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
 

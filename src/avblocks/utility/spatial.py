@@ -617,6 +617,40 @@ def _smallest_keyed(d2, idx, k, n, xp):
     return sel.astype(idx.dtype), exact
 
 
+def _smallest_np(d2, idx, k, n):
+    """NumPy: the ``k`` smallest ``(d2, idx)`` pairs (indices, distances)
+    by ``np.argpartition`` of the 64-bit keys of :func:`_smallest_keyed`, then
+    a sort of ``k + 1``; rows with near-equal distances take the exact
+    passes. ``-1`` / ``inf`` where fewer."""
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    if kk == 0:
+        return np.zeros((qn, 0), np.int64), np.zeros((qn, 0))
+    b = max(1, int(n - 1).bit_length())
+    low = np.int64((1 << b) - 1)
+    key = (d2.view(np.int64) & ~low) | idx.astype(np.int64)
+    take = min(kk + 1, w)
+    if take < w:
+        cols = np.argpartition(key, take - 1, axis=1)[:, :take]
+    else:
+        cols = np.broadcast_to(np.arange(w), (qn, w))
+    kc = np.take_along_axis(key, cols, 1)
+    o = np.argsort(kc, axis=1)
+    cols = np.take_along_axis(cols, o, 1)
+    key = np.take_along_axis(kc, o, 1)
+    trunc = key & ~low
+    inf_bits = np.array(np.inf).view(np.int64) & ~low
+    finite = trunc < inf_bits
+    sel = np.where(finite[:, :kk], np.take_along_axis(idx, cols[:, :kk], 1), -1)
+    od = np.where(finite[:, :kk], np.take_along_axis(d2, cols[:, :kk], 1), np.inf)
+    bad = np.nonzero(np.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]), axis=1))[0]
+    if bad.size:
+        ed, ei = _smallest(d2[bad], idx[bad], kk, np)
+        sel[bad] = np.where(np.isfinite(ed), ei, -1)
+        od[bad] = ed
+    return sel, od
+
+
 def _pad_cols(a, k, fill, xp):
     if a.shape[1] >= k:
         return a[:, :k]
@@ -710,7 +744,9 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     def row(*args):
         idx, _, val, d2, cnt = f(*args)
         d2 = xp.where(val, d2, xp.inf)
-        if keyed:
+        if xp is np and k > 0 and not cells.brute:
+            oi, od = _smallest_np(d2, idx, k, n)
+        elif keyed:
             import jax
             sel, ok = _smallest_keyed(d2, idx, k, n, xp)
             got = sel >= 0

@@ -131,3 +131,13 @@ def test_ensemble_overflow_replans():
         ref = av.simulate(d, 3.0, dt=0.05, log=["nb.neighbors"],
                           x0={"ag.position": x0[r]})
         np.testing.assert_array_equal(res["nb.neighbors"][r], ref["nb.neighbors"])
+
+
+def test_gradient_run_checks_overflow_too():
+    run = av.compile(_converging(), 3.0, dt=0.05, log=["ag.position"], on_overflow="raise")
+
+    def cost(res):
+        return (res["ag.position"][-1] ** 2).sum()
+
+    with pytest.raises(SimulationError, match="capacity"):
+        run.grad(cost, ["g.k"])

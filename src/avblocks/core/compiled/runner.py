@@ -523,6 +523,7 @@ class Runner:
         function (not a new ``lambda`` each call) to avoid recompiling.
         """
         jax = _jax.jax()
+        _diagnostics.clear()
         seed = self.seed if seed is None else int(seed)
         pw, sw = self._split_wrt(wrt)
         theta, _ = self._theta(params)
@@ -555,6 +556,10 @@ class Runner:
             val, g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}
         grads.update({w: np.asarray(g[1][w]) for w, *_ in sw})
+        over = _plans.overflows(self.compiled)
+        if over:
+            return _plans.settle(self, over, lambda: self.value_and_grad(
+                cost, wrt, params, x0, seed, checkpoint=checkpoint))
         return float(val), grads
 
     def grad(self, cost, wrt, params=None, x0=None, seed=None, *, checkpoint=True):

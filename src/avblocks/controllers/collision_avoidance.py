@@ -324,9 +324,10 @@ class CollisionAvoidance(Block):
     right_hand : float >= 0 — roundabout bias against deadlocks (2-D; see
         :func:`safety_filter`), default 0 (pure minimal filter).
     dim : int (2 or 3);  sensing_range, k_max : compute neighbours inside the
-        block (NumPy only) instead of the port.
+        block instead of the port (agent mode compiles: the k nearest from
+        a :class:`~avblocks.utility.spatial.NeighborSearch`).
     mode : ``"agent"`` (default) — one small exact QP per agent, half of each
-        pair's constraint each (vectorised, JAX-traceable with the port);
+        pair's constraint each (vectorised, JAX-traceable);
         ``"joint"`` — one sparse QP over all agents (Clarabel, NumPy only, not
         traceable; needs the ``safety`` extra). With ``sensing_range`` the
         joint mode takes every pair within range from a k-d tree (``k_max``

@@ -116,7 +116,8 @@ class Flocking(Block):
     gamma : bool — add the navigational term towards ``target``.
     target : (D,) or (N, D); target_velocity : same; c1_gamma, c2_gamma.
     radius mode: ``neighbors="internal"`` with ``k_max`` computes neighbours
-    within ``r`` inside the block (NumPy only); ``adjacency`` a fixed graph.
+    within ``r`` inside the block (compiles: ``utility.spatial``); ``adjacency``
+    a fixed graph.
 
     ``d``, ``r``, ``eps``, ``a``, ``b``, ``h``, ``c1``, ``c2``, ``target``,
     ``target_velocity`` (both (N, D)), ``c1_gamma`` and ``c2_gamma`` are

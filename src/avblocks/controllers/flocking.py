@@ -66,18 +66,15 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
                  c1=1.0, c2=1.0, xp=np):
     """Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K).
 
-    One gather of ``[q, p]`` per neighbour, the bump evaluated once, and the
-    unit vectors ``sigma_eps`` folded into the (N, K) weights: the (N, K, D)
-    temporaries are the gathered rows, their differences and one product.
+    The bump is evaluated once and the unit vectors ``sigma_eps`` are folded
+    into (N, K) weights: fewer (N, K, D) temporaries than the equations
+    written term by term.
     """
-    dim = position.shape[1]
     r_a = (xp.sqrt(1.0 + eps * r * r) - 1.0) / eps
     d_a = (xp.sqrt(1.0 + eps * d * d) - 1.0) / eps
-    qp = xp.concatenate([position, velocity], axis=1)         # (N, 2D)
     mask = idx >= 0
-    own = xp.arange(position.shape[0])[:, None]
-    diff = qp[xp.where(mask, idx, own)] - qp[:, None, :]      # (N, K, 2D)
-    dq = diff[..., :dim]
+    safe = xp.where(mask, idx, xp.arange(position.shape[0])[:, None])
+    dq = position[safe] - position[:, None, :]                # (N, K, D)
     nrm2 = xp.sum(dq * dq, axis=-1)
     root = xp.sqrt(1.0 + eps * nrm2)
     s = (root - 1.0) / eps
@@ -90,7 +87,8 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
     w_q = xp.where(mask, rho * phi / root, 0.0)                # phi_a sigma_eps weight
     w_p = xp.where(mask, rho, 0.0)                             # a_ij
     return (c1 * xp.sum(w_q[..., None] * dq, axis=1)
-            + c2 * xp.sum(w_p[..., None] * diff[..., dim:], axis=1))
+            + c2 * xp.sum(w_p[..., None] * (velocity[safe] - velocity[:, None, :]),
+                          axis=1))
 
 
 def order_parameter(velocity, xp=np):

@@ -162,3 +162,24 @@ def test_grad_of_neighbour_distances():
             return np.sum(np.where(i >= 0, d, 0.0) ** 3)
         fd = (c_np(p + e) - c_np(p - e)) / (2 * h)
         assert g[a] == pytest.approx(fd, rel=1e-5, abs=1e-8)
+
+
+def test_far_apart_points_report_their_span():
+    # a frame of ~4e19 cells: more than int64 keys address; the need says so
+    p = np.array([[0.0, 0.0], [0.5, 0.0], [3e9, 3e9], [3e9 + 0.5, 3e9]])
+    _, _, need = sp.nearest(sp.CellList(1.0), p, 1.0, 2)
+    assert float(need.span) > 1
+    assert "span" in sp.CellList(1.0, 4).exceeded(need)
+    _, _, need = sp.nearest(sp.CellList(1.0), p[:2], 1.0, 2)
+    assert float(need.span) < 1e-10
+
+
+def test_jit_packed_sort_equals_stable_argsort():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    keys = np.random.default_rng(0).integers(0, 50, 300)
+    with jax.enable_x64(True):
+        fast = jax.jit(lambda k: sp._sort(k, jnp, 50.0))(jnp.asarray(keys))
+        slow = jax.jit(lambda k: sp._sort(k, jnp, 1e18))(jnp.asarray(keys))
+    np.testing.assert_array_equal(np.asarray(fast), np.argsort(keys, kind="stable"))
+    np.testing.assert_array_equal(np.asarray(slow), np.argsort(keys, kind="stable"))

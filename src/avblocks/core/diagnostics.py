@@ -29,7 +29,7 @@ import numpy as np
 
 _CURRENT: contextvars.ContextVar = contextvars.ContextVar("avblocks_block", default=None)
 _LOCK = threading.Lock()
-#: {(block name, search number): array [capacity, hits, reach]} running maxima
+#: {(block name, search number): array [capacity, hits, reach, span]} running maxima
 _RECORDS: dict = {}
 
 
@@ -57,7 +57,7 @@ def searches_of(b):
 
 
 def _record(key, vec):
-    v = np.asarray(vec, dtype=float).reshape(-1, 3).max(axis=0)
+    v = np.asarray(vec, dtype=float).reshape(-1, 4).max(axis=0)
     with _LOCK:
         old = _RECORDS.get(key)
         _RECORDS[key] = v if old is None else np.maximum(old, v)
@@ -76,11 +76,12 @@ def report(owner, need, plan):
     import jax.numpy as jnp
     vec = jnp.stack([jnp.asarray(need.capacity).astype(float).reshape(()),
                      jnp.asarray(need.hits).astype(float).reshape(()),
-                     jnp.max(jnp.asarray(need.reach)).astype(float).reshape(())])
+                     jnp.max(jnp.asarray(need.reach)).astype(float).reshape(()),
+                     jnp.asarray(getattr(need, "span", 0.0)).astype(float).reshape(())])
     inf = float("inf")
     cap = inf if (plan.capacity is None or plan.brute) else float(plan.capacity)
     hits = inf if plan.hits is None else float(plan.hits)
-    limit = jnp.asarray([cap, hits, plan.reach * (1 + 1e-12)], dtype=vec.dtype)
+    limit = jnp.asarray([cap, hits, plan.reach * (1 + 1e-12), 1.0], dtype=vec.dtype)
     over = jnp.any(vec > limit)
     rec = functools.partial(_record, (name, num))
     jax.lax.cond(over, lambda v: jax.debug.callback(rec, v), lambda v: None, vec)
@@ -93,7 +94,7 @@ def clear():
 
 
 def recorded():
-    """``{(block name, search number): (capacity, hits, reach)}`` needed
+    """``{(block name, search number): (capacity, hits, reach, span)}`` needed
     beyond the plans since :func:`clear`."""
     with _LOCK:
         return {k: tuple(v) for k, v in _RECORDS.items()}

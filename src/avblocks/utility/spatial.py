@@ -92,12 +92,16 @@ class Need(NamedTuple):
     ``capacity``: the most candidates one query point had (points in the
     cells around it; an int array scalar); ``reach``: the largest radius
     asked for (a float array scalar); ``hits``: the most points one query
-    point had within the radius (0 when not counted).
+    point had within the radius (0 when not counted); ``span``: the cells
+    of the free-space frame over the cells its integer keys can address
+    (above 1: the points are spread too far for the keys; in a traced
+    float32 run, beyond about 46,000 cells per axis in 2-D).
     """
 
     capacity: object
     reach: object
     hits: object = 0
+    span: object = 0.0
 
 
 @dataclass(frozen=True)
@@ -192,6 +196,11 @@ class CellList:
         if reach > self.reach * (1 + 1e-12):
             msgs.append(f"a search asked for radius {reach:g}, the cells were planned "
                         f"for {self.reach:g}")
+        span = float(np.max(np.asarray(getattr(need, "span", 0.0))))
+        if span > 1.0:
+            msgs.append(f"span: the points spread over {span:.3g} times the cells the "
+                        "integer cell keys address (run in float64, or use a periodic "
+                        "box=)")
         return "; ".join(msgs) or None
 
     def grown(self, need, headroom=1.5) -> "CellList":
@@ -246,10 +255,23 @@ def _int_type(points, xp):
     return np.int32
 
 
-def _sort(keys, xp):
+def _sort(keys, xp, cells=None):
+    """Stable argsort of cell keys ``>= 0`` below ``cells`` (an int or an
+    array scalar). Traced with 64-bit keys: one plain sort of ``key * N +
+    index`` (XLA's CPU sort of one operand is ~4x faster than its sort of
+    (key, index) pairs), taken when ``cells * N < 2^62``, else the argsort."""
     if xp is np:
         return np.argsort(keys, kind="stable")
-    return xp.argsort(keys, stable=True)
+    n = keys.shape[0]
+    if np.dtype(keys.dtype).itemsize != 8 or cells is None or n < 2:
+        return xp.argsort(keys, stable=True)
+    import jax
+
+    def packed():
+        return xp.sort(keys * n + xp.arange(n, dtype=keys.dtype)) % n
+
+    fits = cells * float(n) < 2.0 ** 62
+    return jax.lax.cond(fits, packed, lambda: xp.argsort(keys, stable=True))
 
 
 class _Layout(NamedTuple):
@@ -261,6 +283,7 @@ class _Layout(NamedTuple):
     shift: object      # (D,) grid frame origin in cells (free space) or None
     dims: object       # (D,) cells per axis of the grid frame
     strides: tuple     # key strides per axis (array scalars)
+    span: object       # frame cells / addressable keys (see Need.span)
 
 
 def _cells_of(cells, pos, xp, it):
@@ -297,8 +320,12 @@ def layout(cells, points, xp=np):
     key = c[:, 0]
     for a in range(1, cells.dim):
         key = key + c[:, a] * strides[a]
-    order = _sort(key, xp)
-    return _Layout(order, key[order], c, shift, dims, tuple(strides))
+    g = dims[0].astype(float)                  # cells in the frame (float: no overflow)
+    for a in range(1, cells.dim):
+        g = g * dims[a].astype(float)
+    order = _sort(key, xp, g)
+    span = g / float(np.iinfo(it).max)
+    return _Layout(order, key[order], c, shift, dims, tuple(strides), span)
 
 
 def _query_cells(cells, lay, queries, xp):
@@ -355,7 +382,9 @@ def _bounds(cells, lay, wins, xp):
     if cells.box is not None:
         g = int(np.prod(cells.cells_per_axis()))
     elif xp is np:
-        g = int(np.prod(np.asarray(lay.dims)))
+        g = 1
+        for x in np.asarray(lay.dims).tolist():
+            g *= int(x)                               # Python int: no overflow
     if g is not None and g <= 4 * n + 4096:          # dense table of cell starts
         it = lay.skey.dtype
         if xp is np:
@@ -399,6 +428,7 @@ class _Query(NamedTuple):
     a: tuple         # per key range: (Q,) first slot in the sorted points
     b: tuple         # per key range: (Q,) end slot
     rows: object     # (Q,) query index of each processed row, or None (identity)
+    span: object = 0.0   # see Need.span
 
 
 def _rows(a, i, xp):
@@ -430,7 +460,7 @@ def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
             me = xp.asarray(ids).astype(it)
         z = xp.zeros((qn,), dtype=it)
         order = xp.arange(n, dtype=it)
-        return _cols(points), order, _Query(_cols(q), me, (z,), (z + n,), None), \
+        return _cols(points), order, _Query(_cols(q), me, (z,), (z + n,), None, 0.0), \
             max(n, 1)
     lay = layout(cells, points, xp)
     ps = tuple(c[lay.order] for c in _cols(points))
@@ -449,7 +479,7 @@ def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
                                  param="capacity", hint="plan it with plan_cells()")
         cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if q[0].shape[0] else 1
     return ps, lay.order, _Query(q, me, tuple(a for a, _ in bounds),
-                                 tuple(b for _, b in bounds), rows), int(cap)
+                                 tuple(b for _, b in bounds), rows, lay.span), int(cap)
 
 
 def _rowmap(fn, arrays, xp, size=None):
@@ -675,7 +705,7 @@ def candidates(cells, points, queries=None, xp=np):
 
     cand, cnt = _rowmap(row, _args(query, None, xp), xp)
     (cand,) = _unsort(query.rows, [cand], xp)
-    return cand, Need(xp.max(cnt), xp.asarray(0.0))
+    return cand, Need(xp.max(cnt), xp.asarray(0.0), 0, query.span)
 
 
 def displacement(cells, points, cand, queries=None, xp=np):
@@ -709,7 +739,8 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
     (ci, cd), _ = _compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     dist = xp.sqrt(cd)
     ci, dist = _unsort(query.rows, [ci, dist], xp)
-    return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh))
+    return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh),
+                          query.span)
 
 
 def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
@@ -769,7 +800,7 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     oi, od, cnt = _rowmap(row, _args(query, heading, xp), xp)
     oi, od = _unsort(query.rows, [oi, od], xp)
     # nearest keeps no row of hits, so hits are no limit of it (need 0)
-    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0)
+    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0, query.span)
 
 
 def kd_nearest(points, radius, k, *, box=None, exclude_self=True):

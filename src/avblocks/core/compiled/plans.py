@@ -97,7 +97,8 @@ def overflows(cd):
         v = rec.get((cd.names[i], j))
         if v is None or s.cells is None:
             continue
-        need = SimpleNamespace(capacity=int(v[0]), reach=float(v[2]), hits=int(v[1]))
+        need = SimpleNamespace(capacity=int(v[0]), reach=float(v[2]), hits=int(v[1]),
+                               span=float(v[3]))
         msg = s.cells.exceeded(need)
         if msg:
             out.append((cd.names[i], s, need, msg))
@@ -110,7 +111,8 @@ def settle(runner, over, rerun):
     ``rerun()``'s result."""
     names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
     mode = getattr(runner, "on_overflow", "replan")
-    bad_reach = [n for n, s, need, _ in over if float(need.reach) > s.cells.reach * (1 + 1e-12)]
+    bad_reach = [n for n, s, need, _ in over
+                 if float(need.reach) > s.cells.reach * (1 + 1e-12) or need.span > 1.0]
     if mode == "raise" or bad_reach or getattr(runner, "_replanned", False):
         why = "a compiled neighbour search overflowed its static plan"
         if getattr(runner, "_replanned", False):

@@ -141,3 +141,11 @@ def test_gradient_run_checks_overflow_too():
 
     with pytest.raises(SimulationError, match="capacity"):
         run.grad(cost, ["g.k"])
+
+
+def test_float32_compiled_run_equals_numpy():
+    p = np.random.default_rng(0).uniform(0, 10, (60, 2))
+    d = _diagram(p, radius=2.0, input="position")
+    a = av.simulate(d, 0.1, dt=0.05, log=["nb.neighbors"])
+    b = av.simulate(d, 0.1, dt=0.05, log=["nb.neighbors"], backend="jax", dtype="float32")
+    np.testing.assert_array_equal(a["nb.neighbors"], b["nb.neighbors"])

@@ -189,3 +189,38 @@ def test_offaxis_mapping_runs_consensus_on_unicycles():
     lap = n * np.eye(n) - np.ones((n, n))
     np.testing.assert_allclose(pts[-1], expm(-lap * 10.0) @ p0, atol=1e-3)
     np.testing.assert_allclose(pts[20], expm(-lap * 0.2) @ p0, atol=1e-3)
+
+
+def test_flocking_law_equals_the_equations_pair_by_pair():
+    # reference: eq. (23) of Olfati-Saber (2006) written out per pair
+    from avblocks.controllers import flocking_law
+    rng = np.random.default_rng(11)
+    n, d, r, eps, a, b, h, c1, c2 = 30, 2.0, 2.4, 0.1, 4.0, 6.0, 0.2, 1.3, 0.7
+    q, p = rng.uniform(0, 8, (n, 2)), rng.uniform(-1, 1, (n, 2))
+    full = np.linalg.norm(q[:, None] - q[None], axis=-1)
+    idx = np.full((n, 10), -1)
+    for i in range(n):
+        js = [j for j in np.argsort(full[i], kind="stable") if j != i and full[i, j] <= r][:10]
+        idx[i, :len(js)] = js
+
+    def snorm(z):
+        return (np.sqrt(1 + eps * z @ z) - 1) / eps
+
+    def rho(x):
+        if x < h:
+            return 1.0
+        return 0.5 * (1 + np.cos(np.pi * (x - h) / (1 - h))) if x <= 1 else 0.0
+
+    r_a, d_a = snorm(np.array([r])), snorm(np.array([d]))
+    cc = abs(a - b) / np.sqrt(4 * a * b)
+    want = np.zeros((n, 2))
+    for i in range(n):
+        for j in idx[i][idx[i] >= 0]:
+            z = q[j] - q[i]
+            s = snorm(z)
+            y = s - d_a + cc
+            phi = 0.5 * ((a + b) * y / np.sqrt(1 + y * y) + (a - b))
+            want[i] += c1 * rho(s / r_a) * phi * z / np.sqrt(1 + eps * z @ z)
+            want[i] += c2 * rho(s / r_a) * (p[j] - p[i])
+    got = flocking_law(q, p, idx, d, r, eps=eps, a=a, b=b, h=h, c1=c1, c2=c2)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)

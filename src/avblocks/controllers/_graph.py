@@ -12,9 +12,11 @@ indices padded with ``-1`` (``idx >= 0`` is the mask), optionally with
     a fixed communication graph: an (N, N) adjacency matrix (dense or
     scipy.sparse, weights allowed), turned once into padded neighbour lists.
 ``radius=r, k_max=K``
-    neighbours computed inside ``output()`` with
-    :func:`~avblocks.environment.neighbors.radius_neighbors` (a k-d tree:
-    NumPy only, not traceable by JAX).
+    the ``K`` nearest within ``r`` computed inside ``output()`` by a
+    :class:`~avblocks.utility.spatial.NeighborSearch` the block owns (set as
+    its attribute ``_neighbor_search``, so the compiled engine plans it):
+    the k-d tree under NumPy, the traceable cell list under JAX (same
+    neighbours, same order; positions in 2 or 3 dimensions).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from ..core.errors import ParameterError, ShapeError
 from ..core.params import positive_scalar
 from ..environment.neighbors import radius_neighbors
+from ..utility.spatial import NeighborSearch
 
 
 def adjacency_to_neighbors(adjacency, n, block):
@@ -113,6 +116,14 @@ class NeighborSource:
             if self.k_max < 1:
                 raise ParameterError("k_max must be >= 1", block=name,
                                      param="k_max", found=k_max)
+            spec = block._inputs.get(position_port)
+            dim = spec.shape[1] if spec is not None and spec.shape is not None and \
+                len(spec.shape) == 2 else 2
+            self.search = None
+            if dim in (2, 3):
+                self.search = NeighborSearch(float(getattr(block, radius_param)),
+                                             points=position_port, dim=dim)
+                block._neighbor_search = self.search
         else:
             self.mode = "port"
             block.declare_input("neighbors", None, "int64",
@@ -138,8 +149,11 @@ class NeighborSource:
             idx, w = self.fixed
             return xp.asarray(idx), xp.asarray(w)
         if self.mode == "radius":
-            r = float(getattr(self._owner, self.radius_param))
-            idx, _ = radius_neighbors(np.asarray(pos), r, self.k_max)
+            r = getattr(self._owner, self.radius_param)
+            if self.search is None:                 # 1-D positions: NumPy only
+                idx, _ = radius_neighbors(np.asarray(pos), float(r), self.k_max)
+            else:
+                idx, _ = self.search.nearest(pos, r, self.k_max, xp=xp)
         else:
             idx = u["neighbors"]
         return idx, xp.where(idx >= 0, 1.0, 0.0)

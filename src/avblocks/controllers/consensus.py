@@ -11,8 +11,8 @@ agents converge to the average of the initial states (it is invariant since
 
 The graph comes from a ``neighbors`` port (N, K) int64 (-1 padded; a
 proximity graph, weights 1), a fixed ``adjacency`` matrix (weights
-``a_ij``), or ``radius``/``k_max`` (neighbours computed inside the block
-with :func:`~avblocks.environment.neighbors.radius_neighbors`, NumPy only).
+``a_ij``), or ``radius``/``k_max`` (neighbours computed inside the block by
+a :class:`~avblocks.utility.spatial.NeighborSearch`; compiles).
 Cost O(N K) per evaluation.
 
 Reference: R. Olfati-Saber & R. M. Murray, "Consensus problems in networks of

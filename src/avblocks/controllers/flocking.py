@@ -64,20 +64,31 @@ def phi_alpha(s, r_a, d_a, a, b, h, xp=np):
 
 def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
                  c1=1.0, c2=1.0, xp=np):
-    """Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K)."""
+    """Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K).
+
+    The bump is evaluated once and the unit vectors ``sigma_eps`` are folded
+    into (N, K) weights: fewer (N, K, D) temporaries than the equations
+    written term by term.
+    """
     r_a = (xp.sqrt(1.0 + eps * r * r) - 1.0) / eps
     d_a = (xp.sqrt(1.0 + eps * d * d) - 1.0) / eps
-    qj, mask = gather(position, idx, xp)
-    pj, _ = gather(velocity, idx, xp)
-    dq = qj - position[:, None, :]
+    mask = idx >= 0
+    safe = xp.where(mask, idx, xp.arange(position.shape[0])[:, None])
+    dq = position[safe] - position[:, None, :]                # (N, K, D)
     nrm2 = xp.sum(dq * dq, axis=-1)
     root = xp.sqrt(1.0 + eps * nrm2)
     s = (root - 1.0) / eps
-    n_ij = dq / root[..., None]
-    grad = xp.where(mask, phi_alpha(s, r_a, d_a, a, b, h, xp), 0.0)
-    aij = xp.where(mask, bump(s / r_a, h, xp), 0.0)
-    return (c1 * xp.sum(grad[..., None] * n_ij, axis=1)
-            + c2 * xp.sum(aij[..., None] * (pj - velocity[:, None, :]), axis=1))
+    x = s / r_a                                               # >= 0: bump inline
+    rho = xp.where(x < h, 1.0, xp.where(
+        x <= 1.0, 0.5 * (1.0 + xp.cos(np.pi * (x - h) / (1.0 - h))), 0.0))
+    c = abs(a - b) / xp.sqrt(4.0 * a * b)
+    z = s - d_a + c
+    phi = 0.5 * ((a + b) * z / xp.sqrt(1.0 + z * z) + (a - b))
+    w_q = xp.where(mask, rho * phi / root, 0.0)                # phi_a sigma_eps weight
+    w_p = xp.where(mask, rho, 0.0)                             # a_ij
+    return (c1 * xp.sum(w_q[..., None] * dq, axis=1)
+            + c2 * xp.sum(w_p[..., None] * (velocity[safe] - velocity[:, None, :]),
+                          axis=1))
 
 
 def order_parameter(velocity, xp=np):
@@ -103,7 +114,8 @@ class Flocking(Block):
     gamma : bool — add the navigational term towards ``target``.
     target : (D,) or (N, D); target_velocity : same; c1_gamma, c2_gamma.
     radius mode: ``neighbors="internal"`` with ``k_max`` computes neighbours
-    within ``r`` inside the block (NumPy only); ``adjacency`` a fixed graph.
+    within ``r`` inside the block (compiles: ``utility.spatial``); ``adjacency``
+    a fixed graph.
 
     ``d``, ``r``, ``eps``, ``a``, ``b``, ``h``, ``c1``, ``c2``, ``target``,
     ``target_velocity`` (both (N, D)), ``c1_gamma`` and ``c2_gamma`` are

@@ -1,4 +1,4 @@
-"""Neighbour queries over agent positions (k-d tree, never an N^2 loop).
+"""Neighbour queries over agent positions (k-d tree or cell list, never an N^2 loop).
 
 The neighbour format that controllers consume: an ``(N, K)`` int64 array of
 agent indices, padded with ``-1``, sorted by distance; ``idx >= 0`` is the
@@ -12,6 +12,7 @@ from scipy.spatial import cKDTree
 
 from ..core.block import Block
 from ..core.errors import ParameterError
+from ..utility.spatial import NeighborSearch
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
 
@@ -149,13 +150,14 @@ PAD_DISTANCE = -1.0
 
 
 class Neighbors(Block):
-    """Range-limited, k-nearest and field-of-view neighbour sets (k-d tree).
+    """Range-limited, k-nearest and field-of-view neighbour sets.
 
     Ports
     -----
     pose : in, (N, 3) [m, m, rad]  (or ``position`` (N, 2) with input="position")
     neighbors : out, (N, K) int64
-        Indices of up to ``K`` other agents, nearest first, padded with -1.
+        Indices of up to ``K`` other agents, nearest first (ties: smaller
+        index first), padded with -1.
     distance : out, (N, K) float [m]
         Their distances; ``PAD_DISTANCE`` (-1) where padded.
 
@@ -166,14 +168,24 @@ class Neighbors(Block):
     k : int
         ``K``, the most neighbours kept per agent (static shape).
     radius : float
-        Sensing range (default: unlimited; then the k nearest).
+        Sensing range (default: unlimited; then the k nearest, by comparing
+        every pair: O(N^2), for small N).
     fov : float, optional
         Full field-of-view angle in radians (needs ``input="pose"``); a
         neighbour's bearing relative to the heading must lie in
         ``[-fov/2, fov/2]``. Default: all around.
+    box : (L_x, L_y), optional
+        Periodic world ``[0, L_x) x [0, L_y)``: distances by the minimum
+        image (``radius <= min(L) / 2``).
+    capacity : int, optional
+        Fix the compiled search's static capacity (candidates per agent, see
+        :mod:`avblocks.utility.spatial`) instead of letting the compiled
+        engine plan it from the initial positions.
 
     ``radius`` and ``fov`` (when given) are numeric parameters; ``k`` and
-    whether there is a field of view are structural.
+    whether there is a field of view are structural. The search's cells are
+    sized for the ``radius`` given here: a compiled run whose ``radius`` is
+    later raised above it reports an overflow.
 
     input : "pose" or "position"
     period : float, optional
@@ -186,7 +198,10 @@ class Neighbors(Block):
 
     Notes
     -----
-    SciPy k-d tree side computation: not JAX-traceable.
+    Compiles (``backend="jax"``): the search is the cell list of
+    :class:`avblocks.utility.spatial.NeighborSearch` (exact: the same
+    neighbours in the same order as the NumPy engine, whose radius queries
+    use SciPy's k-d tree, measured faster there).
 
     Example
     -------
@@ -198,10 +213,8 @@ class Neighbors(Block):
     [[1, -1], [0, -1], [-1, -1]]
     """
 
-    #: NumPy/SciPy/shapely only: the compiled backend refuses it by name.
-    traceable = False
-
-    def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None):
+    def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None,
+                 box=None, capacity=None):
         super().__init__()
         self.n = n = agent_count(n, "Neighbors")
         self.k = k = agent_count(k, "Neighbors")
@@ -223,16 +236,28 @@ class Neighbors(Block):
         else:
             self.declare_parameter("fov", fov, bounds=(1e-12, 2 * np.pi), unit="rad")
         self.input = declare_agents_input(self, n, input, need_heading=fov is not None)
+        try:
+            self.search = NeighborSearch(radius, points=self.input, box=box,
+                                         capacity=capacity)
+        except ParameterError as e:
+            raise ParameterError(str(e.args[0]) if e.args else "bad search settings",
+                                 block="Neighbors", param="box" if box is not None
+                                 else "capacity") from e
         self.declare_output("neighbors", (n, k), "int64",
                             doc="neighbour indices, nearest first, -1 padded")
         self.declare_output("distance", (n, k), unit="m",
                             doc="neighbour distances, -1 where padded")
         maybe_periodic(self, period)
 
+    def searches(self):
+        """The neighbour searches this block owns (planned by the compiled engine)."""
+        return [self.search]
+
     def output(self, t, x, u, xp):
-        p = np.asarray(u[self.input])
+        p = u[self.input]
         if self.fov is None:
-            idx, dist = radius_neighbors(p[:, :2], float(self.radius), self.k)
+            idx, dist = self.search.nearest(p[:, :2], self.radius, self.k, xp=xp)
         else:
-            idx, dist = fov_neighbors(p, float(self.radius), self.k, float(self.fov))
-        return {"neighbors": idx, "distance": np.where(idx >= 0, dist, PAD_DISTANCE)}
+            idx, dist = self.search.nearest(p[:, :2], self.radius, self.k, xp=xp,
+                                            heading=p[:, 2], fov=self.fov)
+        return {"neighbors": idx, "distance": xp.where(idx >= 0, dist, PAD_DISTANCE)}

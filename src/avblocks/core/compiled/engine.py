@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import diagnostics as _diagnostics
 from ..engine import Engine as _Engine
 from ..engine import _select
 from ..errors import AvError, CompileError, ShapeError
@@ -43,7 +44,8 @@ class TracedEngine(_Engine):
     # --------------------------------------------------------------- calls
     def _call(self, i, what, fn, *args, **kw):
         try:
-            return fn(*args, **kw)
+            with _diagnostics.block(self.names[i], self.blocks[i]):
+                return fn(*args, **kw)
         except AvError:
             raise
         except Exception as e:  # noqa: BLE001 - name the block that failed

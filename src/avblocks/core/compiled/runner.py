@@ -13,8 +13,10 @@ from ..diagram import CompiledDiagram, Diagram, PortRef
 from ..errors import CompileError, ParameterError, SimulationError
 from ..results import Results
 from ..solvers import make_solver
+from .. import diagnostics as _diagnostics
 from . import _jax
 from . import devices as _devices
+from . import plans as _plans
 from .program import Program, get_program
 from .structure import diagram_key, fingerprint
 
@@ -66,7 +68,8 @@ def _solver_key(solver):
 
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
-            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None):
+            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None,
+            on_overflow="replan"):
     """Compile ``diagram`` once for runs of ``t_final`` (JAX: ``jit`` of a
     nested ``lax.scan``) and return a :class:`Runner`.
 
@@ -92,6 +95,12 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
     check_finite : bool
         After a run, raise :class:`SimulationError` (with the results) if a
         logged signal or the final state is NaN/inf.
+    on_overflow : ``"replan"`` (default) or ``"raise"``
+        What a run does when a block's neighbour search needed more than the
+        static plan made from the initial inputs: warn, re-plan, compile
+        again once and repeat the run; or raise :class:`SimulationError`
+        naming the block and the sizes (see
+        :mod:`avblocks.core.compiled.plans`).
     devices : None, int or list of JAX devices
         Where the runs execute (default: every local device of JAX's
         default backend). With several, a run of at least
@@ -155,6 +164,8 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                            param="solver", expected="'rk4' or 'euler'", found=solver,
                            hint="use backend='numpy' for solve_ivp methods")
     _check_traceable(cd)
+    _plans.check_mode(on_overflow)
+    _plans.plan_searches(cd, dt=dt, t0=t0, seed=seed)
     idx, names, specs, aliases = _log_spec(cd, log)
     x64 = _DTYPES[dtype]
     key = (diagram_key(cd), nsteps, log_every, tuple(names), _solver_key(solv), dt,
@@ -162,9 +173,11 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
     prog = get_program(key, lambda: Program(cd, dt=dt, t0=t0, nsteps=nsteps,
                                             log_every=log_every, log_idx=idx,
                                             solver=solv, x64=x64))
-    return Runner(cd, prog, names=names, specs=specs, aliases=aliases, seed=seed,
-                  dtype=dtype, check_finite=check_finite, solver_name=solv.name,
-                  devices=_devices.resolve(devices))
+    runner = Runner(cd, prog, names=names, specs=specs, aliases=aliases, seed=seed,
+                    dtype=dtype, check_finite=check_finite, solver_name=solv.name,
+                    devices=_devices.resolve(devices))
+    runner.on_overflow = on_overflow
+    return runner
 
 
 class Runner:
@@ -314,8 +327,13 @@ class Runner:
             spent += more
         return exe, spent, place, placed
 
+    #: what a run does when a neighbour search overflows its plan
+    #: (:mod:`avblocks.core.compiled.plans`): "replan" or "raise"
+    on_overflow = "replan"
+
     def __call__(self, params=None, x0=None, seed=None):
         jax = _jax.jax()
+        _diagnostics.clear()
         seed = self.seed if seed is None else int(seed)
         theta, _ = self._theta(params)
         x0vals, _ = self._x0_values(x0)
@@ -342,6 +360,9 @@ class Runner:
         logs = [np.asarray(a) for a in logs]
         XF = jax.tree_util.tree_map(np.asarray, XF)
         res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
+        over = _plans.overflows(self.compiled)
+        if over:
+            return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
             _check_finite(res)
         return res
@@ -376,6 +397,7 @@ class Runner:
             values ``(runs, ...)``; ``res.to_xarray()`` has a ``run`` dim.
         """
         jax = _jax.jax()
+        _diagnostics.clear()
         R = _count_runs(seeds, params, x0, runs)
         seeds = [self.seed] * R if seeds is None else [int(s) for s in seeds]
         if len(seeds) != R:
@@ -450,6 +472,10 @@ class Runner:
                     per_run_params=sorted(tb))
         meta["realtime_factor"] = (R * prog.nsteps * prog.dt / wall) if wall > 0 else math.inf
         res = self._results(out, finals, meta, runs=R)
+        over = _plans.overflows(self.compiled)
+        if over:
+            return _plans.settle(self, over, lambda: self.ensemble(
+                seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes))
         if self.check_finite:
             _check_finite(res)
         return res
@@ -497,6 +523,7 @@ class Runner:
         function (not a new ``lambda`` each call) to avoid recompiling.
         """
         jax = _jax.jax()
+        _diagnostics.clear()
         seed = self.seed if seed is None else int(seed)
         pw, sw = self._split_wrt(wrt)
         theta, _ = self._theta(params)
@@ -529,6 +556,10 @@ class Runner:
             val, g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}
         grads.update({w: np.asarray(g[1][w]) for w, *_ in sw})
+        over = _plans.overflows(self.compiled)
+        if over:
+            return _plans.settle(self, over, lambda: self.value_and_grad(
+                cost, wrt, params, x0, seed, checkpoint=checkpoint))
         return float(val), grads
 
     def grad(self, cost, wrt, params=None, x0=None, seed=None, *, checkpoint=True):

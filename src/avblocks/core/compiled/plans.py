@@ -1,0 +1,148 @@
+"""Static plans of the neighbour searches blocks own, and overflow handling.
+
+A traced search has static shapes (see :mod:`avblocks.utility.spatial`):
+its candidate capacity and hit width are fixed before tracing. The compiled
+engine (:func:`avblocks.compile`):
+
+1. **plans** every search a block owns (``block.searches()``, or each
+   attribute that is a ``NeighborSearch``; see
+   :func:`avblocks.core.diagnostics.searches_of`) from the block's input
+   values at ``t0``, computed by the NumPy engine (one initial evaluation,
+   no step), unless the user fixed ``capacity=``. The plan is part of the
+   block's structure, so it is part of the compile-cache key. Plans only
+   grow over a block's life (a new plan keeps the larger of the old and
+   the new sizes), so a plan grown after an overflow is kept;
+2. during the run, each search call tests ``need > plan`` and records an
+   excess (:mod:`avblocks.core.diagnostics`; nothing is called back while
+   the plan suffices);
+3. after the run, where a search needed more than its plan:
+
+   - ``on_overflow="replan"`` (default): a :class:`RuntimeWarning` names
+     the block and the sizes, the search is re-planned with the needed size
+     times its ``headroom``, the program is compiled again (once) and the
+     run repeated. A repeated run that overflows again raises;
+   - ``on_overflow="raise"``: :class:`~avblocks.core.errors.SimulationError`
+     naming the block, "capacity" (or "hits", "radius"), needed vs planned.
+
+An ensemble's need is the largest over its runs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import warnings
+from types import SimpleNamespace
+
+import numpy as np
+
+from .. import diagnostics
+from ..errors import ParameterError, SimulationError
+
+MODES = ("replan", "raise")
+
+
+def check_mode(mode):
+    if mode not in MODES:
+        raise ParameterError("unknown on_overflow", param="on_overflow",
+                             expected=" or ".join(repr(m) for m in MODES), found=mode)
+    return mode
+
+
+def owned(cd):
+    """``[(block index, search number, search)]`` of a compiled diagram."""
+    out = []
+    for i, b in enumerate(cd.blocks):
+        for j, s in enumerate(diagnostics.searches_of(b)):
+            out.append((i, j, s))
+    return out
+
+
+def _merge(old, new):
+    """The larger of two plans of one search (None: no old plan)."""
+    if old is None or old.reach != new.reach or old.box != new.box:
+        return new
+    cap = max(old.capacity or 0, new.capacity or 0) or None
+    hits = max(old.hits or 0, new.hits or 0) or None
+    return dataclasses.replace(new, capacity=cap, hits=hits)
+
+
+def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
+    """Plan every search of ``cd`` not fixed by its user, from the NumPy
+    engine's block inputs at ``t0``. Returns the number planned."""
+    todo = [(i, s) for i, _, s in owned(cd) if not getattr(s, "fixed", False)]
+    if not todo:
+        return 0
+    from ..simulator import Simulator
+    sim = Simulator(cd, dt, "euler", seed=seed, t0=t0, x0=x0, check_finite=False)
+    sim.init()
+    for i, s in todo:
+        u = sim.eng.gather(i, sim.Y)
+        if s.points not in u:
+            raise ParameterError("a neighbour search names an input the block does not "
+                                 "have", block=cd.names[i], param="points",
+                                 expected=sorted(u), found=s.points)
+        old = s.cells
+        s.plan(np.asarray(u[s.points]))
+        s.cells = _merge(old, s.cells)
+    return len(todo)
+
+
+def overflows(cd):
+    """``[(block name, search, need, message)]`` of the searches whose
+    recorded need exceeds their plan since the last
+    :func:`avblocks.core.diagnostics.clear`."""
+    rec = diagnostics.recorded()
+    out = []
+    for i, j, s in owned(cd):
+        v = rec.get((cd.names[i], j))
+        if v is None or s.cells is None:
+            continue
+        need = SimpleNamespace(capacity=int(v[0]), reach=float(v[2]), hits=int(v[1]),
+                               span=float(v[3]))
+        msg = s.cells.exceeded(need)
+        if msg:
+            out.append((cd.names[i], s, need, msg))
+    return out
+
+
+def settle(runner, over, rerun):
+    """Act on ``over`` (from :func:`overflows`) after a run of ``runner``:
+    raise, or grow the plans, rebuild the runner's program and return
+    ``rerun()``'s result."""
+    names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
+    mode = getattr(runner, "on_overflow", "replan")
+    bad_reach = [n for n, s, need, _ in over
+                 if float(need.reach) > s.cells.reach * (1 + 1e-12) or need.span > 1.0]
+    if mode == "raise" or bad_reach or getattr(runner, "_replanned", False):
+        why = "a compiled neighbour search overflowed its static plan"
+        if getattr(runner, "_replanned", False):
+            why += " again after re-planning"
+        raise SimulationError(f"{why}: {names}", block=over[0][0],
+                              hint="give the block a larger capacity=, or compile with "
+                                   "on_overflow='replan' (the default)")
+    for _, s, need, _ in over:
+        s.cells = s.cells.grown(need, s.headroom)
+    warnings.warn(f"compiled run re-planned after a neighbour search overflow: {names}; "
+                  "compiling again and repeating the run", RuntimeWarning, stacklevel=3)
+    rebuild(runner)
+    runner._replanned = True
+    try:
+        return rerun()
+    finally:
+        runner._replanned = False
+
+
+def rebuild(runner):
+    """Give ``runner`` the program of its diagram's current structure."""
+    from .program import Program, get_program
+    from .runner import _solver_key
+    from .structure import diagram_key
+    from . import _jax
+    jax = _jax.jax()
+    p, cd = runner.program, runner.compiled
+    key = (diagram_key(cd), p.nsteps, p.log_every, tuple(runner.names),
+           _solver_key(p.solver), p.dt, p.t0, p.x64, str(jax.default_backend()))
+    runner.program = get_program(key, lambda: Program(
+        cd, dt=p.dt, t0=p.t0, nsteps=p.nsteps, log_every=p.log_every,
+        log_idx=p.log_idx, solver=p.solver, x64=p.x64))
+    runner._run_exe = None

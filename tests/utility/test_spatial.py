@@ -1,0 +1,185 @@
+"""utility.spatial: the cell-list search against brute force (and the k-d tree)."""
+
+import numpy as np
+import pytest
+
+from avblocks.utility import spatial as sp
+
+
+def brute(p, r, k, box=None, fov=None, heading=None):
+    """Independent truth: all pairs, lexsort by (distance, index)."""
+    d = p[None, :, :] - p[:, None, :]
+    if box is not None:
+        d = d - np.asarray(box) * np.round(d / np.asarray(box))
+    dist = np.sqrt((d ** 2).sum(-1))
+    n = len(p)
+    ok = (dist <= r) & ~np.eye(n, dtype=bool)
+    if fov is not None:
+        rel = np.arctan2(d[..., 1], d[..., 0]) - heading[:, None]
+        rel = np.abs((rel + np.pi) % (2 * np.pi) - np.pi)
+        ok &= rel <= fov / 2 + 1e-12
+    dm = np.where(ok, dist, np.inf)
+    j = np.broadcast_to(np.arange(n), (n, n))
+    o = np.lexsort((j, dm), axis=-1)[:, :k]
+    i = np.take_along_axis(np.where(ok, j, -1), o, 1)
+    dd = np.take_along_axis(dm, o, 1)
+    if i.shape[1] < k:
+        i = np.pad(i, ((0, 0), (0, k - i.shape[1])), constant_values=-1)
+        dd = np.pad(dd, ((0, 0), (0, k - dd.shape[1])), constant_values=np.inf)
+    return i, dd
+
+
+def cases(seed, count):
+    rng = np.random.default_rng(seed)
+    for trial in range(count):
+        n = int(rng.integers(1, 250))
+        side = rng.uniform(1, 20)
+        p = rng.uniform(0, side, (n, 2))
+        if trial % 3 == 0:
+            p = np.round(p * 2) / 2          # duplicates, exact ties, cell borders
+        r = float(rng.uniform(0.3, 3))
+        k = int(rng.integers(1, 15))
+        box = None
+        if trial % 4 == 1:
+            box = (side * 1.01, side * 1.01)
+            r = min(r, side * 0.5)
+        yield rng, p, r, k, box
+
+
+def test_nearest_numpy_matches_brute_force():
+    for rng, p, r, k, box in cases(1, 30):
+        cells = sp.CellList(r, box=box)
+        i, d, _ = sp.nearest(cells, p, r, k)
+        bi, bd = brute(p, r, k, box)
+        np.testing.assert_array_equal(i, bi)
+        np.testing.assert_allclose(d, bd, rtol=1e-12)
+        h = rng.uniform(-np.pi, np.pi, len(p))
+        fov = float(rng.uniform(0.5, 6))
+        i, d, _ = sp.nearest(cells, p, r, k, heading=h, fov=fov)
+        np.testing.assert_array_equal(i, brute(p, r, k, box, fov, h)[0])
+        plan = sp.plan_cells(p, r, box=box)
+        i, d, need = sp.nearest(plan, p, r, k)
+        np.testing.assert_array_equal(i, bi)
+        assert plan.exceeded(need) is None
+
+
+def test_kd_nearest_equals_brute_force_with_ties():
+    for _, p, r, k, box in cases(5, 40):
+        i, d = sp.kd_nearest(p, r, k, box=box)
+        bi, bd = brute(p, r, k, box)
+        np.testing.assert_array_equal(i, bi)
+        np.testing.assert_allclose(d, bd, rtol=1e-12)
+
+
+def test_exactly_at_radius_is_inside_and_n1():
+    p = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 2.0], [3.0, 0.0]])
+    cells = sp.CellList(1.0)
+    i, d, _ = sp.nearest(cells, p, 1.0, 3)
+    assert i.tolist() == [[1, -1, -1], [0, -1, -1], [-1, -1, -1], [-1, -1, -1]]
+    i, d, _ = sp.nearest(cells, p[:1], 1.0, 2)
+    assert i.tolist() == [[-1, -1]] and np.isinf(d).all()
+
+
+def test_chunked_rows_equal_unchunked(monkeypatch):
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0, 5, (120, 2))
+    monkeypatch.setattr(sp, "CHUNK", 7)
+    i, _, _ = sp.nearest(sp.CellList(1.0), p, 1.0, 5)
+    np.testing.assert_array_equal(i, brute(p, 1.0, 5)[0])
+
+
+def test_within_is_the_radius_set():
+    rng = np.random.default_rng(4)
+    p = np.round(rng.uniform(0, 6, (150, 2)) * 2) / 2
+    idx, dist, need = sp.within(sp.CellList(1.0), p, 1.0)
+    full = np.linalg.norm(p[:, None] - p[None], axis=-1)
+    for a in range(len(p)):
+        want = set(np.nonzero((full[a] <= 1.0) & (np.arange(len(p)) != a))[0])
+        got = set(idx[a][idx[a] >= 0].tolist())
+        assert got == want
+    assert int(need.hits) == max(len(s) for s in [set()] + [
+        set(np.nonzero((full[a] <= 1.0) & (np.arange(len(p)) != a))[0]) for a in range(len(p))])
+
+
+def test_overflow_is_reported():
+    p = np.random.default_rng(0).uniform(0, 10, (200, 2))
+    plan = sp.plan_cells(p, 1.0)
+    crowd = np.zeros_like(p) + np.random.default_rng(1).uniform(0, 0.1, p.shape)
+    _, _, need = sp.nearest(plan, crowd, 1.0, 4)
+    msg = plan.exceeded(need)
+    assert msg and "capacity" in msg
+    grown = plan.grown(need)
+    assert grown.capacity >= int(need.capacity)
+
+
+def test_jit_matches_brute_force():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    with jax.enable_x64(True):
+        for rng, p, r, k, box in cases(2, 8):
+            plan = sp.plan_cells(p, r, box=box)
+            h = rng.uniform(-np.pi, np.pi, len(p))
+            fov = float(rng.uniform(0.5, 6))
+            f = jax.jit(lambda q, h: sp.nearest(plan, q, r, k, xp=jnp, heading=h,
+                                                fov=fov)[:2])
+            i, d = f(jnp.asarray(p), jnp.asarray(h))
+            bi, bd = brute(p, r, k, box, fov, h)
+            np.testing.assert_array_equal(np.asarray(i), bi)
+            np.testing.assert_allclose(np.asarray(d), bd, rtol=1e-12)
+
+
+def test_jit_chunked_lax_map(monkeypatch):
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    monkeypatch.setattr(sp, "CHUNK", 16)
+    p = np.random.default_rng(7).uniform(0, 6, (100, 2))
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, 1.0)
+        i = jax.jit(lambda q: sp.nearest(plan, q, 1.0, 6, xp=jnp)[0])(jnp.asarray(p))
+    np.testing.assert_array_equal(np.asarray(i), brute(p, 1.0, 6)[0])
+
+
+def test_grad_of_neighbour_distances():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    p = np.random.default_rng(8).uniform(0, 4, (40, 2))
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, 1.0)
+
+        def cost(q):
+            i, d, _ = sp.nearest(plan, q, 1.0, 4, xp=jnp)
+            return jnp.sum(jnp.where(i >= 0, d, 0.0) ** 3)
+
+        g = np.asarray(jax.grad(cost)(jnp.asarray(p)))
+    # central differences with the neighbour sets fixed (none cross r here)
+    h = 1e-6
+    for a in [(0, 0), (5, 1), (17, 0)]:
+        e = np.zeros_like(p)
+        e[a] = h
+
+        def c_np(q):
+            i, d, _ = sp.nearest(sp.CellList(1.0), q, 1.0, 4)
+            return np.sum(np.where(i >= 0, d, 0.0) ** 3)
+        fd = (c_np(p + e) - c_np(p - e)) / (2 * h)
+        assert g[a] == pytest.approx(fd, rel=1e-5, abs=1e-8)
+
+
+def test_far_apart_points_report_their_span():
+    # a frame of ~4e19 cells: more than int64 keys address; the need says so
+    p = np.array([[0.0, 0.0], [0.5, 0.0], [3e9, 3e9], [3e9 + 0.5, 3e9]])
+    _, _, need = sp.nearest(sp.CellList(1.0), p, 1.0, 2)
+    assert float(need.span) > 1
+    assert "span" in sp.CellList(1.0, 4).exceeded(need)
+    _, _, need = sp.nearest(sp.CellList(1.0), p[:2], 1.0, 2)
+    assert float(need.span) < 1e-10
+
+
+def test_jit_packed_sort_equals_stable_argsort():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    keys = np.random.default_rng(0).integers(0, 50, 300)
+    with jax.enable_x64(True):
+        fast = jax.jit(lambda k: sp._sort(k, jnp, 50.0))(jnp.asarray(keys))
+        slow = jax.jit(lambda k: sp._sort(k, jnp, 1e18))(jnp.asarray(keys))
+    np.testing.assert_array_equal(np.asarray(fast), np.argsort(keys, kind="stable"))
+    np.testing.assert_array_equal(np.asarray(slow), np.argsort(keys, kind="stable"))

@@ -297,41 +297,21 @@ def test_shapely_method_refused_by_the_compiled_engine_by_name():
 
 @pytest.mark.jax
 def test_traced_margin_beyond_the_grid_reach_is_reported():
-    """Under JAX the grid is static: a margin raised past its reach is handed
-    to the run's diagnostics (never silent); within it, nothing is exceeded."""
-    jax = pytest.importorskip("jax")
-    import jax.numpy as jnp
-
-    from avblocks.core import diagnostics
-    from avblocks.core.compiled._jax import x64
-    from avblocks.utility.spatial import Need
-
-    c = Collision(World([SQUARE]), 2, footprint=Disc(0.5), margin=0.1)  # reach 0.7
-    grid = c.edges
-
-    class Collector:                    # what the compiled engine's collector sees
-        needs = []
-
-        def add(self, owner, need, plan):
-            if owner is grid:           # (the agent search reports too)
-                self.needs.append(need.reach)
-
-    def run(p):
-        Collector.needs.clear()
-        y = c.output(0.0, {}, {"pose": p}, jnp)
-        return y["collision"], list(Collector.needs)
-
+    """Under JAX the edge grid is a static plan: a margin raised past its
+    reach stops a compiled run with an error naming the block and the radius
+    (never silent); within it the run goes through."""
+    pytest.importorskip("jax")
+    import avblocks as av
     pose = np.array([[0.3, 0.0, 0.0], [-3.0, 0.0, 0.0]])
-    tok = diagnostics._ACTIVE.set(Collector())
-    try:
-        with x64(True):
-            c.set_parameter("margin", 0.2)      # (a fresh trace per value)
-            hit, needs = jax.jit(lambda p: run(p))(pose)
-            assert np.asarray(hit).tolist() == [True, False]
-            assert grid.exceeded(Need(0, np.asarray(needs[0]))) is None
-            c.set_parameter("margin", 0.3)
-            _, needs = jax.jit(lambda p: run(p))(pose)
-    finally:
-        diagnostics._ACTIVE.reset(tok)
-    msg = grid.exceeded(Need(0, np.asarray(needs[0])))
-    assert "radius 0.8" in msg and "built for 0.7" in msg
+    d = av.Diagram()
+    src = d.add(av.blocks.Constant(pose), name="src")
+    col = d.add(Collision(World([SQUARE]), 2, footprint=Disc(0.5), margin=0.1),
+                name="col")                                     # grid reach 0.7
+    d.connect(src.y, col.pose)
+    run = av.compile(d, 0.2, dt=0.1, log=[col.collision])
+    res = run(params={"col.margin": 0.2})                       # needs 0.7: fits
+    assert res[col.collision][-1].tolist() == [True, False]
+    with pytest.raises(av.SimulationError) as e:
+        run(params={"col.margin": 0.3})                         # needs 0.8
+    msg = str(e.value)
+    assert "'col'" in msg and "radius 0.8" in msg and "built for 0.7" in msg

@@ -181,7 +181,7 @@ def test_grid_method_traced_equals_numpy():
     w = _concave_world(gen)
     n = 100
     pose = np.c_[gen.uniform(0, 30, (n, 2)), gen.uniform(-np.pi, np.pi, n)]
-    s = RangeSensor(w, n, n_rays=16, max_range=5.0, agent_radius=0.3, capacity=16,
+    s = RangeSensor(w, n, n_rays=16, max_range=5.0, agent_radius=0.3, capacity=64,
                     method="grid")
     want = s.output(0.0, {}, {"pose": pose}, np)["ranges"]
     with x64(True):

@@ -363,6 +363,13 @@ class Collision(Block):
         """The world as an :class:`EdgeGrid` (built on first use)."""
         return self._grid(self._reach)
 
+    def searches(self):
+        """The static plans of a compiled run: the agent search and the edge
+        grid (see :mod:`avblocks.core.compiled.plans`)."""
+        if self.method == "shapely":
+            return []
+        return [s for s in (self.search, self.edges) if s is not None]
+
     def output(self, t, x, u, xp):
         if self.method == "shapely" or (self.method == "auto" and xp is np):
             return collide(self.world, np.asarray(u[self.input]), self.footprint,

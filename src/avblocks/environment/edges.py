@@ -260,7 +260,29 @@ class EdgeGrid:
         Cap on the number of cells (default 2^16).
 
     All arrays are NumPy constants (structural); queries take ``xp``.
+
+    In a compiled run the grid is a fixed plan like a neighbour search's:
+    a block lists it in its ``searches()``, a query hands the radius it
+    asked for to :func:`avblocks.core.diagnostics.report`, and a radius
+    beyond ``reach`` stops the run with an error naming the block (the grid
+    is never re-planned: build the block with a larger ``reach=``).
     """
+
+    #: what the compiled engine's overflow check reads (see
+    #: :mod:`avblocks.core.compiled.plans`): a plan fixed at construction,
+    #: with a reach and no capacity or hit width to grow
+    neighbor_search = True
+    fixed = True
+    capacity = None
+    hits = None
+    brute = False
+    box = None
+    headroom = 1.0
+
+    @property
+    def cells(self):
+        """The plan the overflow check compares with: the grid itself."""
+        return self
 
     def __init__(self, world, reach, *, cell=None, max_cells=1 << 16):
         import shapely

@@ -421,6 +421,13 @@ class RangeSensor(Block):
         without a world)."""
         return self._grid(self._reach)
 
+    def searches(self):
+        """The static plans of a compiled run: the agent search and the edge
+        grid (see :mod:`avblocks.core.compiled.plans`)."""
+        if self.method == "shapely":
+            return []
+        return [s for s in (self.search, self.edges) if s is not None]
+
     def output(self, t, x, u, xp):
         if self.method == "shapely" or (self.method == "auto" and xp is np):
             r = cast_rays(self.world, np.asarray(u[self.input]), self.angles,

@@ -21,7 +21,6 @@ from avblocks.controllers.collision_avoidance import (
     neighbor_edges,
     pairs_from_neighbors,
 )
-from avblocks.core.errors import AvError
 from avblocks.environment.neighbors import radius_neighbors
 
 # stated accuracy of the ADMM solver (defaults: at most 500 iterations,
@@ -237,12 +236,14 @@ def test_both_modes_with_sensing_range_compile_and_equal_numpy(mode, k_max):
 
 
 @pytest.mark.jax
-def test_compiled_sensing_range_without_capacity_is_refused_by_name():
+def test_compiled_sensing_range_without_capacity_is_planned_by_the_engine():
+    """No capacity=: the compiled engine plans the block's own search from
+    the initial positions and the run equals the NumPy one."""
     pytest.importorskip("jax")
-    with pytest.raises(AvError, match="capacity") as e:
-        av.simulate(_swap_diagram("joint"), 0.2, dt=0.05, solver="euler", log=["ag.y"],
-                    backend="jax")
-    assert "CollisionAvoidance" in str(e.value)
+    kw = dict(t_final=1.0, dt=0.05, solver="euler", log=["ag.y"])
+    ref = av.simulate(_swap_diagram("joint"), **kw)
+    got = av.simulate(_swap_diagram("joint"), backend="jax", **kw)
+    np.testing.assert_allclose(got["ag.y"], ref["ag.y"], atol=1e-9)
 
 
 @pytest.mark.jax

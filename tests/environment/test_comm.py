@@ -176,7 +176,7 @@ def test_compiled_engine_delivers_the_same_messages():
     n, kw = 40, dict(t_final=3.0, dt=0.05, seed=5,
                      log=["ch.sender", "ch.received", "g.informed", "g.value"])
     ref = av.simulate(_moving_swarm(n, 0), **kw)
-    got = av.simulate(_moving_swarm(n, 0, capacity=12), backend="jax", **kw)
+    got = av.simulate(_moving_swarm(n, 0, capacity=48), backend="jax", **kw)
     np.testing.assert_array_equal(got["ch.sender"], ref["ch.sender"])
     np.testing.assert_array_equal(got["g.informed"], ref["g.informed"])
     np.testing.assert_allclose(got["ch.received"], ref["ch.received"], atol=1e-12)

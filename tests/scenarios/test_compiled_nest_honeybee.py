@@ -1,6 +1,8 @@
 """nest and honeybee on the compiled engine: `avblocks run NAME --backend jax`
 prints the same summary.json numbers as the NumPy run (the random walks and
-the gossip draw from the same counter-based stream in both engines)."""
+the gossip draw from the same counter-based stream in both engines; the
+compiled engine plans the gossip's neighbour search and checks it never
+overflowed, so the compiled run is exact)."""
 
 import json
 
@@ -8,7 +10,6 @@ import numpy as np
 import pytest
 
 from avblocks.cli import main
-from avblocks.utility.spatial import CellList, cell_index
 
 jax = pytest.importorskip("jax")
 
@@ -34,25 +35,12 @@ def _same_numbers(a, b):
             assert w == pytest.approx(v, rel=1e-4), k
 
 
-def _cells_never_overflowed(out, pose_name, capacity):
-    """The NumPy run's logged poses never put more bees in one search bucket
-    than the compiled run's capacity (the compiled run was exact)."""
-    import xarray as xr
-    ds = xr.open_dataset(out / "results.nc")
-    pose = np.asarray(ds[pose_name])
-    cells = CellList(1.0)
-    fullest = max(int(cell_index(cells, p[:, :2], np)[3]) for p in pose)
-    assert fullest <= capacity
-    return fullest
-
-
 def test_nest_compiles_and_matches_numpy(tmp_path):
     sets = ["agents=120", "p_loss=0.2"]
     ref, out = _summary(tmp_path, "nest", "numpy", sets, 30.0)
     got, _ = _summary(tmp_path, "nest", "jax", sets, 30.0)
     _same_numbers(ref, got)
     assert ref["numbers"]["informed_at_end"] > ref["numbers"]["scouts"]   # it spread
-    _cells_never_overflowed(out, "bees.pose", 24)
 
 
 def test_honeybee_compiles_and_matches_numpy(tmp_path):
@@ -63,7 +51,6 @@ def test_honeybee_compiles_and_matches_numpy(tmp_path):
     _same_numbers(ref, got)
     nums = ref["numbers"]
     assert None not in (nums["detected_s"], nums["returned_s"], nums["all_informed_s"])
-    _cells_never_overflowed(out, "bees.pose", 24)
 
 
 @pytest.mark.slow

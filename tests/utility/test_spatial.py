@@ -120,8 +120,8 @@ def test_jit_matches_brute_force():
             plan = sp.plan_cells(p, r, box=box)
             h = rng.uniform(-np.pi, np.pi, len(p))
             fov = float(rng.uniform(0.5, 6))
-            f = jax.jit(lambda q, h: sp.nearest(plan, q, r, k, xp=jnp, heading=h,
-                                                fov=fov)[:2])
+            f = jax.jit(lambda q, h, plan=plan, r=r, k=k, fov=fov:
+                        sp.nearest(plan, q, r, k, xp=jnp, heading=h, fov=fov)[:2])
             i, d = f(jnp.asarray(p), jnp.asarray(h))
             bi, bd = brute(p, r, k, box, fov, h)
             np.testing.assert_array_equal(np.asarray(i), bi)

@@ -40,7 +40,7 @@ import numpy as np
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import finite_array, positive_scalar
-from ._graph import NeighborSource, gather
+from ._graph import NeighborSource
 
 
 def sigma_norm(z, eps, xp=np):

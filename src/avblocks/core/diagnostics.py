@@ -81,7 +81,8 @@ def report(owner, need, plan):
     inf = float("inf")
     cap = inf if (plan.capacity is None or plan.brute) else float(plan.capacity)
     hits = inf if plan.hits is None else float(plan.hits)
-    limit = jnp.asarray([cap, hits, plan.reach * (1 + 1e-12), 1.0], dtype=vec.dtype)
+    # a radius rounded to float32 (relative 6e-8) is not an overflow
+    limit = jnp.asarray([cap, hits, plan.reach * (1 + 1e-6), 1.0], dtype=vec.dtype)
     over = jnp.any(vec > limit)
     rec = functools.partial(_record, (name, num))
     jax.lax.cond(over, lambda v: jax.debug.callback(rec, v), lambda v: None, vec)

@@ -81,7 +81,8 @@ def engine(name):
 
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
-            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None):
+            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None,
+            on_overflow="replan"):
     """Compile ``diagram`` once for runs of ``t_final`` with the compiling
     engine named by ``backend`` and return its :class:`Runner` (arguments:
     :func:`avblocks.core.compiled.compile`, the JAX engine's)."""
@@ -94,7 +95,8 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                                  found=backend)
         fn = _loaded[key] = _load(COMPILERS[backend])
     return fn(diagram, t_final, dt, solver, log=log, log_every=log_every, t0=t0, seed=seed,
-              backend=backend, dtype=dtype, check_finite=check_finite, devices=devices)
+              backend=backend, dtype=dtype, check_finite=check_finite, devices=devices,
+              on_overflow=on_overflow)
 
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,

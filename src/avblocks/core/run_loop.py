@@ -23,8 +23,8 @@ from .runguard import (
     _log_every_that_fits,
     _param_binding,
     _progress_wanted,
-    progress_bar,
     default_log,
+    progress_bar,
     whole_steps,
 )
 from .simulator import Simulator

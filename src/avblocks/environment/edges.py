@@ -498,7 +498,7 @@ class EdgeGrid:
     def exceeded(self, need):
         """A sentence when a query asked for more than ``reach`` (else None)."""
         r = float(np.max(np.asarray(need.reach)))
-        if r > self.reach * (1 + 1e-12) + 1e-12:
+        if r > self.reach * (1 + 1e-6) + 1e-12:      # float32 rounding is no overflow
             return (f"an obstacle query asked for radius {r:g}, the edge grid was built "
                     f"for {self.reach:g}")
         return None

@@ -77,10 +77,11 @@ def scout_poses(scouts, radius, seed):
 def make_diagram(agents=500, scouts=12, source=(-55.0, 18.0), sensing_radius=3.0,
                  entry_radius=1.0, comm_range=1.0, density=0.5, speed=(0.3, 0.6),
                  scout_speed=(1.0, 1.5), mean_interval=2.0, p_loss=0.0, seed=1,
-                 t_final=250.0, dt=0.1, log_every=5, comm_capacity=24):
+                 t_final=250.0, dt=0.1, log_every=5, comm_capacity=None):
     """The honeybee diagram and its simulation settings (see the module
-    docstring). ``comm_capacity``: most bees per cell of the gossip's
-    neighbour search in a compiled run (the NumPy engine sizes itself)."""
+    docstring). ``comm_capacity``: candidates per bee of the gossip's
+    neighbour search in a compiled run (None: planned by the compiled
+    engine; the NumPy engine sizes itself)."""
     n, m = int(agents), int(scouts)
     radius = hexagon_radius(n, density)
     poly = hexagon(radius)
@@ -130,7 +131,8 @@ def make_diagram(agents=500, scouts=12, source=(-55.0, 18.0), sensing_radius=3.0
                            outputs={"cmd": (m + n, 2), "flag": Port("flag", (m + n,), "bool")}),
                   name="choose")
     gossip = d.add(Gossip(m + n, radius=float(comm_range), p_loss=float(p_loss),
-                          capacity=int(comm_capacity)), name="gossip")
+                          capacity=_capacity(comm_capacity)),
+                   name="gossip")
     d.connect(bees.pose, sp.u)
     d.connect(bees.pose, npose.u)
     for blk in (search, home, inside, detect):
@@ -243,3 +245,8 @@ def figures(res, out, params):
     b.set_title(f"the alarm in a nest of {n}")
     b.grid(True, alpha=0.3)
     return [save_figure(fig, f"{out}/honeybee.png")]
+
+
+def _capacity(value):
+    """``comm_capacity``: None (the compiled engine plans the search) or an int."""
+    return None if value is None else int(value)

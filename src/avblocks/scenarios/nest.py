@@ -84,11 +84,13 @@ def nest_poses(agents, radius, scouts, seed, margin=0.3):
 
 def make_diagram(agents=500, scouts=5, comm_range=1.0, density=0.5, speed=(0.3, 0.6),
                  mean_interval=2.0, p_loss=0.0, seed=1, t_final=100.0, dt=0.05,
-                 log_every=1, comm_capacity=24):
+                 log_every=1, comm_capacity=None):
     """The nest diagram and its simulation settings (see the module docstring).
 
-    ``comm_capacity``: most bees per cell of the gossip's neighbour search in
-    a compiled run (``--backend jax``); the NumPy engine sizes itself.
+    ``comm_capacity``: candidates per bee of the gossip's neighbour search in
+    a compiled run (``--backend jax``); None (default): the compiled engine
+    plans it from the first positions and re-plans on overflow; the NumPy
+    engine sizes itself.
     """
     n = int(agents)
     radius = hexagon_radius(n, density)
@@ -102,7 +104,8 @@ def make_diagram(agents=500, scouts=5, comm_range=1.0, density=0.5, speed=(0.3, 
     seeds[:min(int(scouts), n)] = True
     flag = d.add(Constant(seeds), name="scouts")
     gossip = d.add(Gossip(n, radius=float(comm_range), p_loss=float(p_loss),
-                          capacity=int(comm_capacity)), name="gossip")
+                          capacity=_capacity(comm_capacity)),
+                   name="gossip")
     d.connect(bees.pose, walk.pose)
     d.connect(walk.cmd, bees.cmd)
     d.connect(bees.pose, gossip.pose)
@@ -168,3 +171,8 @@ GENERATORS = {
     "nest_hexagon": _nest_hexagon,
     "nest_poses": _nest_poses,
 }
+
+
+def _capacity(value):
+    """``comm_capacity``: None (the compiled engine plans the search) or an int."""
+    return None if value is None else int(value)

@@ -86,6 +86,7 @@ import numpy as np
 
 from ..core.errors import ParameterError
 
+
 class Need(NamedTuple):
     """What a search needed: compare with the :class:`CellList`'s plan.
 
@@ -193,7 +194,7 @@ class CellList:
         if self.hits is not None and hits > self.hits:
             msgs.append(f"hits: a point had {hits} others within range, "
                         f"room for {self.hits}")
-        if reach > self.reach * (1 + 1e-12):
+        if reach > self.reach * (1 + 1e-6):        # float32 rounding of a radius is no overflow
             msgs.append(f"a search asked for radius {reach:g}, the cells were planned "
                         f"for {self.reach:g}")
         span = float(np.max(np.asarray(getattr(need, "span", 0.0))))
@@ -203,7 +204,7 @@ class CellList:
                         "box=)")
         return "; ".join(msgs) or None
 
-    def grown(self, need, headroom=1.5) -> "CellList":
+    def grown(self, need, headroom=1.5) -> CellList:
         """This plan with room for ``need`` (times ``headroom``)."""
         cap = int(np.max(np.asarray(need.capacity)))
         hits = int(np.max(np.asarray(need.hits)))
@@ -928,12 +929,16 @@ class NeighborSearch:
                                 hits=self.hits)
         return self.cells
 
-    def _cells(self, xp, radius):
+    def _cells(self, xp, radius, npoints=None):
         if xp is np:
             r = float(np.max(radius)) if radius is not None else self.reach
             reach = self.reach if r <= self.reach else r
             return CellList(reach, None, self.table, self.box, self.dim)
         if self.cells is None:
+            if not math.isfinite(self.reach) and npoints is not None:
+                # all pairs: the plan follows from the (static) point count
+                return CellList(self.reach, 1, self.table, self.box, self.dim,
+                                max(1, int(npoints)))
             raise ParameterError(
                 "this neighbour search has no static plan: the compiled engine plans "
                 "it from the initial positions, or give capacity=", param="capacity")
@@ -945,14 +950,14 @@ class NeighborSearch:
             diagnostics.report(self, need, cells)
 
     def candidates(self, points, queries=None, xp=np):
-        cells = self._cells(xp, None)
+        cells = self._cells(xp, None, points.shape[0])
         cand, need = candidates(cells, points[:, : self.dim],
                                 None if queries is None else queries[:, : self.dim], xp)
         self._report(need, cells, xp)
         return cand
 
     def within(self, points, radius, queries=None, xp=np, **kw):
-        cells = self._cells(xp, radius if xp is np else None)
+        cells = self._cells(xp, radius if xp is np else None, points.shape[0])
         idx, dist, need = within(cells, points[:, : self.dim], radius,
                                  None if queries is None else queries[:, : self.dim],
                                  xp, **kw)
@@ -967,7 +972,7 @@ class NeighborSearch:
             # (benchmarks/neighbors.py); same neighbours, same order
             return kd_nearest(np.asarray(points)[:, : self.dim], float(radius), k,
                               box=self.box)
-        cells = self._cells(xp, radius if xp is np else None)
+        cells = self._cells(xp, radius if xp is np else None, points.shape[0])
         idx, dist, need = nearest(cells, points[:, : self.dim], radius, k,
                                   None if queries is None else queries[:, : self.dim],
                                   xp, **kw)

@@ -10,7 +10,7 @@ import sys as _sys
 from ..core import plotting as _plotting
 from .animation import Animation, animate, find_pose, plot_frame, save_movie
 from .animation_block import Animation2D
-from .diagram import diagram_svg, draw_diagram, to_dot
+from .diagram import diagram_svg, draw_diagram, to_dot  # noqa: F401 (diagram_svg: backend)
 from .movie import MovieWriter, read_video, write_movie
 from .scene import Group, Scene2D, obstacle_paths
 from .scope import Scope, plot_signals, plot_trajectories

@@ -7,11 +7,13 @@ engine (:func:`avblocks.compile`):
 1. **plans** every search a block owns (``block.searches()``, or each
    attribute that is a ``NeighborSearch``; see
    :func:`avblocks.core.diagnostics.searches_of`) from the block's input
-   values at ``t0``, computed by the NumPy engine (one initial evaluation,
-   no step), unless the user fixed ``capacity=``. The plan is part of the
-   block's structure, so it is part of the compile-cache key. Plans only
-   grow over a block's life (a new plan keeps the larger of the old and
-   the new sizes), so a plan grown after an overflow is kept;
+   values at ``t0`` (or, when the search's ``points`` names a parameter,
+   such as fixed targets, from that parameter's value), computed by the
+   NumPy engine (one initial evaluation, no step), unless the user fixed
+   ``capacity=``. The plan is part of the block's structure, so it is part
+   of the compile-cache key. Plans only grow over a block's life (a new
+   plan keeps the larger of the old and the new sizes), so a plan grown
+   after an overflow is kept;
 2. during the run, each search call tests ``need > plan`` and records an
    excess (:mod:`avblocks.core.diagnostics`; nothing is called back while
    the plan suffices);
@@ -77,12 +79,18 @@ def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
     sim.init()
     for i, s in todo:
         u = sim.eng.gather(i, sim.Y)
-        if s.points not in u:
-            raise ParameterError("a neighbour search names an input the block does not "
-                                 "have", block=cd.names[i], param="points",
-                                 expected=sorted(u), found=s.points)
+        params = getattr(cd.blocks[i], "_params", {})
+        if s.points in u:                       # an input: its value at t0
+            pts = u[s.points]
+        elif s.points in params:                # a parameter (e.g. fixed targets)
+            pts = cd.blocks[i].get_parameter(s.points)
+        else:
+            raise ParameterError("a neighbour search names neither an input nor a "
+                                 "parameter of its block", block=cd.names[i],
+                                 param="points", expected=sorted(u) + sorted(params),
+                                 found=s.points)
         old = s.cells
-        s.plan(np.asarray(u[s.points]))
+        s.plan(np.asarray(pts))
         s.cells = _merge(old, s.cells)
     return len(todo)
 
@@ -112,7 +120,7 @@ def settle(runner, over, rerun):
     names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
     mode = getattr(runner, "on_overflow", "replan")
     bad_reach = [n for n, s, need, _ in over
-                 if float(need.reach) > s.cells.reach * (1 + 1e-12) or need.span > 1.0]
+                 if float(need.reach) > s.cells.reach * (1 + 1e-6) or need.span > 1.0]
     if mode == "raise" or bad_reach or getattr(runner, "_replanned", False):
         why = "a compiled neighbour search overflowed its static plan"
         if getattr(runner, "_replanned", False):
@@ -134,10 +142,10 @@ def settle(runner, over, rerun):
 
 def rebuild(runner):
     """Give ``runner`` the program of its diagram's current structure."""
+    from . import _jax
     from .program import Program, get_program
     from .runner import _solver_key
     from .structure import diagram_key
-    from . import _jax
     jax = _jax.jax()
     p, cd = runner.program, runner.compiled
     key = (diagram_key(cd), p.nsteps, p.log_every, tuple(runner.names),

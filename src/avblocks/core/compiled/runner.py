@@ -8,12 +8,12 @@ import time
 
 import numpy as np
 
+from .. import diagnostics as _diagnostics
 from .. import rng as _rng
 from ..diagram import CompiledDiagram, Diagram, PortRef
 from ..errors import CompileError, ParameterError, SimulationError
 from ..results import Results
 from ..solvers import make_solver
-from .. import diagnostics as _diagnostics
 from . import _jax
 from . import devices as _devices
 from . import plans as _plans

@@ -132,25 +132,9 @@ def settle(runner, over, rerun):
         s.cells = s.cells.grown(need, s.headroom)
     warnings.warn(f"compiled run re-planned after a neighbour search overflow: {names}; "
                   "compiling again and repeating the run", RuntimeWarning, stacklevel=3)
-    rebuild(runner)
+    runner._rebuild_program()
     runner._replanned = True
     try:
         return rerun()
     finally:
         runner._replanned = False
-
-
-def rebuild(runner):
-    """Give ``runner`` the program of its diagram's current structure."""
-    from . import _jax
-    from .program import Program, get_program
-    from .runner import _solver_key
-    from .structure import diagram_key
-    jax = _jax.jax()
-    p, cd = runner.program, runner.compiled
-    key = (diagram_key(cd), p.nsteps, p.log_every, tuple(runner.names),
-           _solver_key(p.solver), p.dt, p.t0, p.x64, str(jax.default_backend()))
-    runner.program = get_program(key, lambda: Program(
-        cd, dt=p.dt, t0=p.t0, nsteps=p.nsteps, log_every=p.log_every,
-        log_idx=p.log_idx, solver=p.solver, x64=p.x64))
-    runner._run_exe = None

@@ -331,6 +331,18 @@ class Runner:
     #: (:mod:`avblocks.core.compiled.plans`): "replan" or "raise"
     on_overflow = "replan"
 
+    def _rebuild_program(self):
+        """Take the program of the diagram's current structure (after its
+        searches were re-planned: see :mod:`avblocks.core.compiled.plans`)."""
+        jax = _jax.jax()
+        p, cd = self.program, self.compiled
+        key = (diagram_key(cd), p.nsteps, p.log_every, tuple(self.names),
+               _solver_key(p.solver), p.dt, p.t0, p.x64, str(jax.default_backend()))
+        self.program = get_program(key, lambda: Program(
+            cd, dt=p.dt, t0=p.t0, nsteps=p.nsteps, log_every=p.log_every,
+            log_idx=p.log_idx, solver=p.solver, x64=p.x64))
+        self._run_exe = None
+
     def __call__(self, params=None, x0=None, seed=None):
         jax = _jax.jax()
         _diagnostics.clear()

@@ -11,8 +11,9 @@ ahead-of-time compiled ``jit(lax.scan)``; compiled programs are cached by the
 diagram's structure. See docs/compiled.md.
 """
 
+from .build import compile, grad, simulate_compiled
 from .program import cache_info, clear_cache, enable_persistent_cache
-from .runner import Runner, compile, grad, simulate_compiled
+from .runner import Runner
 
 __all__ = ["compile", "grad", "Runner", "simulate_compiled", "cache_info", "clear_cache",
            "enable_persistent_cache"]

@@ -8,7 +8,7 @@ the engine's ahead-of-time entry (:func:`avblocks.compile` lands there).
 
 from __future__ import annotations
 
-from .runner import compile, simulate_compiled  # noqa: F401  (compile: the contract's)
+from .build import compile, simulate_compiled  # noqa: F401  (compile: the contract's)
 
 
 def run(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None, seed=0,

@@ -1,5 +1,7 @@
-"""User-facing compiled runs: :func:`compile` -> :class:`Runner`, and the
-``backend="jax"`` path of :func:`avblocks.simulate`, and :func:`grad`."""
+"""The :class:`Runner`: a compiled program of one diagram structure, run
+with new parameters, initial states and seeds, as ensembles, or
+differentiated. :mod:`avblocks.core.compiled.build` makes runners
+(:func:`~avblocks.core.compiled.build.compile`)."""
 
 from __future__ import annotations
 
@@ -10,174 +12,17 @@ import numpy as np
 
 from .. import diagnostics as _diagnostics
 from .. import rng as _rng
-from ..diagram import CompiledDiagram, Diagram, PortRef
-from ..errors import CompileError, ParameterError, SimulationError
+from ..errors import ParameterError, SimulationError
 from ..results import Results
-from ..solvers import make_solver
 from . import _jax
 from . import devices as _devices
 from . import plans as _plans
 from .program import Program, get_program
 from .structure import diagram_key, fingerprint
 
-_DTYPES = {"float64": True, "float32": False}
-_UNTRACEABLE_HINT = ("run this diagram with backend='numpy' (simulate(..., "
-                     "backend='numpy')); the compiled backend needs blocks whose math "
-                     "is pure `xp` code")
-
-
-def _log_spec(compiled, log):
-    """(indices, names, port specs, aliases) of what to log (as the NumPy path)."""
-    from ..runguard import default_log
-    if log is None:
-        refs = default_log(compiled)
-    elif isinstance(log, (str, PortRef)):
-        refs = [log]
-    else:
-        refs = list(log)
-    idx, names, specs, aliases = [], [], [], {}
-    for r in refs:
-        i, o = compiled.resolve(r)
-        name = f"{compiled.names[i]}.{o}"
-        if name in names:
-            continue
-        idx.append((i, o))
-        names.append(name)
-        specs.append(compiled.blocks[i]._outputs[o])
-        alias = r.path if isinstance(r, PortRef) else str(r)
-        if alias != name:
-            aliases[alias] = name
-    return idx, names, specs, aliases
-
-
-def _check_traceable(compiled):
-    bad = [(n, type(b).__name__, "has side effects (I/O, drawing, hardware)")
-           for n, b in zip(compiled.names, compiled.blocks) if b.side_effects]
-    bad += [(n, type(b).__name__, "runs NumPy-only code (declares traceable = False)")
-            for n, b in zip(compiled.names, compiled.blocks)
-            if not getattr(b, "traceable", True) and not b.side_effects]
-    if bad:
-        n, cls, why = bad[0]
-        others = "" if len(bad) == 1 else f"; also: {', '.join(b[0] for b in bad[1:])}"
-        raise CompileError(f"{cls} cannot be compiled: it {why}{others}", block=n,
-                           hint=_UNTRACEABLE_HINT)
-
 
 def _solver_key(solver):
     return (type(solver).__module__, type(solver).__qualname__, fingerprint(vars(solver)))
-
-
-def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
-            seed=0, backend="jax", dtype="float64", check_finite=True, devices=None,
-            on_overflow="replan"):
-    """Compile ``diagram`` once for runs of ``t_final`` (JAX: ``jit`` of a
-    nested ``lax.scan``) and return a :class:`Runner`.
-
-    Parameters
-    ----------
-    diagram : Diagram or CompiledDiagram
-    t_final, dt, solver, t0 : as :func:`avblocks.simulate` (fixed-step
-        solvers only: ``"rk4"``, ``"euler"`` or a fixed-step Solver).
-    log : list of ports or ``"block.port"`` strings, optional
-        What the runs record (default: every ``pose``/``position`` output).
-    log_every : int
-        Record every ``log_every``-th major step (the only copy of the log).
-    seed : int
-        Default seed of the runs.
-    backend : ``"jax"``
-    dtype : ``"float64"`` (default) or ``"float32"``
-        float64 matches the NumPy engine to round-off (1e-9 on the test
-        diagrams). float32 halves memory and is faster on GPUs, but drifts
-        from the float64 run: measured over 30 s (3000 steps) of 1000
-        unicycles in a 100 m square, up to 1.1 cm (median 1 mm) under the
-        go-to-goal law and 2 mm on open-loop circles (docs/compiled.md).
-        Random blocks draw from ``jax.random`` in either precision.
-    check_finite : bool
-        After a run, raise :class:`SimulationError` (with the results) if a
-        logged signal or the final state is NaN/inf.
-    on_overflow : ``"replan"`` (default) or ``"raise"``
-        What a run does when a block's neighbour search needed more than the
-        static plan made from the initial inputs: warn, re-plan, compile
-        again once and repeat the run; or raise :class:`SimulationError`
-        naming the block and the sizes (see
-        :mod:`avblocks.core.compiled.plans`).
-    devices : None, int or list of JAX devices
-        Where the runs execute (default: every local device of JAX's
-        default backend). With several, a run of at least
-        ``devices.MIN_AGENTS_TO_SPLIT`` agents is split along its agent
-        axis and an ensemble along its run axis (see
-        :mod:`avblocks.core.compiled.devices`); ``devices=1`` keeps
-        everything on one device.
-
-    The compiled program is shared by every diagram with the same structure
-    (block types, wiring, shapes, sample times, non-parameter attributes),
-    step count and log: numeric parameters, initial states and seeds are its
-    arguments, so new values never recompile. A block that cannot be traced
-    raises :class:`CompileError` naming it.
-
-    >>> import numpy as np, avblocks as av
-    >>> d = av.Diagram()
-    >>> c = d.add(av.blocks.Constant([[1.0]]), name="c")
-    >>> g = d.add(av.blocks.Gain(2.0), name="g")
-    >>> i = d.add(av.blocks.Integrator([[0.0]]), name="i")
-    >>> _ = d.connect(c.y, g.u), d.connect(g.y, i.u)
-    >>> run = av.compile(d, 1.0, dt=0.1, log=[i.y])
-    >>> float(run(params={"g.k": 3.0})[i.y][-1, 0, 0])
-    3.0
-    """
-    if backend not in ("jax",):
-        raise ParameterError("unknown compiled backend", param="backend",
-                             expected="'jax'", found=backend)
-    if dtype not in _DTYPES:
-        raise ParameterError("unknown dtype", param="dtype",
-                             expected="'float64' or 'float32'", found=dtype)
-    jax = _jax.jax()
-    cd = diagram.build() if isinstance(diagram, Diagram) else diagram
-    if not isinstance(cd, CompiledDiagram):
-        raise ParameterError("compile needs a Diagram", param="diagram",
-                             expected="Diagram", found=type(diagram).__name__)
-    try:
-        dt = float(dt)
-    except (TypeError, ValueError):
-        dt = float("nan")
-    if not (math.isfinite(dt) and dt > 0):
-        raise ParameterError("major step must be a positive number", param="dt",
-                             expected="> 0", found=dt)
-    try:
-        span = float(t_final) - float(t0)
-    except (TypeError, ValueError):
-        span = float("nan")
-    if not (math.isfinite(span) and span >= 0):
-        raise ParameterError("t_final must be a number >= t0", param="t_final",
-                             expected=f">= {t0}", found=t_final)
-    nsteps = int(round(span / dt))
-    try:
-        log_every = int(log_every)
-    except (TypeError, ValueError):
-        log_every = 0
-    if log_every < 1:
-        raise ParameterError("log_every must be >= 1", param="log_every",
-                             expected=">= 1", found=log_every)
-    solv = make_solver(solver)
-    if not solv.fixed_step:
-        raise CompileError("the compiled backend runs fixed-step solvers only",
-                           param="solver", expected="'rk4' or 'euler'", found=solver,
-                           hint="use backend='numpy' for solve_ivp methods")
-    _check_traceable(cd)
-    _plans.check_mode(on_overflow)
-    _plans.plan_searches(cd, dt=dt, t0=t0, seed=seed)
-    idx, names, specs, aliases = _log_spec(cd, log)
-    x64 = _DTYPES[dtype]
-    key = (diagram_key(cd), nsteps, log_every, tuple(names), _solver_key(solv), dt,
-           float(t0), x64, str(jax.default_backend()))
-    prog = get_program(key, lambda: Program(cd, dt=dt, t0=t0, nsteps=nsteps,
-                                            log_every=log_every, log_idx=idx,
-                                            solver=solv, x64=x64))
-    runner = Runner(cd, prog, names=names, specs=specs, aliases=aliases, seed=seed,
-                    dtype=dtype, check_finite=check_finite, solver_name=solv.name,
-                    devices=_devices.resolve(devices))
-    runner.on_overflow = on_overflow
-    return runner
 
 
 class Runner:
@@ -643,53 +488,3 @@ def _check_finite(res):
                           time=float(res.t[first]), results=res,
                           hint="the NumPy backend stops at the first bad step and "
                                "names the block that produced it")
-
-
-def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
-                      seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
-                      max_log_bytes=2 * 1024**3, params=None, x0=None, backend="jax",
-                      dtype="float64"):
-    """:func:`avblocks.simulate` with ``backend="jax"`` (same arguments and
-    Results; plus ``dtype``). ``realtime`` pacing needs the NumPy backend;
-    ``progress`` is ignored (the run is one call)."""
-    if realtime is not None:
-        raise ParameterError("real-time pacing needs the NumPy backend", param="realtime",
-                             hint="use backend='numpy' to pace a run to the clock")
-    runner = compile(diagram, t_final, dt, solver, log=log, log_every=log_every, t0=t0,
-                     seed=seed, backend=backend, dtype=dtype, check_finite=check_finite)
-    p = runner.program
-    item = 8 if p.x64 else 4
-    need = sum(p.nlog * int(np.prod(s.shape)) * item for s in runner.specs)
-    if need > max_log_bytes:
-        raise ParameterError(f"the log would take {need / 1e9:.2f} GB", param="log",
-                             expected=f"<= {max_log_bytes / 1e9:.2f} GB",
-                             found=f"{len(runner.specs)} signals x {p.nlog} samples",
-                             hint="log fewer signals or decimate with log_every")
-    return runner(params=params, x0=x0, seed=seed)
-
-
-def grad(cost, diagram, wrt, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
-         params=None, x0=None, seed=0, t0=0.0, dtype="float64", checkpoint=True,
-         return_value=False):
-    """Gradients of ``cost(results)`` by reverse mode through a whole run.
-
-    ``wrt`` names numeric parameters (``"drive.gain"``) and initial states
-    (``"fleet.pose@x0"``); returns ``{name: gradient array}`` (and the cost
-    with ``return_value=True``). ``cost`` receives :class:`Results` holding
-    JAX arrays: write it with ``jax.numpy``. Other arguments as
-    :func:`compile` and :meth:`Runner.value_and_grad`.
-
-    >>> import jax.numpy as jnp, avblocks as av
-    >>> d = av.Diagram()
-    >>> c = d.add(av.blocks.Constant([[1.0]]), name="c")
-    >>> g = d.add(av.blocks.Gain(2.0), name="g")
-    >>> i = d.add(av.blocks.Integrator([[0.0]]), name="i")
-    >>> _ = d.connect(c.y, g.u), d.connect(g.y, i.u)
-    >>> gr = av.grad(lambda r: r[i.y][-1, 0, 0] ** 2, d, ["g.k"], 1.0, dt=0.1, log=[i.y])
-    >>> round(float(gr["g.k"]), 9)      # d/dk (k t)^2 at t = 1, k = 2
-    4.0
-    """
-    runner = compile(diagram, t_final, dt, solver, log=log, log_every=log_every, t0=t0,
-                     seed=seed, dtype=dtype)
-    val, g = runner.value_and_grad(cost, wrt, params, x0, seed, checkpoint=checkpoint)
-    return (val, g) if return_value else g

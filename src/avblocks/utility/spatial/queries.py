@@ -1,0 +1,429 @@
+"""The queries of a cell-list search: candidates, all within a radius, the
+k nearest (exact, ties by index), and planning a search from sample points."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ...core.errors import ParameterError
+from .cells import CellList, Need
+from .layout import _bounds, _gather_slots, _int_type, _query_cells, _windows, layout
+
+
+def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=None,
+               min_capacity=8, hits=None) -> CellList:
+    """Plan a :class:`CellList` from sample positions (build time, NumPy).
+
+    ``capacity`` defaults to ``max(min_capacity, ceil(headroom * most))``
+    where ``most`` is the largest candidate count of a point at ``points``;
+    ``hits`` likewise from the most points within ``reach`` of one point.
+    """
+    pts = np.asarray(points, dtype=float)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3):
+        raise ParameterError("points must be (N, 2) or (N, 3)", param="points",
+                             found=pts.shape)
+    base = CellList(reach, None, table, box, pts.shape[1])
+    n = pts.shape[0]
+    if base.brute:
+        return CellList(base.reach, 1, table, base.box, base.dim,
+                        max(1, n - 1) if hits is None else int(hits))
+    if capacity is None or hits is None:
+        _, _, need = within(base, pts, base.reach, None, np)
+        if capacity is None:
+            capacity = max(int(min_capacity),
+                           int(math.ceil(float(headroom) * int(need.capacity))))
+        if hits is None:
+            hits = max(int(min_capacity), int(math.ceil(float(headroom) * int(need.hits))))
+    return CellList(base.reach, int(capacity), table, base.box, base.dim, int(hits))
+
+
+# ---------------------------------------------------------------- internals
+
+
+CHUNK = 4096
+
+
+class _Query(NamedTuple):
+    """Per-query data of a search, rows in processing order."""
+
+    q: tuple         # per axis: (Q,) query coordinates
+    me: object       # (Q,) point index of the query (self) or -1
+    a: tuple         # per key range: (Q,) first slot in the sorted points
+    b: tuple         # per key range: (Q,) end slot
+    rows: object     # (Q,) query index of each processed row, or None (identity)
+    span: object = 0.0   # see Need.span
+
+
+def _rows(a, i, xp):
+    """``a[i]`` for a 2-D ``a``: under JAX one 1-D gather per column (XLA's
+    CPU gather of rows is an order of magnitude slower)."""
+    if xp is np:
+        return a[i]
+    return xp.stack([a[:, c][i] for c in range(a.shape[1])], axis=1)
+
+
+def _cols(a):
+    return tuple(a[:, c] for c in range(a.shape[1]))
+
+
+def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
+    """Sort the points by cell and find every query's slot ranges.
+
+    Returns ``(ps, order, query, cap)``: the coordinates (one (N,) array
+    per axis) of the points in sorted order, the sorting permutation, a
+    :class:`_Query` and the candidate width."""
+    n = points.shape[0]
+    it = _int_type(points, xp)
+    if cells.brute:
+        q = points if queries is None else queries
+        qn = q.shape[0]
+        me = xp.arange(qn, dtype=it) if (queries is None and exclude_self) else \
+            xp.full((qn,), -1, dtype=it)
+        if ids is not None:
+            me = xp.asarray(ids).astype(it)
+        z = xp.zeros((qn,), dtype=it)
+        order = xp.arange(n, dtype=it)
+        return _cols(points), order, _Query(_cols(q), me, (z,), (z + n,), None, 0.0), \
+            max(n, 1)
+    lay = layout(cells, points, xp)
+    ps = tuple(c[lay.order] for c in _cols(points))
+    if queries is None:            # process the points in cell order (locality)
+        q, qc, rows = ps, _rows(lay.coords, lay.order, xp), lay.order
+        me = rows.astype(it) if exclude_self else xp.full((n,), -1, dtype=it)
+    else:
+        q, qc, rows = _cols(queries), _query_cells(cells, lay, queries, xp), None
+        me = xp.full((queries.shape[0],), -1, dtype=it) if ids is None else \
+            xp.asarray(ids).astype(it)
+    bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp)
+    cap = cells.capacity
+    if cap is None:
+        if xp is not np:
+            raise ParameterError("a traced search needs a static capacity",
+                                 param="capacity", hint="plan it with plan_cells()")
+        cap = max(1, int(np.max(sum(b - a for a, b in bounds)))) if q[0].shape[0] else 1
+    return ps, lay.order, _Query(q, me, tuple(a for a, _ in bounds),
+                                 tuple(b for _, b in bounds), rows, lay.span), int(cap)
+
+
+def _rowmap(fn, arrays, xp, size=None):
+    """``fn`` over row chunks of ``arrays`` (all with Q leading rows),
+    outputs concatenated: a Python loop of a few chunks under NumPy,
+    ``lax.map`` when traced."""
+    size = CHUNK if size is None else size
+    qn = arrays[0].shape[0]
+    if qn <= size:
+        return fn(*arrays)
+    if xp is np:
+        outs = [fn(*[x[i:i + size] for x in arrays]) for i in range(0, qn, size)]
+        return tuple(np.concatenate(parts, axis=0) for parts in zip(*outs))
+    import jax
+    m = -(-qn // size)
+    pad = m * size - qn
+
+    def fold(x):
+        if pad:
+            x = xp.concatenate([x, xp.broadcast_to(x[-1:], (pad,) + x.shape[1:])], 0)
+        return x.reshape((m, size) + x.shape[1:])
+
+    outs = jax.lax.map(lambda xs: fn(*xs), [fold(x) for x in arrays])
+    return tuple(o.reshape((m * size,) + o.shape[2:])[:qn] for o in outs)
+
+
+def _chunk_fn(cells, ps, order, cap, radius, xp, *, fov=None):
+    """Row function: candidates, squared distances and validity of a chunk."""
+    dim = len(ps)
+
+    def hits(me, heading, *rest):
+        q, ab = rest[:dim], rest[dim:]
+        k = len(ab) // 2
+        bounds = list(zip(ab[:k], ab[k:]))
+        pos, ok, _ = _gather_slots(bounds, cap, xp)
+        d = []
+        for a in range(dim):
+            da = ps[a][pos] - q[a][:, None]
+            if cells.box is not None:
+                da = da - cells.box[a] * xp.round(da / cells.box[a])
+            d.append(da)
+        idx = order[pos]
+        d2 = d[0] * d[0]
+        for a in range(1, dim):
+            d2 = d2 + d[a] * d[a]
+        cnt = sum(b - a for a, b in bounds)
+        val = ok
+        if radius is not None:
+            r = xp.asarray(radius, dtype=d2.dtype)
+            val = ok & (d2 <= r * r) & (idx != me[:, None])
+            if fov is not None:
+                rel = xp.arctan2(d[1], d[0]) - heading[:, None]
+                rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
+                val = val & (rel <= 0.5 * fov + 1e-12)
+        return idx, ok, val, d2, cnt
+
+    return hits
+
+
+def _unsort(rows, arrays, xp):
+    """Put rows processed in ``rows`` order back into query order."""
+    if rows is None:
+        return arrays
+    n = rows.shape[0]
+    if xp is np:
+        inv = np.empty(n, dtype=rows.dtype)
+        inv[rows] = np.arange(n, dtype=rows.dtype)
+    else:
+        inv = xp.zeros(n, dtype=rows.dtype).at[rows].set(xp.arange(n, dtype=rows.dtype))
+    return [_rows(a, inv, xp) if a.ndim == 2 else a[inv] for a in arrays]
+
+
+def _args(query, heading, xp):
+    h = heading
+    if h is None:
+        h = xp.zeros(query.q[0].shape[0], dtype=query.q[0].dtype)
+    elif query.rows is not None:
+        h = h[query.rows]
+    return [query.me, h, *query.q, *query.a, *query.b]
+
+
+def _compact(ok, cols, width, xp):
+    """Move the valid entries of each row to its front: arrays (Q, width)
+    of each of ``cols`` (first fill value given with it), and the largest
+    count (the width needed)."""
+    it = np.int64 if xp is np else cols[0][0].dtype
+    cnt = xp.sum(ok, axis=1)
+    need = xp.max(cnt) if ok.shape[1] else xp.asarray(0)
+    if width is None:
+        width = max(1, int(need))
+    qn = ok.shape[0]
+    dest = xp.cumsum(ok, axis=1) - 1
+    outs = []
+    if xp is np:
+        r, c = np.nonzero(ok)
+        dcol = dest[r, c]
+        keep = dcol < width
+        r, c, dcol = r[keep], c[keep], dcol[keep]
+        for a, fill in cols:
+            o = np.full((qn, width), fill, dtype=a.dtype)
+            o[r, dcol] = a[r, c]
+            outs.append(o)
+        return outs, need
+    dest = xp.where(ok, dest, width)
+    rr = xp.broadcast_to(xp.arange(qn)[:, None], ok.shape)
+    for a, fill in cols:
+        o = xp.full((qn, width), fill, dtype=a.dtype)
+        outs.append(o.at[rr, dest].set(a, mode="drop"))
+    del it
+    return outs, need
+
+
+def _smallest(d2, idx, k, xp):
+    """The ``k`` smallest ``(d2, idx)`` pairs of each row, sorted: ``k``
+    passes of a row minimum (distance first, then the smaller index among
+    equal distances), each removing what it took. Exact; O(k M) per row.
+    ``idx`` entries must be unique per row where ``d2`` is finite."""
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    big = np.iinfo(np.int64).max if np.dtype(idx.dtype).itemsize == 8 else \
+        np.iinfo(np.int32).max
+    od, oi = [], []
+    for _ in range(kk):
+        m = xp.min(d2, axis=1)
+        j = xp.min(xp.where(d2 == m[:, None], idx, big), axis=1)
+        od.append(m)
+        oi.append(j)
+        d2 = xp.where(idx == j[:, None], xp.inf, d2)
+    if kk == 0:
+        return xp.zeros((qn, 0), dtype=d2.dtype), xp.zeros((qn, 0), dtype=idx.dtype)
+    return xp.stack(od, axis=1), xp.stack(oi, axis=1)
+
+
+def _smallest_keyed(d2, idx, k, n, xp):
+    """Traced, 64-bit: the ``k`` smallest ``(d2, idx)`` pairs by ``k + 1``
+    passes over one integer key per candidate, the bits of ``d2`` (a float
+    >= 0: its bits order as it does) with the low ``b`` bits replaced by
+    the index (``2^b >= n``). Returns ``(idx (Q, k), exact)``: the key
+    orders like ``(d2, idx)`` unless two of a row's ``k + 1`` smallest
+    distances agree in all but their low ``b`` bits (relative difference
+    below ``2^(b - 52)``); ``exact`` is False when some row has such a
+    pair (equal distances included), and the caller then takes the exact
+    passes of :func:`_smallest_exact`. The distances of the selected points
+    are recomputed by the caller (same arithmetic, same values)."""
+    import jax
+    b = max(1, int(n - 1).bit_length())
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    passes = min(kk + 1, w)
+    bits = jax.lax.bitcast_convert_type(d2, np.int64)
+    low = np.int64((1 << b) - 1)
+    key = (bits & ~low) | idx.astype(np.int64)
+    top = np.int64(np.iinfo(np.int64).max)
+    got = []
+    for _ in range(passes):
+        m = xp.min(key, axis=1)
+        got.append(m)
+        key = xp.where(key == m[:, None], top, key)
+    got = xp.stack(got, axis=1)
+    inf_bits = int(np.array(np.inf).view(np.int64)) & ~int(low)
+    trunc = got & ~low
+    finite = trunc < inf_bits
+    exact = ~xp.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]))
+    sel = xp.where(finite[:, :kk], (got[:, :kk] & low), -1)
+    return sel.astype(idx.dtype), exact
+
+
+def _smallest_np(d2, idx, k, n):
+    """NumPy: the ``k`` smallest ``(d2, idx)`` pairs (indices, distances)
+    by ``np.argpartition`` of the 64-bit keys of :func:`_smallest_keyed`, then
+    a sort of ``k + 1``; rows with near-equal distances take the exact
+    passes. ``-1`` / ``inf`` where fewer."""
+    qn, w = d2.shape
+    kk = min(int(k), w)
+    if kk == 0:
+        return np.zeros((qn, 0), np.int64), np.zeros((qn, 0))
+    b = max(1, int(n - 1).bit_length())
+    low = np.int64((1 << b) - 1)
+    key = (d2.view(np.int64) & ~low) | idx.astype(np.int64)
+    take = min(kk + 1, w)
+    if take < w:
+        cols = np.argpartition(key, take - 1, axis=1)[:, :take]
+    else:
+        cols = np.broadcast_to(np.arange(w), (qn, w))
+    kc = np.take_along_axis(key, cols, 1)
+    o = np.argsort(kc, axis=1)
+    cols = np.take_along_axis(cols, o, 1)
+    key = np.take_along_axis(kc, o, 1)
+    trunc = key & ~low
+    inf_bits = np.array(np.inf).view(np.int64) & ~low
+    finite = trunc < inf_bits
+    sel = np.where(finite[:, :kk], np.take_along_axis(idx, cols[:, :kk], 1), -1)
+    od = np.where(finite[:, :kk], np.take_along_axis(d2, cols[:, :kk], 1), np.inf)
+    bad = np.nonzero(np.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]), axis=1))[0]
+    if bad.size:
+        ed, ei = _smallest(d2[bad], idx[bad], kk, np)
+        sel[bad] = np.where(np.isfinite(ed), ei, -1)
+        od[bad] = ed
+    return sel, od
+
+
+def _pad_cols(a, k, fill, xp):
+    if a.shape[1] >= k:
+        return a[:, :k]
+    pad = xp.full((a.shape[0], k - a.shape[1]), fill, dtype=a.dtype)
+    return xp.concatenate([a, pad], axis=1)
+
+
+def candidates(cells, points, queries=None, xp=np):
+    """Candidate neighbours of each query point: ``(cand, need)``.
+
+    ``cand`` is (Q, M) int point indices, ``-1`` where empty, ``M =
+    capacity``; every point within ``cells.reach`` of a query point is in
+    its row when ``need.capacity <= capacity``. ``queries`` defaults to
+    ``points``.
+    """
+    ps, order, query, cap = _prepare(cells, points, queries, xp)
+    f = _chunk_fn(cells, ps, order, cap, None, xp)
+
+    def row(*args):
+        idx, ok, _, _, cnt = f(*args)
+        return xp.where(ok, idx, -1), cnt
+
+    cand, cnt = _rowmap(row, _args(query, None, xp), xp)
+    (cand,) = _unsort(query.rows, [cand], xp)
+    return cand, Need(xp.max(cnt), xp.asarray(0.0), 0, query.span)
+
+
+def displacement(cells, points, cand, queries=None, xp=np):
+    """``p_cand - q`` (Q, M, D) by the minimum image in a periodic box."""
+    q = points if queries is None else queries
+    d = points[xp.maximum(cand, 0)] - q[:, None, :]
+    if cells.box is not None:
+        box = xp.asarray(cells.box, dtype=d.dtype)
+        d = d - box * xp.round(d / box)
+    return d
+
+
+def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
+    """Every point within ``radius`` (inclusive) of each query point.
+
+    Returns ``(idx, dist, need)``: (Q, H) indices (``-1`` where none; in
+    no particular order) and their distances (``inf`` where none); ``H =
+    cells.hits`` (NumPy without a plan: the largest count found). With
+    ``queries`` None the query points are the points and ``exclude_self``
+    drops each point from its own row.
+    """
+    ps, order, query, cap = _prepare(cells, points, queries, xp,
+                                     exclude_self=exclude_self)
+    f = _chunk_fn(cells, ps, order, cap, radius, xp)
+
+    def row(*args):
+        idx, _, val, d2, cnt = f(*args)
+        return idx, val, d2, cnt, xp.sum(val, axis=1)
+
+    idx, val, d2, cnt, nh = _rowmap(row, _args(query, None, xp), xp)
+    (ci, cd), _ = _compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
+    dist = xp.sqrt(cd)
+    ci, dist = _unsort(query.rows, [ci, dist], xp)
+    return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh),
+                          query.span)
+
+
+def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
+            fov=None, exclude_self=True, ids=None):
+    """The ``k`` nearest points within ``radius`` of each query point.
+
+    Sorted by distance, ties by index. With ``heading`` (Q,) and ``fov``
+    (full angle), only points whose bearing from the query point relative
+    to its heading lies in ``[-fov/2, fov/2]`` count.
+
+    ``ids`` (Q,): the point index of each query point, left out of its own
+    row (for queries that are some of the points).
+
+    Returns ``(idx, dist, need)``: (Q, k) int (``-1`` padded) and float
+    (``inf`` padded).
+    """
+    ps, order, query, cap = _prepare(cells, points, queries, xp,
+                                     exclude_self=exclude_self, ids=ids)
+    f = _chunk_fn(cells, ps, order, cap, radius, xp, fov=fov)
+    k = int(k)
+
+    n = points.shape[0]
+    keyed = (xp is not np and np.dtype(points.dtype).itemsize == 8 and k > 0
+             and n < 2 ** 31 and not cells.brute)
+    pcols = _cols(points)
+
+    def exact(d2, idx):
+        od, oi = _smallest(d2, idx, k, xp)
+        fin = xp.isfinite(od)
+        return xp.where(fin, oi, -1), od
+
+    def row(*args):
+        idx, _, val, d2, cnt = f(*args)
+        d2 = xp.where(val, d2, xp.inf)
+        if xp is np and k > 0 and not cells.brute:
+            oi, od = _smallest_np(d2, idx, k, n)
+        elif keyed:
+            import jax
+            sel, ok = _smallest_keyed(d2, idx, k, n, xp)
+            got = sel >= 0
+            safe = xp.where(got, sel, 0)
+            me = args[2:2 + len(pcols)]          # the query coordinates of the chunk
+            dd = 0.0
+            for a, c in enumerate(pcols):
+                da = c[safe] - me[a][:, None]
+                if cells.box is not None:
+                    da = da - cells.box[a] * xp.round(da / cells.box[a])
+                dd = dd + da * da
+            fast = (sel, xp.where(got, dd, xp.inf))
+            oi, od = jax.lax.cond(ok, lambda: fast, lambda: exact(d2, idx))
+        else:
+            oi, od = exact(d2, idx)
+        fin = oi >= 0
+        od = xp.where(fin, xp.sqrt(xp.where(fin, od, 1.0)), xp.inf)
+        return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
+
+    oi, od, cnt = _rowmap(row, _args(query, heading, xp), xp)
+    oi, od = _unsort(query.rows, [oi, od], xp)
+    # nearest keeps no row of hits, so hits are no limit of it (need 0)
+    return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0, query.span)

@@ -20,6 +20,8 @@ PAGES = [
     ("core", "avblocks.core", "Ports, blocks, diagrams, the NumPy engine, solvers, results."),
     ("blocks", "avblocks.blocks", "Sources, math, continuous and discrete blocks, routing, Function."),
     ("utility", "avblocks.utility", "Angles, SE(2)/SE(3) helpers, quaternions, initial poses."),
+    ("spatial", "avblocks.utility.spatial",
+     "The traceable cell-list neighbour search (O(N), static shapes, overflow checks)."),
     ("vehicles", "avblocks.vehicles", "Vehicle models: one block, N vehicles."),
     ("controllers", "avblocks.controllers", "Controllers and their pure laws."),
     ("environment", "avblocks.environment",

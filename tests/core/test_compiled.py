@@ -474,3 +474,15 @@ def test_cached_program_never_traces_blocks_changed_since():
     ens = r2.ensemble(runs=2)                   # a new trace: must use d2's blocks
     ref = av.simulate(goto(seed=7)[0], **kw)
     assert np.max(np.abs(ens["fleet.pose"][1] - ref["fleet.pose"])) < 1e-9
+
+
+def test_compile_refuses_a_run_that_is_not_whole_steps():
+    """compile() makes the same checks as every engine: a t_final that is
+    not t0 + k dt is refused with the two nearest valid end times (it was
+    rounded silently before)."""
+    d, _ = goto(seed=1)
+    with pytest.raises(av.ParameterError, match="whole number of major steps") as e:
+        av.compile(d, 1.005, dt=0.01)
+    assert "1 or 1.01" in str(e.value)
+    with pytest.raises(av.ParameterError, match="finite number"):
+        av.compile(d, float("nan"), dt=0.01)

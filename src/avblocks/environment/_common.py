@@ -6,6 +6,7 @@ import numpy as np
 
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from .edges import EdgeGrid
 
 _KINDS = {"pose": (3, "m, m, rad", ("x", "y", "theta"), "agent poses"),
           "position": (2, "m, m", ("x", "y"), "agent positions")}
@@ -45,3 +46,33 @@ def maybe_periodic(block, period):
 
 def to_numpy(a):
     return np.asarray(a)
+
+
+class EdgeGridOwner:
+    """What a block that queries obstacles as an edge grid shares
+    (``Collision``, ``RangeSensor``): the grids it built per reach (a memo of
+    values, not part of the compile key), the grid of its own reach, and the
+    static plans a compiled run checks (its agent search and that grid).
+    The block sets ``world``, ``method``, ``search``, ``_reach`` and
+    ``_grid_cache``."""
+
+    def _grid(self, reach):
+        if self.world is None:
+            return None
+        g = self._grid_cache.get(reach)
+        if g is None:
+            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
+        return g
+
+    @property
+    def edges(self):
+        """The world as an :class:`~avblocks.environment.edges.EdgeGrid`
+        (built on first use; None without a world)."""
+        return self._grid(self._reach)
+
+    def searches(self):
+        """The static plans of a compiled run: the agent search and the edge
+        grid (see :mod:`avblocks.core.compiled.plans`)."""
+        if self.method == "shapely":
+            return []
+        return [s for s in (self.search, self.edges) if s is not None]

@@ -59,8 +59,8 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
-from ._common import agent_count, declare_agents_input, maybe_periodic
-from .edges import EdgeGrid, point_in_ring, segment_segment_dist2
+from ._common import EdgeGridOwner, agent_count, declare_agents_input, maybe_periodic
+from .edges import point_in_ring, segment_segment_dist2
 from .footprint import Disc, Footprint
 from .world import World, _disc_obstacle_hits
 
@@ -234,7 +234,7 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
             "hit_index": first, "hit_agent_index": ai_}
 
 
-class Collision(Block):
+class Collision(EdgeGridOwner, Block):
     """Collision detector for N agents in a :class:`World` (AVLib III.C).
 
     Ports
@@ -351,24 +351,6 @@ class Collision(Block):
             sreach = math.inf           # all pairs: (N, N), exact, no plan needed
         self.search = (NeighborSearch(reach=sreach, points=self.input, capacity=capacity)
                        if self.agents and n > 1 else None)
-
-    def _grid(self, reach):
-        g = self._grid_cache.get(reach)
-        if g is None:
-            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
-        return g
-
-    @property
-    def edges(self):
-        """The world as an :class:`EdgeGrid` (built on first use)."""
-        return self._grid(self._reach)
-
-    def searches(self):
-        """The static plans of a compiled run: the agent search and the edge
-        grid (see :mod:`avblocks.core.compiled.plans`)."""
-        if self.method == "shapely":
-            return []
-        return [s for s in (self.search, self.edges) if s is not None]
 
     def output(self, t, x, u, xp):
         if self.method == "shapely" or (self.method == "auto" and xp is np):

@@ -55,8 +55,8 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
-from ._common import agent_count, declare_agents_input, maybe_periodic
-from .edges import EdgeGrid, ray_circle, ray_segment
+from ._common import EdgeGridOwner, agent_count, declare_agents_input, maybe_periodic
+from .edges import ray_circle, ray_segment
 from .world import World
 
 #: Agent counts up to which the agent search compares all pairs by default
@@ -278,7 +278,7 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
     return xp.minimum(out, rmax)
 
 
-class RangeSensor(Block):
+class RangeSensor(EdgeGridOwner, Block):
     """A lidar-like range sensor on each of N agents.
 
     Ports
@@ -406,27 +406,6 @@ class RangeSensor(Block):
                 sreach = math.inf       # all pairs: (N, N), exact, no plan needed
             self.search = NeighborSearch(reach=sreach, points=self.input,
                                          capacity=capacity)
-
-    def _grid(self, reach):
-        if self.world is None:
-            return None
-        g = self._grid_cache.get(reach)
-        if g is None:
-            g = self._grid_cache[reach] = EdgeGrid(self.world, reach)
-        return g
-
-    @property
-    def edges(self):
-        """The world as an :class:`EdgeGrid` (built on first use; None
-        without a world)."""
-        return self._grid(self._reach)
-
-    def searches(self):
-        """The static plans of a compiled run: the agent search and the edge
-        grid (see :mod:`avblocks.core.compiled.plans`)."""
-        if self.method == "shapely":
-            return []
-        return [s for s in (self.search, self.edges) if s is not None]
 
     def output(self, t, x, u, xp):
         if self.method == "shapely" or (self.method == "auto" and xp is np):

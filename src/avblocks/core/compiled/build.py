@@ -4,12 +4,11 @@ the ``backend="jax"`` path of :func:`avblocks.simulate`
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..diagram import CompiledDiagram, Diagram, PortRef
 from ..errors import CompileError, ParameterError
+from ..runguard import _finite, whole_steps
 from ..solvers import make_solver
 from . import _jax
 from . import devices as _devices
@@ -130,21 +129,14 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
     if not isinstance(cd, CompiledDiagram):
         raise ParameterError("compile needs a Diagram", param="diagram",
                              expected="Diagram", found=type(diagram).__name__)
-    try:
-        dt = float(dt)
-    except (TypeError, ValueError):
-        dt = float("nan")
-    if not (math.isfinite(dt) and dt > 0):
+    # the same checks as every engine (core.runguard): finite numbers, dt > 0,
+    # a whole number of steps (never a silently shortened run)
+    dt = _finite(dt, "dt")
+    if not dt > 0:
         raise ParameterError("major step must be a positive number", param="dt",
                              expected="> 0", found=dt)
-    try:
-        span = float(t_final) - float(t0)
-    except (TypeError, ValueError):
-        span = float("nan")
-    if not (math.isfinite(span) and span >= 0):
-        raise ParameterError("t_final must be a number >= t0", param="t_final",
-                             expected=f">= {t0}", found=t_final)
-    nsteps = int(round(span / dt))
+    t0 = _finite(t0, "t0")
+    nsteps = whole_steps(t0, _finite(t_final, "t_final"), dt)
     try:
         log_every = int(log_every)
     except (TypeError, ValueError):

@@ -65,8 +65,9 @@ class Probe(Block):
     """Samples memory and step timing into preallocated windows.
 
     Ports: none. Side effects only: at each major step, the wall-clock
-    lateness of the step against ``t_first + k * period`` (the pacing
-    schedule; ``period=None`` records step times only), and at the end of
+    lateness of the step against ``origin + k * period`` (the pacing
+    schedule, its origin the earliest slot seen; ``period=None``: no
+    lateness), and at the end of
     each window of ``window`` steps the RSS of this process and of
     ``other_pid`` (optional)."""
 
@@ -83,6 +84,7 @@ class Probe(Block):
         self.wall = np.full(nwin, np.nan)        # wall seconds at the window's end
         self.k = 0
         self.t_first = None
+        self.origin = None
 
     def output(self, t, x, u, xp):
         return {}
@@ -93,7 +95,11 @@ class Probe(Block):
             self.t_first = now
         w = self.k // self.window
         if self.period is not None:
-            late = now - (self.t_first + self.k * self.period)
+            # the schedule's origin: the earliest any step has started,
+            # less its slot (so a step on time has lateness 0)
+            slot = now - self.k * self.period
+            self.origin = slot if self.origin is None else min(self.origin, slot)
+            late = slot - self.origin
             if late > self.period:
                 self.misses[w] += 1
             if late > self.worst[w]:
@@ -255,6 +261,7 @@ def table(parts):
             ("misses/window, first third", "misses_per_window_first_third", "{:.2f}"),
             ("misses/window, last third", "misses_per_window_last_third", "{:.2f}"),
             ("worst lateness [ms]", "worst_lateness_ms", "{:.1f}"),
+            ("simulate(): overruns / worst lateness [ms]", "meta", None),
             ("watchdog events", "watchdog_events", "{:d}"),
             ("samples / expected", None, None),
             ("log buffers [MB] (part of the RSS)", "log_MB", "{:.2f}"),
@@ -267,7 +274,10 @@ def table(parts):
     for label, key, fmt in rows:
         cells = []
         for p in parts:
-            if key is None:
+            if key == "meta":
+                cells.append(f"{p['overruns_meta']} / {p['max_lateness_meta_ms']:.1f}"
+                             if "overruns_meta" in p else "")
+            elif key is None:
                 cells.append(f"{p['samples']} / {p['samples_expected']}")
             elif key in p and p[key] is not None:
                 cells.append(fmt.format(p[key]))

@@ -5,7 +5,6 @@ processes commanding the same robots."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -120,13 +119,13 @@ def test_malformed_pose_payloads_are_counted_ignored_and_the_robot_counts_as_sil
 
 
 def test_a_robot_sending_only_garbage_fails_preflight_with_the_reason(router, tmp_path):
-    from avblocks.interfaces.ros2 import PreflightError
+    from avblocks.interfaces.ros2 import PreflightError, RobotWarning
     # corrupt from the first command: the emulator needs one command to start
     # its clock, so a first robot drives it; tb2 is garbage from then on
     with emulator(router, "tb1,tb2", tmp_path, "--corrupt", "tb2@0:nan",
                   "--pose0", "[[0,0,0],[0,1,0]]"):
-        from avblocks.interfaces.ros2._zenoh import Link
         from avblocks.interfaces.ros2 import _msgs
+        from avblocks.interfaces.ros2._zenoh import Link
         link = Link(router)
         pub = link.publisher("tb1/cmd_vel", _msgs.TWIST)
         time.sleep(0.3)
@@ -134,7 +133,7 @@ def test_a_robot_sending_only_garbage_fails_preflight_with_the_reason(router, tm
         time.sleep(0.3)
         link.close()
         robots = _robots(router, "tb2", wait=1.0)
-        with pytest.raises(PreflightError) as e:
+        with pytest.raises(PreflightError) as e, pytest.warns(RobotWarning, match="'tb2/odom'"):
             av.simulate(_drive(robots), t_final=0.5, dt=0.05, realtime=1.0, progress=False)
     assert "tb2" in str(e.value) and "malformed" in str(e.value)
     assert "non-finite x" in str(e.value)
@@ -164,7 +163,7 @@ def test_sigkilled_commander_robots_stop_by_their_own_command_timeout(router, tm
         assert len(out) == 1, (nm, out)
         assert out[0]["wall"] - t_kill < 0.5    # stopped by its own timeout
         # 0.4 s after the last command it received, to one emulator tick (20 ms)
-        assert out[0]["t"] - out[0]["last_cmd"] == pytest.approx(0.4, abs=0.03 + 0.02)
+        assert out[0]["t"] - out[0]["last_cmd"] == pytest.approx(0.4, abs=0.06)
 
 
 # ------------------------------------------------------------------ two commanders

@@ -12,4 +12,5 @@ from .robots import Robots
 from .swap import replace_block, robots_like
 
 __all__ = ["Robots", "Link", "open_router", "open_session", "free_port",
-           "PreflightError", "RobotError", "RobotLinkError", "RobotWarning", "replace_block", "robots_like"]
+           "PreflightError", "RobotError", "RobotLinkError", "RobotWarning",
+           "replace_block", "robots_like"]

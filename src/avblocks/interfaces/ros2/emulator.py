@@ -12,12 +12,13 @@ Each emulated robot subscribes to ``<name>/cmd_vel`` (Twist) and publishes
 
 Like a real base it stops (zero velocity) when no command came for
 ``cmd_timeout`` seconds (logged as a ``timeout`` event per robot: this is
-what stops the fleet when the commanding process dies without a word). Faults to test against: ``loss`` (each message in
-either direction dropped with this probability), ``latency`` + ``jitter``
-(uniform extra delay, both directions), ``noise`` (Gaussian on x, y, yaw of
-published poses) and ``drops`` (``{name: t}``: the robot stops publishing
-``t`` seconds of its time after the first command reached the fleet, i.e.
-into the run; it still receives and logs commands) and ``corrupt``
+what stops the fleet when the commanding process dies without a word).
+Faults to test against: ``loss`` (each message in either direction
+dropped with this probability), ``latency`` + ``jitter`` (uniform extra
+delay, both directions), ``noise`` (Gaussian on x, y, yaw of published
+poses), ``drops`` (``{name: t}``: the robot stops publishing ``t`` seconds
+of its time after the first command reached the fleet, i.e. into the run;
+it still receives and logs commands) and ``corrupt``
 (``{name: (t, kind)}``: from ``t`` seconds after the first command the robot
 publishes a malformed payload of ``kind`` instead of each pose; kinds in
 :data:`CORRUPT_KINDS`).
@@ -43,7 +44,6 @@ import numpy as np
 from ...core.errors import ParameterError
 from . import _msgs
 from ._zenoh import Link
-
 
 #: Malformed pose payloads the emulator can send (``corrupt``):
 #: ``truncated`` (the first half of the CDR), ``wrong_type`` (a Twist),

@@ -289,3 +289,25 @@ def test_router_gone_for_good_stops_and_ends_the_run_with_its_log(tmp_path):
     for nm in ("tb1", "tb2"):
         out = [x for x in _events(recs, "timeout", nm) if x["wall"] > timeline["kill"]]
         assert len(out) == 1 and out[0]["wall"] - timeline["kill"] < 0.5
+
+
+def test_cli_run_gives_up_on_silent_robots_stops_and_saves_results(router, tmp_path):
+    from avblocks.core.results import Results
+
+    from .test_ros2_formation import SCALE, _cli, _pose0
+    out = tmp_path / "out"
+    with emulator(router, "tb1,tb2,tb3", tmp_path, "--pose0", _pose0(), "--time-scale",
+                  SCALE) as log:
+        p = subprocess.Popen(_cli(router, out, 120, "--robot-give-up", 4), env=env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        for nm in ("tb1", "tb2", "tb3"):
+            _wait_moving(log, nm, timeout=30)
+        time.sleep(0.5)
+    t_gone = time.monotonic()           # the emulator (every robot) is gone
+    stdout, stderr = p.communicate(timeout=30)
+    waited = time.monotonic() - t_gone
+    assert p.returncode == 3, stderr                # the run failed, results saved
+    assert "no pose from any robot" in stderr and "give_up=4" in stderr
+    assert 0.9 < waited < 10                        # 4 robot s = 1 wall s at 4x
+    res = Results.load(out / "results.nc")
+    assert 0 < res.t[-1] < 120 and np.isfinite(res["fleet.pose"]).all()

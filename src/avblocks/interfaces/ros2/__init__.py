@@ -7,9 +7,10 @@ a diagram's model block for a ``Robots`` block.
 """
 
 from ._zenoh import Link, free_port, open_router, open_session
-from .errors import PreflightError, RobotError
+from .errors import PreflightError, RobotError, RobotLinkError, RobotWarning
 from .robots import Robots
 from .swap import replace_block, robots_like
 
 __all__ = ["Robots", "Link", "open_router", "open_session", "free_port",
-           "PreflightError", "RobotError", "replace_block", "robots_like"]
+           "PreflightError", "RobotError", "RobotLinkError", "RobotWarning",
+           "replace_block", "robots_like"]

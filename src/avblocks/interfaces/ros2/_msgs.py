@@ -114,6 +114,11 @@ def encode_pose_stamped(x, y, z, yaw, t, frame="world", distro="jazzy") -> bytes
 
 
 def _yaw(q):
+    """Yaw of a quaternion; NaN for a degenerate one (norm far from 1, e.g.
+    all zeros), which no pose source publishes on purpose."""
+    n2 = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w
+    if not 0.25 <= n2 <= 2.25:
+        return float("nan")
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
@@ -136,3 +141,16 @@ def decode_pose_stamped(data, distro="jazzy"):
     stamp = m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec
     nan = float("nan")
     return (p.x, p.y, p.z, _yaw(q), nan, nan, nan, stamp)
+
+
+def pose_problem(v, with_velocity=True):
+    """What is wrong with a decoded pose ``(x, y, z, yaw, vx, vy, vz, stamp)``,
+    or None: a non-finite position, yaw or stamp (or velocity, for
+    odometry) makes it unusable."""
+    names = ("x", "y", "z", "yaw", "vx", "vy", "vz", "stamp")
+    check = (0, 1, 2, 3, 7) + ((4, 5, 6) if with_velocity else ())
+    bad = [names[k] for k in check if not math.isfinite(v[k])]
+    if bad:
+        return "non-finite " + ", ".join(bad) + (" (or a degenerate orientation "
+                                                 "quaternion)" if "yaw" in bad else "")
+    return None

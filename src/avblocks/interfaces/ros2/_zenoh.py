@@ -36,6 +36,8 @@ CONVENTIONS = ("bridge", "rmw_zenoh")
 #: QoS written in liveliness tokens: reliable, volatile, keep last 10
 #: (rmw_zenoh's encoding ``<rel>:<dur>:<hist>,<depth>:<deadline>:<lifespan>:<liveliness>``).
 QOS_TOKEN = "1:2:1,10:,:,:,,"
+#: Liveliness tokens that say which session commands a robot (see ``Link.claim``).
+CLAIM_PREFIX = "avblocks/commander"
 
 
 def _zenoh():
@@ -186,12 +188,36 @@ class Link:
         """Call ``callback(payload bytes, receive time)`` (monotonic seconds,
         Zenoh's thread) for every sample on ``topic``."""
         def listener(sample):
-            callback(sample.payload.to_bytes(), time.monotonic())
+            try:
+                callback(sample.payload.to_bytes(), time.monotonic())
+            except Exception:  # noqa: BLE001 - a callback must not kill Zenoh's thread;
+                pass            # callers count and report their own failures
         sub = self.session.declare_subscriber(self.key(topic, typename), listener)
         self._subs.append(sub)
         if self.convention == "rmw_zenoh":
             self._endpoint_token("MS", topic, typename)
         return sub
+
+    def claim(self, keys, timeout=1.0):
+        """Declare this session the commander of each key (a liveliness token
+        ``avblocks/commander/<key>/<session id>``) and return
+        ``{key: [other session ids]}`` of the other sessions holding one.
+        The token is declared before asking, so of two sessions starting
+        together each sees the other."""
+        zid = str(self.session.info.zid())
+        for k in keys:
+            self._tokens.append(self.session.liveliness().declare_token(
+                f"{CLAIM_PREFIX}/{k}/{zid}"))
+        others = {}
+        for k in keys:
+            for reply in self.session.liveliness().get(f"{CLAIM_PREFIX}/{k}/*",
+                                                       timeout=timeout):
+                if reply.ok is None:
+                    continue
+                owner = str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                if owner != zid:
+                    others.setdefault(k, []).append(owner)
+        return others
 
     def close(self):
         """Undeclare everything and close the session (if this link opened it)."""

@@ -23,6 +23,9 @@ def add_run_options(r):
                         "vehicle model)")
     g.add_argument("--robot-timeout", type=float, default=0.5, dest="robot_timeout",
                    help="watchdog timeout [s]")
+    g.add_argument("--robot-give-up", type=float, default=10.0, dest="robot_give_up",
+                   help="no pose from any robot for this long [s]: stop every robot, "
+                        "save the results so far and exit 3")
     g.add_argument("--pose-source", default="odom", choices=["odom", "mocap"],
                    dest="pose_source")
 
@@ -42,7 +45,9 @@ def apply(args, diagram, sim):
         replace_block(diagram, name, None)      # raises the clear error
     robots = robots_like(diagram[name].block, args.robots, pose=args.pose_source,
                          transport=args.transport, router=args.router,
-                         timeout=args.robot_timeout, time_scale=float(sim["realtime"]))
+                         timeout=args.robot_timeout,
+                         give_up=getattr(args, "robot_give_up", 10.0),
+                         time_scale=float(sim["realtime"]))
     replace_block(diagram, name, robots)
     return robots
 

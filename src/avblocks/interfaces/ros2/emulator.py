@@ -11,12 +11,17 @@ Each emulated robot subscribes to ``<name>/cmd_vel`` (Twist) and publishes
   yaw, position moves in a straight line.
 
 Like a real base it stops (zero velocity) when no command came for
-``cmd_timeout`` seconds. Faults to test against: ``loss`` (each message in
-either direction dropped with this probability), ``latency`` + ``jitter``
-(uniform extra delay, both directions), ``noise`` (Gaussian on x, y, yaw of
-published poses) and ``drops`` (``{name: t}``: the robot stops publishing
-``t`` seconds of its time after the first command reached the fleet, i.e.
-into the run; it still receives and logs commands).
+``cmd_timeout`` seconds (logged as a ``timeout`` event per robot: this is
+what stops the fleet when the commanding process dies without a word).
+Faults to test against: ``loss`` (each message in either direction
+dropped with this probability), ``latency`` + ``jitter`` (uniform extra
+delay, both directions), ``noise`` (Gaussian on x, y, yaw of published
+poses), ``drops`` (``{name: t}``: the robot stops publishing ``t`` seconds
+of its time after the first command reached the fleet, i.e. into the run;
+it still receives and logs commands) and ``corrupt``
+(``{name: (t, kind)}``: from ``t`` seconds after the first command the robot
+publishes a malformed payload of ``kind`` instead of each pose; kinds in
+:data:`CORRUPT_KINDS`).
 
 ``time_scale`` runs the emulated world that many times faster than the
 wall clock (all its times, rates and delays are in its own seconds): pair
@@ -40,6 +45,34 @@ from ...core.errors import ParameterError
 from . import _msgs
 from ._zenoh import Link
 
+#: Malformed pose payloads the emulator can send (``corrupt``):
+#: ``truncated`` (the first half of the CDR), ``wrong_type`` (a Twist),
+#: ``nan`` / ``inf`` (the message with x = NaN, yaw from a NaN quaternion /
+#: y = +inf), ``huge`` (a 10 MB payload with a valid header, sent at most
+#: 4 times per robot second), ``bad_header`` (an unknown encapsulation id).
+CORRUPT_KINDS = ("truncated", "wrong_type", "nan", "inf", "huge", "bad_header")
+
+
+def parse_corrupt(items):
+    """``["tb2@1.5:nan", "tb3@0:huge"]`` -> ``{"tb2": (1.5, "nan"), "tb3": (0.0, "huge")}``."""
+    out = {}
+    for it in items or []:
+        for part in str(it).split(","):
+            if not part.strip():
+                continue
+            try:
+                nm, rest = part.split("@", 1)
+                t, kind = rest.split(":", 1)
+                t = float(t.strip().rstrip("s"))
+            except ValueError:
+                raise ParameterError("a corruption is NAME@TIME:KIND, e.g. tb2@1.5s:nan",
+                                     param="corrupt", found=part) from None
+            if kind.strip() not in CORRUPT_KINDS:
+                raise ParameterError("unknown corruption kind", param="corrupt",
+                                     expected=list(CORRUPT_KINDS), found=kind)
+            out[nm.strip()] = (t, kind.strip())
+    return out
+
 
 def parse_drops(items):
     """``["tb2@10", "tb3@4.5s"]`` -> ``{"tb2": 10.0, "tb3": 4.5}``."""
@@ -62,7 +95,7 @@ class Emulator:
     def __init__(self, names, model="unicycle", pose0=None, *, router="tcp/127.0.0.1:7447",
                  transport="bridge", pose="odom", rate=30.0, loss=0.0, latency=0.0,
                  jitter=0.0, noise=0.0, drops=None, time_scale=1.0, cmd_timeout=0.5,
-                 log=None, seed=0, distro="jazzy"):
+                 log=None, seed=0, distro="jazzy", corrupt=None):
         self.names = [s.strip() for s in (names.split(",") if isinstance(names, str)
                                           else names)]
         n = len(self.names)
@@ -91,6 +124,13 @@ class Emulator:
         if unknown:
             raise ParameterError("drop names a robot that is not emulated", param="drop",
                                  expected=self.names, found=sorted(unknown))
+        self.corrupt = dict(corrupt or {})
+        unknown = set(self.corrupt) - set(self.names)
+        if unknown:
+            raise ParameterError("corrupt names a robot that is not emulated",
+                                 param="corrupt", expected=self.names, found=sorted(unknown))
+        self._last_huge = {}
+        self.timed_out = np.zeros(n, bool)
         self.rng = np.random.default_rng(seed)
         self.distro = distro
         self._lock = threading.Lock()
@@ -187,6 +227,12 @@ class Emulator:
             if self.loss and self.rng.random() < self.loss:
                 continue
             x, y, z, th = p[i]
+            if (nm in self.corrupt and self.t_first_cmd is not None
+                    and t - self.t_first_cmd >= self.corrupt[nm][0]):
+                data = self._malformed(i, nm, x, y, z, th, t)
+                if data is not None:
+                    self.pubs[i].put(data)
+                continue
             if self.pose_kind == "odom":
                 data = _msgs.encode_odometry(x, y, z, th, self.cmd[i, :3], self.cmd[i, 3:], t,
                                              child=f"{nm}/base_link", distro=self.distro)
@@ -201,6 +247,36 @@ class Emulator:
                     heapq.heappush(self._pending, (time.monotonic() + d, self._seq,
                                                    "pose", i, data))
 
+    def _malformed(self, i, nm, x, y, z, th, t):
+        """The malformed payload robot ``i`` sends now (None: skip this tick)."""
+        kind = self.corrupt[nm][1]
+        if nm not in self._last_huge:
+            self._last_huge[nm] = -np.inf
+            self.write({"ev": "corrupt", "robot": nm, "kind": kind})
+        odom = self.pose_kind == "odom"
+
+        def enc(x=x, y=y, yaw=th):
+            if odom:
+                return _msgs.encode_odometry(x, y, z, yaw, self.cmd[i, :3], self.cmd[i, 3:],
+                                             t, child=f"{nm}/base_link", distro=self.distro)
+            return _msgs.encode_pose_stamped(x, y, z, yaw, t, distro=self.distro)
+        if kind == "truncated":
+            good = enc()
+            return good[:len(good) // 2]
+        if kind == "wrong_type":
+            return _msgs.encode_twist(self.cmd[i, :3], self.cmd[i, 3:], self.distro)
+        if kind == "nan":
+            return enc(x=float("nan"), yaw=float("nan"))
+        if kind == "inf":
+            return enc(y=float("inf"))
+        if kind == "bad_header":
+            return b"\x07\x07\x00\x00" + enc()[4:]
+        # huge: a valid header and message, then 10 MB of padding
+        if t - self._last_huge[nm] < 0.25:
+            return None
+        self._last_huge[nm] = t
+        return enc() + bytes(10 * 1024 * 1024)
+
     def run(self, duration=None):
         """Run until ``stop()`` or ``duration`` wall seconds."""
         period = 1.0 / (self.rate * self.scale)
@@ -212,6 +288,10 @@ class Emulator:
             self._deliver(wall)
             t = self.now()
             stale = (t - self.last_cmd) > self.cmd_timeout
+            for i in np.nonzero(stale & ~self.timed_out & np.isfinite(self.last_cmd))[0]:
+                self.write({"ev": "timeout", "robot": self.names[i],
+                            "last_cmd": float(self.last_cmd[i])})
+            self.timed_out = stale
             self.cmd[stale] = 0.0
             self._integrate(t - t_prev)
             t_prev = t
@@ -247,7 +327,8 @@ def main(args):
                   transport=args.transport, pose=args.pose, rate=args.rate, loss=args.loss,
                   latency=args.latency, jitter=args.jitter, noise=args.noise,
                   drops=parse_drops(args.drop), time_scale=args.time_scale,
-                  cmd_timeout=args.cmd_timeout, log=args.log, seed=args.seed)
+                  cmd_timeout=args.cmd_timeout, log=args.log, seed=args.seed,
+                  corrupt=parse_corrupt(args.corrupt))
     signal.signal(signal.SIGTERM, lambda *a: em.stop())
     print(f"emulating {','.join(em.names)} ({args.model}, {args.transport}) via "
           f"{args.router}", flush=True)
@@ -281,6 +362,9 @@ def add_parser(sub):
     e.add_argument("--noise", type=float, default=0.0, help="pose noise std [m, rad]")
     e.add_argument("--drop", action="append", metavar="NAME@T",
                    help="robot NAME goes silent T s after the first command, e.g. tb2@10s")
+    e.add_argument("--corrupt", action="append", metavar="NAME@T:KIND",
+                   help="robot NAME sends malformed pose payloads of KIND from T s after "
+                        f"the first command ({', '.join(CORRUPT_KINDS)}), e.g. tb2@1s:nan")
     e.add_argument("--time-scale", type=float, default=1.0, dest="time_scale",
                    help="emulated seconds per wall second")
     e.add_argument("--cmd-timeout", type=float, default=0.5, dest="cmd_timeout",

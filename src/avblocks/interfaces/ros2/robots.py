@@ -27,21 +27,47 @@ piecewise-constant signal like from any discrete block.
 Watchdog: a robot whose latest pose is older than ``timeout`` is flagged
 (``fresh`` false), its pose output keeps the last value, and it is sent
 zero velocity at every step until poses come back; then control resumes.
+
+Bad traffic: a payload on a pose topic that is larger than ``max_payload``,
+does not decode as the expected message (truncated CDR, another type, an
+unknown encapsulation header) or carries a non-finite or degenerate pose is
+counted and dropped in the middleware thread; it never reaches the buffer,
+so a robot sending only such payloads is silent to the watchdog. The main
+thread warns (:class:`RobotWarning`, naming robot and topic) the first
+time a topic has one, and once more at the end of the run with the count.
+
+Ownership: before declaring any publisher, the block declares a Zenoh
+liveliness token ``avblocks/commander/<cmd key>/<session id>`` per robot
+and asks the router for other sessions' tokens on the same keys; if
+another avblocks process already commands one of the robots, the start is
+refused (:class:`PreflightError` naming the robots) without sending
+anything. Two processes starting at the same instant both refuse.
+
+Link loss: Zenoh clients reconnect to their router by themselves, and the
+subscriptions come back with it. While the router is away every robot is
+stale (zero commands, which cannot arrive: the robot's own command timeout
+stops it); when the router returns, poses arrive and control resumes. If
+no robot is heard for ``give_up`` seconds the block commands zero once
+more and ends the run with :class:`RobotLinkError` (a
+:class:`~avblocks.core.errors.SimulationError` carrying the log so far).
 """
 
 from __future__ import annotations
 
 import threading
 import time
+import warnings
 
 import numpy as np
 
 from ...core.block import Block
 from ...core.errors import ParameterError, SimulationError
 from . import _guard, _msgs
-from .errors import PreflightError
+from .errors import PreflightError, RobotLinkError, RobotWarning
 
 KINDS = ("unicycle", "holonomic2d", "holonomic3d")
+#: Largest pose payload accepted by default [bytes] (an Odometry is ~0.7 kB).
+MAX_PAYLOAD = 64 * 1024
 POSES = ("odom", "mocap")
 TRANSPORTS = ("bridge", "rmw_zenoh", "rclpy")
 
@@ -149,6 +175,15 @@ class Robots(Block):
         ROS domain id, message set ("jazzy"/"humble"), node name, Zenoh mode.
     stop_repeats : int
         Zero commands sent when stopping (20 ms apart), for lossy links.
+    max_payload : int [bytes]
+        Larger pose payloads are dropped unread (counted, warned).
+    give_up : float or None [s]
+        No pose from any robot for this long (robot seconds) ends the run
+        with :class:`RobotLinkError` after stopping every robot; None waits
+        for the link forever (the watchdog still zeroes every robot).
+    exclusive : bool
+        Refuse to start when another avblocks process commands one of the
+        robots (Zenoh transports; see the module docstring).
 
     Equations
     ---------
@@ -176,7 +211,8 @@ class Robots(Block):
                  speed_max=1.0, arena=None, min_distance=0.0, mocap_transform=None,
                  estop=False, period=None, time_scale=1.0, wait=5.0, cmd_topic=None,
                  pose_topic=None, cmd_frame="body", domain=None, distro="jazzy",
-                 node="avblocks", mode="client", stop_repeats=3):
+                 node="avblocks", mode="client", stop_repeats=3, max_payload=MAX_PAYLOAD,
+                 give_up=10.0, exclusive=True):
         super().__init__()
         self.names = _names(names)
         self.n = n = len(self.names)
@@ -199,6 +235,15 @@ class Robots(Block):
         self.tf = _transform(mocap_transform)
         self.wait = float(wait)
         self.stop_repeats = int(stop_repeats)
+        self.max_payload = int(max_payload)
+        if self.max_payload < 64:
+            raise ParameterError("max_payload must be at least 64 bytes", block="Robots",
+                                 param="max_payload", found=max_payload)
+        if give_up is not None and not (float(give_up) > 0):
+            raise ParameterError("give_up must be a positive number of seconds or None",
+                                 block="Robots", param="give_up", found=give_up)
+        self.give_up = None if give_up is None else float(give_up)
+        self.exclusive = bool(exclusive)
         self.cmd_topic = cmd_topic or "{name}/cmd_vel"
         self.pose_topic = pose_topic or ("{name}/odom" if pose == "odom"
                                          else "vrpn_mocap/{name}/pose")
@@ -246,6 +291,9 @@ class Robots(Block):
         self._latest = np.full((n, 8), np.nan)      # x y z yaw vx vy vz stamp
         self._recv = np.full(n, -np.inf)             # monotonic receive time
         self._count = np.zeros(n, np.int64)
+        self._bad = np.zeros(n, np.int64)            # malformed payloads dropped
+        self._bad_why = [None] * n                    # first reason per robot
+        self._bad_warned = np.zeros(n, bool)
         self._link = None
         self._pubs = []
         self._estop_latched = False
@@ -257,12 +305,30 @@ class Robots(Block):
         self.steps_sent = 0
 
     # ------------------------------------------------------------ receive side
+    def _reject(self, i, why):
+        with self._lock:
+            self._bad[i] += 1
+            if self._bad_why[i] is None:
+                self._bad_why[i] = why
+
     def _on_pose(self, i, data, now):
-        if self.pose_source == "odom":
-            v = _msgs.decode_odometry(data, self.distro)
-        else:
-            v = _msgs.decode_pose_stamped(data, self.distro)
-        v = np.array(v, float)
+        # Zenoh's thread: anything wrong with the payload is counted and
+        # dropped here; it never reaches the buffer (the robot stays silent).
+        if len(data) > self.max_payload:
+            return self._reject(i, f"payload of {len(data)} bytes, more than "
+                                   f"max_payload={self.max_payload}")
+        try:
+            if self.pose_source == "odom":
+                v = _msgs.decode_odometry(data, self.distro)
+            else:
+                v = _msgs.decode_pose_stamped(data, self.distro)
+            v = np.array(v, float)
+            why = _msgs.pose_problem(v, self.pose_source == "odom")
+        except Exception as e:  # noqa: BLE001 - any decoding failure is bad input
+            ptype = _msgs.ODOMETRY if self.pose_source == "odom" else _msgs.POSE_STAMPED
+            why = f"not a {ptype} ({type(e).__name__}: {str(e)[:120]})"
+        if why is not None:
+            return self._reject(i, why)
         if self.pose_source == "mocap":
             tx, ty, tz, tyaw = self.tf
             c, s = np.cos(tyaw), np.sin(tyaw)
@@ -276,6 +342,28 @@ class Robots(Block):
             self._latest[i] = v
             self._recv[i] = now
             self._count[i] += 1
+
+    @property
+    def malformed(self):
+        """``{pose topic: payloads dropped}`` in this run (robots with any)."""
+        with self._lock:
+            bad = self._bad.copy()
+        return {self.pose_topic.format(name=nm): int(c) for nm, c in zip(self.names, bad)
+                if c}
+
+    def _warn_malformed(self, final=False):
+        with self._lock:
+            bad, why = self._bad.copy(), list(self._bad_why)
+        for i in np.nonzero(bad > 0)[0]:
+            if self._bad_warned[i] and not final:
+                continue
+            self._bad_warned[i] = True
+            topic = self.pose_topic.format(name=self.names[i])
+            what = "in this run" if final else "so far"
+            warnings.warn(RobotWarning(
+                f"robot '{self.names[i]}': {bad[i]} malformed payload(s) on topic "
+                f"'{topic}' ignored {what} (first: {why[i]}); the robot counts as "
+                f"silent until valid poses arrive"), stacklevel=2)
 
     def snapshot(self):
         """``(latest (N, 8), age (N,) [s, scaled], counts (N,))`` now."""
@@ -307,6 +395,8 @@ class Robots(Block):
         if self._link is None:      # not started (a dry evaluation): hold
             return {k: x[k] for k in self._outs}
         latest, age, _ = self.snapshot()
+        if self._bad.any() and not self._bad_warned[self._bad > 0].all():
+            self._warn_malformed()
         return self._state_from(latest, age)
 
     # ------------------------------------------------------------ side effects
@@ -327,8 +417,13 @@ class Robots(Block):
             self._latest[:] = np.nan
             self._recv[:] = -np.inf
             self._count[:] = 0
+            self._bad[:] = 0
+            self._bad_why = [None] * self.n
+        self._bad_warned[:] = False
         self._link = self._open()
         try:
+            if self.exclusive:
+                self._claim()
             ptype = _msgs.ODOMETRY if self.pose_source == "odom" else _msgs.POSE_STAMPED
             self._pubs = [self._link.publisher(self.cmd_topic.format(name=nm), _msgs.TWIST)
                           for nm in self.names]
@@ -345,6 +440,24 @@ class Robots(Block):
             self.set_initial(k, v)
         self._was_fresh[:] = True
 
+    def _claim(self):
+        """Declare this process the commander of each robot; refuse (before
+        any publisher exists) if another avblocks process already is."""
+        claim = getattr(self._link, "claim", None)
+        if claim is None:           # rclpy: no liveliness query here
+            return
+        keys = [self._link.key(self.cmd_topic.format(name=nm), _msgs.TWIST)
+                for nm in self.names]
+        others = claim(keys)
+        taken = [nm for nm, k in zip(self.names, keys) if others.get(k)]
+        if taken:
+            who = sorted({z for k in keys for z in others.get(k, ())})
+            raise PreflightError(
+                f"robot(s) {taken} are already commanded by another avblocks process "
+                f"(Zenoh session(s) {', '.join(who)} via router {self.router}); "
+                "nothing was sent to them", block="Robots",
+                hint="stop the other run first, or command other robots")
+
     def _preflight(self):
         deadline = time.monotonic() + self.wait
         while True:
@@ -354,8 +467,13 @@ class Robots(Block):
                 break
             time.sleep(0.01)
         if missing:
+            with self._lock:
+                bad = {nm: (int(self._bad[i]), self._bad_why[i])
+                       for i, nm in enumerate(self.names) if nm in missing and self._bad[i]}
+            extra = "".join(f"; {nm} sent {c} malformed payload(s) (first: {w})"
+                            for nm, (c, w) in bad.items())
             raise PreflightError(
-                f"no pose received within {self.wait:g} s from robot(s) {missing} "
+                f"no valid pose received within {self.wait:g} s from robot(s) {missing}{extra} "
                 f"(topic '{self.pose_topic.format(name=missing[0])}', "
                 f"transport '{self.transport}', router {self.router})",
                 block="Robots", hint="check that the robots (or the emulator) run, "
@@ -426,6 +544,17 @@ class Robots(Block):
                 block="Robots", port=self.cmd_port, time=t)
         c = self._limit(c)
         fresh = np.asarray(y["fresh"], bool)
+        if self.give_up is not None:
+            age = np.asarray(y["age"], float)
+            if age.size and float(age.min()) > self.give_up:
+                self.stop_robots()
+                raise RobotLinkError(
+                    f"no pose from any robot for {float(age.min()):.3g} s (give_up="
+                    f"{self.give_up:g} s): the router or the network is down; every "
+                    "robot was commanded zero (their own command timeout stops them "
+                    "if that cannot arrive)", block="Robots", time=t,
+                    hint="check the Zenoh router and the robots' links; the log up "
+                         "to now is in err.results")
         stop = ~fresh
         if self.has_estop:
             stop = stop | np.asarray(u["estop"], bool)
@@ -465,6 +594,8 @@ class Robots(Block):
         try:
             self.stop_robots()
         finally:
+            if self._bad.any():
+                self._warn_malformed(final=True)
             _guard.unregister(self)
             link, self._link, self._pubs = self._link, None, []
             if link is not None:

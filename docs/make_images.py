@@ -228,6 +228,8 @@ PRODUCERS = {
     "uav-tracking-error": (_script([sys.executable, "-m", "avblocks", "run", "uav_tracking",
                                     "--out", "{tmp}", "--quiet"], made="tracking_error.png"),
                            True),
+    "soak": (_script([sys.executable, "benchmarks/soak.py", "--minutes", "30",
+                      "--plot", "{images}/soak.png"]), True),
     "sweep_time_to_done": (_script([sys.executable, "-m", "avblocks", "sweep", "waypoints",
                                     "--grid", "drive.gain=0.5,1,2", "--grid",
                                     "drive.v_max=1,2,3", "--seeds", "4",

@@ -127,7 +127,11 @@ def test_grid_sweep_matches_serial_runs_and_closed_form(client, serial, tmp_path
     half = out / "cases" / "c0000030" / "zarr.json"
     half.write_text(half.read_text().replace('"status"', '"status_"'))
     assert Study(out).counts() == {"done": 30, "failed": 0, "missing": 6}
-    again = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+    with pytest.raises(SweepError, match="cannot be imported by name"):
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+    fns = {k: v for k, v in metrics().items() if callable(v)}   # not importable by name
+    again = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                            metrics=fns)
     assert again.last_run["ran"] == 6 and again.last_run["done"] == 6
     after = again.records()
     for cid, rec in before.items():
@@ -346,3 +350,84 @@ def test_progress_is_silent_off_a_terminal(capsys):
     bar.close()
     assert bar.bar is None and (bar.done, bar.failed) == (2, 1)
     assert capsys.readouterr().err == ""
+
+
+def _evil_blob(marker):
+    """A pickle that writes ``marker`` when it is loaded."""
+    import base64
+    import pickle
+
+    class Evil:
+        def __reduce__(self):
+            return (Path(marker).write_text, ("pwned",))
+    return base64.b64encode(pickle.dumps({"evil": Evil()})).decode()
+
+
+def test_a_store_never_runs_the_code_it_holds(client, tmp_path):
+    """A store with a pickled metric that would write a file when loaded
+    (as avblocks 0.1.0 wrote them): resume, Study.open, to_xarray and the CLI
+    leave no file and say what is missing; importable metrics come back by
+    name, and new stores hold references, never code."""
+    import json
+
+    import zarr
+    gap = av.sweep.METRICS["min_gap"]
+    out = tmp_path / "t.zarr"
+    av.sweep(SCEN, grid={"goal": [0.0, 1.0]}, seeds=2, fixed=FIXED, out=str(out),
+             metrics={"gap": gap, "final_x": lambda r: r["fleet.position"][-1, :, 0]},
+             scheduler=client, summary=False, plot=False)
+    root = zarr.open_group(str(out), mode="r+")
+    spec = json.loads(root.attrs["avblocks_sweep"])
+    assert spec["metric_refs"] == {"gap": "avblocks.sweep.metrics:min_gap", "final_x": None}
+    assert "metrics_pickle" not in root.attrs and "_callables" not in spec
+    # now make it hostile: a pickled metric, two cases gone
+    marker = tmp_path / "pwned.txt"
+    spec["metrics"].append("evil")
+    root.attrs["avblocks_sweep"] = json.dumps(spec)
+    root.attrs["metrics_pickle"] = _evil_blob(marker)
+    for cid in (1, 3):
+        shutil.rmtree(out / "cases" / f"c{cid:07d}")
+    with pytest.raises(SweepError, match="'final_x'|'evil'"):
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+    with pytest.raises(SweepError, match="'evil'.*cannot be imported by name"):
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                        metrics={"final_x": lambda r: r["fleet.position"][-1, :, 0]})
+    study = Study.open(out)
+    ds = study.to_xarray()
+    assert ds["gap"].shape == (2, 2) and study.counts()["missing"] == 2
+    from avblocks.cli import main
+    assert main(["sweep", "--resume", str(out), "--scheduler", client.scheduler.address,
+                 "--quiet", "--no-plot"]) == 2
+    assert not marker.exists()
+    # importable metrics resume by name
+    with pytest.raises(SweepError, match="no.such.module"):
+        av.sweep.spec.resolve_metric("no.such.module:fn", "x")
+    assert av.sweep.spec.resolve_metric("avblocks.sweep.metrics:min_gap", "gap") is gap
+
+
+def test_plain_xarray_opens_a_finished_store(client, tmp_path):
+    """`xarray.open_zarr(STORE)` in a process that never imports avblocks
+    gives the whole sweep: grid names and seed as dimensions with their
+    values, every metric, the status of every case."""
+    import json
+    import subprocess
+    import sys
+    out = tmp_path / "x.zarr"
+    study = av.sweep(SCEN, grid={"ctl.k": [0.5, 2.0], "goal": [0.0, 1.0, 2.0]}, seeds=2,
+                     fixed=FIXED, out=str(out), metrics=["min_gap"],
+                     scheduler=client, summary=False, plot=False)
+    code = ("import json, sys, xarray as xr\n"
+            f"ds = xr.open_zarr({str(out)!r})\n"
+            "print(json.dumps({'dims': dict(ds.sizes), 'k': ds['ctl.k'].values.tolist(),"
+            " 'seed': ds['seed'].values.tolist(), 'gap': ds['min_gap'].values.tolist(),"
+            " 'status': ds['status'].values.tolist(),"
+            " 'avblocks': any(m.startswith('avblocks') for m in sys.modules)}))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=120, check=True)
+    got = json.loads(r.stdout)
+    assert got["avblocks"] is False
+    assert got["dims"] == {"ctl.k": 2, "goal": 3, "seed": 2}
+    assert got["k"] == [0.5, 2.0] and got["seed"] == [0, 1]
+    ref = study.to_xarray()
+    np.testing.assert_array_equal(np.asarray(got["gap"]), ref["min_gap"].values)
+    assert np.all(np.asarray(got["status"]) == "done")

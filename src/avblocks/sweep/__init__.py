@@ -25,9 +25,9 @@ from .spec import (
     Spec,
     SweepError,
     build_case,
+    metric_reference,
     normalise_grid,
     normalise_seeds,
-    pickle_callables,
     scenario_source,
     split_overrides,
 )
@@ -108,9 +108,9 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
     data = {"version": SPEC_VERSION, "scenario": src, "grid": g,
             "seeds": normalise_seeds(seeds), "fixed": fx, "metrics": names,
             "log": log, "log_every": int(log_every), "ensemble": bool(ensemble)}
+    data["metric_refs"] = {n: metric_reference(fn) for n, fn in custom.items()}
     data["token"] = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
-    blob = pickle_callables(custom) if custom else ""
-    data["metrics_pickle"] = blob
+    data["_callables"] = dict(custom)          # this process's functions, never stored
     return Spec(data), custom
 
 
@@ -200,24 +200,38 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
                          hint="pass resume=True to finish it, overwrite=True to "
                               "replace it, or another out=")
     _check_first_case(spec)
-    store.create_store(out, {k: v for k, v in spec.data.items() if k != "metrics_pickle"},
-                       spec.data["metrics_pickle"], overwrite=overwrite)
+    store.create_store(out, {k: v for k, v in spec.data.items() if not k.startswith("_")},
+                       overwrite=overwrite)
     with client_for(scheduler, workers, dashboard) as client:
         counts = execute(spec, range(spec.n_cases), out, client, progress)
     return _finish(out, counts, plot, summary)
 
 
 def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progress=None,
-                 plot=True, summary=True, dashboard=False) -> Study:
+                 plot=True, summary=True, dashboard=False, metrics=None) -> Study:
     """Run the cases of the sweep stored at ``out`` that are missing (and
-    the failed ones with ``retry_failed=True``), with the stored definition."""
+    the failed ones with ``retry_failed=True``), with the stored definition.
+
+    The store holds no code: custom metrics come back by their stored
+    reference (``"package.module:function"``, imported by name), or from
+    ``metrics={name: fn}`` for functions that cannot be imported by name."""
     from . import store
     from .runner import client_for, execute
     root = store.open_store(out)
-    data, blob = store.read_spec(root)
-    data = {**data, "metrics_pickle": blob}
+    data, _ = store.read_spec(root)
+    if metrics:
+        if not isinstance(metrics, dict) or not all(callable(f) for f in metrics.values()):
+            raise SweepError("resume's metrics= is a dict {name: fn(results)}",
+                             found=type(metrics).__name__)
+        unknown = sorted(set(metrics) - set(data["metrics"]))
+        if unknown:
+            raise SweepError(f"metrics {unknown} are not in this sweep",
+                             hint=f"its metrics: {data['metrics']}")
+        data = {**data, "_callables": dict(metrics)}
     spec = Spec(data)
     todo = Study(out).missing(retry_failed)
+    if len(todo):
+        spec.metric_fns()               # every metric found before any case runs
     with client_for(scheduler, workers, dashboard) as client:
         counts = execute(spec, todo, out, client, progress)
     return _finish(out, counts, plot, summary)
@@ -225,6 +239,7 @@ def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progr
 
 def _finish(out, counts, plot, summary) -> Study:
     study = Study(out, last_run=counts)
+    study.write_dataset()
     if summary:
         print(study.summary())
         failed = study.errors()

@@ -11,13 +11,16 @@ Override names follow ``avblocks run --set``:
 - ``block.param`` (any other dotted name): a numeric block parameter, handed
   to ``simulate(params={...})`` (``drive.gain``, ``lf.k_l``).
 
-The spec is plain JSON (stored in the Zarr store's attributes) plus the
-pickled metric callables, so ``resume`` needs only the store.
+The spec is plain JSON (stored in the Zarr store's attributes). Custom
+metric functions are stored *by reference* (``"package.module:function"``),
+never as code: resuming imports them by name, and a store never runs what
+it holds. A function that cannot be imported by name (a lambda, one defined
+in a script or a notebook) serves the run that was given it; ``resume``
+then needs it again (``metrics={name: fn}``), with an error saying so.
 """
 
 from __future__ import annotations
 
-import base64
 import inspect
 import math
 from pathlib import Path
@@ -187,14 +190,35 @@ def build_case(src, values: dict, seed: int):
     return d, sim
 
 
-def pickle_callables(fns: dict) -> str:
-    import cloudpickle
-    return base64.b64encode(cloudpickle.dumps(fns)).decode("ascii")
+def metric_reference(fn) -> str | None:
+    """``"module:qualname"`` when importing that name gives ``fn`` back
+    (then a resumed sweep finds it again), else None."""
+    mod, qual = getattr(fn, "__module__", None), getattr(fn, "__qualname__", None)
+    if not mod or not qual or mod == "__main__" or "<" in qual:
+        return None
+    try:
+        return f"{mod}:{qual}" if resolve_metric(f"{mod}:{qual}", "?") is fn else None
+    except SweepError:
+        return None
 
 
-def unpickle_callables(blob: str) -> dict:
-    import cloudpickle
-    return cloudpickle.loads(base64.b64decode(blob.encode("ascii")))
+def resolve_metric(ref: str, name: str):
+    """The function named by ``ref`` (``"package.module:function"``),
+    imported by name; a :class:`SweepError` naming the metric otherwise."""
+    import importlib
+    mod, _, qual = str(ref).partition(":")
+    try:
+        obj = importlib.import_module(mod)
+        for part in qual.split("."):
+            obj = getattr(obj, part)
+    except Exception as e:  # noqa: BLE001 - any import failure is the same answer
+        raise SweepError(f"metric '{name}' refers to {ref!r}, which cannot be imported "
+                         f"({type(e).__name__}: {e})",
+                         hint="install or put on sys.path the package that defines it, or "
+                              "resume with metrics={name: fn}") from None
+    if not callable(obj):
+        raise SweepError(f"metric '{name}' refers to {ref!r}, which is not callable")
+    return obj
 
 
 class Spec:
@@ -221,12 +245,28 @@ class Spec:
         return ", ".join(f"{k}={v}" for k, v in {**grid, "seed": seed}.items())
 
     def metric_fns(self) -> dict:
+        """``{name: fn}``: functions handed to this process (``_callables``,
+        never stored), else imported by their stored reference, else the
+        built-in metric of that name."""
         if self._metric_fns is None:
             from .metrics import METRICS
-            custom = (unpickle_callables(self.data["metrics_pickle"])
-                      if self.data.get("metrics_pickle") else {})
-            self._metric_fns = {n: custom.get(n) or METRICS[n]
-                                for n in self.data["metrics"]}
+            given = self.data.get("_callables") or {}
+            refs = self.data.get("metric_refs") or {}
+            fns = {}
+            for n in self.data["metrics"]:
+                if n in given:
+                    fns[n] = given[n]
+                elif refs.get(n):
+                    fns[n] = resolve_metric(refs[n], n)
+                elif n in refs or n not in METRICS:
+                    raise SweepError(
+                        f"metric '{n}' was a function that cannot be imported by name "
+                        "(a lambda, or defined in a script); a sweep store keeps no code",
+                        hint=f"resume with metrics={{'{n}': fn}}, or define the function "
+                             "in an importable module")
+                else:
+                    fns[n] = METRICS[n]
+            self._metric_fns = fns
         return self._metric_fns
 
     def build(self, case_id: int):

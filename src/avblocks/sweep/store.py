@@ -3,7 +3,7 @@
 ::
 
     sweep.zarr/                    attrs: avblocks_sweep (the spec, JSON),
-                                          metrics_pickle (custom metric callables)
+                                          (no code: custom metrics by reference)
       cases/
         c0000017/                  one group per case, written by the worker
                                    that ran it; attrs (written last):
@@ -44,13 +44,18 @@ def _zarr():
     return zarr
 
 
-def create_store(out, spec_data: dict, metrics_pickle: str | None, overwrite=False):
+def create_store(out, spec_data: dict, overwrite=False):
+    """A new store holding the sweep's definition (plain JSON: no code)."""
     zarr = _zarr()
     root = zarr.open_group(str(out), mode="w" if overwrite else "w-")
-    root.attrs.update({"avblocks_sweep": json.dumps(spec_data),
-                       "metrics_pickle": metrics_pickle or ""})
+    root.attrs.update({"avblocks_sweep": json.dumps(spec_data)})
     root.create_group("cases")
     return root
+
+
+def open_group(out, mode="r"):
+    """The store's root group as it is (no check that it is a sweep)."""
+    return _zarr().open_group(str(out), mode=mode)
 
 
 def open_store(out, mode="r"):
@@ -75,8 +80,17 @@ def store_exists(out) -> bool:
         return False
 
 
-def read_spec(root) -> tuple[dict, str]:
-    return json.loads(root.attrs["avblocks_sweep"]), str(root.attrs.get("metrics_pickle", ""))
+def read_spec(root) -> tuple[dict, bool]:
+    """The stored definition, and whether the store also carries pickled
+    code (stores of avblocks 0.1.0): that is never loaded."""
+    try:
+        data = json.loads(root.attrs["avblocks_sweep"])
+    except (TypeError, ValueError) as e:
+        raise SweepError("the store's sweep definition is not valid JSON") from e
+    if not isinstance(data, dict):
+        raise SweepError("the store's sweep definition is not a mapping")
+    data = {k: v for k, v in data.items() if not str(k).startswith("_")}
+    return data, bool(root.attrs.get("metrics_pickle"))
 
 
 def write_case(out, case_id, record: dict, metrics=None, logs=None):

@@ -138,6 +138,27 @@ class Study:
                          "store": self.out, "metrics": list(sp.data["metrics"])})
         return ds
 
+    def write_dataset(self):
+        """Write :meth:`to_xarray` (with the logs, when the sweep stored
+        them) at the store's root, so that plain ``xarray.open_zarr(store)``
+        opens the whole sweep: grid names and ``seed`` as dimensions with
+        their values as coordinates, one variable per metric, ``status``,
+        ``error``, ``wall_s``. The per-case groups under ``cases/`` stay
+        (they are what a crash leaves complete). Called when a sweep or a
+        resume finishes; missing cases are NaN and ``status`` says so."""
+        ds = self.to_xarray(logs=bool(self.spec.data.get("log")) and self._has_logs())
+        ds.attrs["store"] = "."                 # the dataset is the store itself
+        keep = dict(self._root.attrs)           # xarray replaces the group's attributes
+        ds.to_zarr(self.out, mode="a", consolidated=False)
+        root = store.open_group(self.out, mode="r+")
+        root.attrs.update(keep)
+        self._root = store.open_store(self.out)
+        return self.out
+
+    def _has_logs(self):
+        done = [c for c, r in self.records().items() if r["status"] == STATUS_DONE]
+        return bool(done) and bool(store.read_logs(self._root, done[0]))
+
     def _logs_variables(self, recs):
         sp = self.spec
         done = [cid for cid, r in recs.items() if r["status"] == STATUS_DONE]

@@ -134,7 +134,7 @@ def rl_task(agents=3, half=1.0, speed=1.0, radius=0.1, cover=0.1):
 
     return {"diagram": d, "act": "action", "observe": "task.obs", "reward": "task.reward",
             "done": "task.done", "reset": reset, "info": {"success": "task.success"},
-            "dt": sim["dt"], "substeps": 1, "max_steps": 50}
+            "dt": sim["dt"], "substeps": 1, "max_steps": 50, "solver": "euler"}
 
 
 def outcome(res, params):

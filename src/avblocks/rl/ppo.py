@@ -234,11 +234,14 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
                   curve, cfg)
 
 
-def evaluate(env, actor, episodes=100, seed=1234, activation="tanh"):
+def evaluate(env, actor, episodes=100, seed=1234, activation="tanh", output="clip"):
     """Deterministic (mean action) evaluation over ``episodes`` episodes in
     one vmapped, jitted rollout: ``{"success": fraction of agents with
     success at the end, "return": mean return per agent, "collided":
-    fraction of agents that collided (if the task reports it)}``."""
+    fraction of agents that collided (if the task reports it)}``.
+    ``output``: how the MLP's output becomes the action, as
+    :class:`~avblocks.controllers.Policy` (``"clip"`` for PPO's Gaussian
+    mean, ``"tanh"`` for :mod:`avblocks.rl.apg`)."""
     jax = _engine.jax()
     jnp = jax.numpy
     lo, hi = jnp.asarray(env.action_low), jnp.asarray(env.action_high)
@@ -249,7 +252,11 @@ def evaluate(env, actor, episodes=100, seed=1234, activation="tanh"):
 
         def body(c, _):
             state, obs, hit = c
-            a = jnp.clip(mlp(w, obs, jnp, activation), lo, hi)
+            y = mlp(w, obs, jnp, activation)
+            if output == "tanh":
+                a = lo + (jnp.tanh(y) + 1.0) * 0.5 * (hi - lo)
+            else:
+                a = jnp.clip(y, lo, hi)
             state, obs, r, d, info = env.step_env(state, a)
             col = info.get("collision", jnp.zeros(env.n, bool))
             return (state, obs, hit | col), (r, info.get("success", jnp.zeros(env.n, bool)))

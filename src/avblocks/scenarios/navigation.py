@@ -16,9 +16,9 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
 ------------------------------------------------------------------------
 - **action** (per agent, 2): velocity command in ``[-1, 1]^2`` times
   ``speed`` [m/s].
-- **observation** (per agent, ``4 + rays``): goal relative to the agent
-  (m), own position divided by ``half``, the ray ranges divided by
-  ``max_range`` (``task.obs``).
+- **observation** (per agent, ``4 + rays + 2(N-1)``): goal relative to
+  the agent (m), own position divided by ``half``, the ray ranges divided
+  by ``max_range``, the other agents relative to it (m) (``task.obs``).
 - **reward** (per agent): ``progress * (d_prev - d)`` (``d`` the distance
   to the goal, over the last control step) ``+ 0.1 * [d < goal_radius]``
   ``- collision * [touching an obstacle, a wall or another agent]``
@@ -49,6 +49,7 @@ from avblocks.vehicles import SingleIntegrator
 from ._task import (
     command_source,
     free_points,
+    others_index,
     inside,
     pairwise,
     polygon_edges,
@@ -69,7 +70,7 @@ class NavigationTask(Block):
     -----
     position : in, (N, 2) [m]
     goals : in, (N, 2) [m]
-    obs : out, (N, 4 + rays)
+    obs : out, (N, 4 + rays + 2(N-1))
     reward : out, (N,)
     done : out, (N,) bool (always false)
     collision : out, (N,) bool: touching an obstacle, a wall or an agent now
@@ -89,7 +90,7 @@ class NavigationTask(Block):
     """
 
     def __init__(self, n, edges, *, rays=8, half=1.5, radius=0.1, goal_radius=0.15,
-                 max_range=1.0, progress=5.0, collision=1.0):
+                 max_range=1.0, progress=5.0, collision=2.5):
         super().__init__()
         self.n = n
         self.rays = int(rays)
@@ -105,7 +106,8 @@ class NavigationTask(Block):
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_discrete_state("prev", np.zeros(n), dtype="float64")
         self.declare_discrete_state("hit", np.zeros(n, dtype=bool))
-        self.declare_output("obs", (n, 4 + self.rays))
+        self.idx = others_index(n)
+        self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)))
         self.declare_output("reward", (n,))
         self.declare_output("done", (n,), "bool")
         self.declare_output("collision", (n,), "bool")
@@ -126,7 +128,8 @@ class NavigationTask(Block):
         d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
         ranges = ray_ranges(p, self.angles, self.edges, self.half, p, self.radius,
                             self.max_range, xp)
-        obs = xp.concatenate([rel, p / self.half, ranges / self.max_range], axis=-1)
+        rel_o = xp.reshape(p[self.idx] - p[:, None, :], (self.n, -1))
+        obs = xp.concatenate([rel, p / self.half, ranges / self.max_range, rel_o], axis=-1)
         col = self._collision(p, xp)
         at = d < self.goal_radius
         reward = self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col

@@ -40,8 +40,8 @@ def test_step_moves_agents_and_rewards_as_the_equations_say(backend):
     X = list(state.X)
     i = env.cd.index("fleet")
     X[i] = {**X[i], "position": env.xp.asarray(p0, dtype=X[i]["position"].dtype)}
-    state = state._replace(X=X, theta={**state.theta,
-                                       "landmarks.value": env.xp.asarray(lm, dtype=state.theta["landmarks.value"].dtype)})
+    lm_t = env.xp.asarray(lm, dtype=state.theta["landmarks.value"].dtype)
+    state = state._replace(X=X, theta={**state.theta, "landmarks.value": lm_t})
     a = np.array([[1.0, 0.0], [0.0, -1.0], [0.5, 0.5]], np.float32)
     state, obs, r, d, info = env.step_env(state, a)
     p1 = p0 + 1.0 * a * 0.1                     # speed 1 m/s, one 0.1 s step

@@ -119,8 +119,9 @@ def test_pursuit_capture_terminates_the_episode():
     from avblocks import rl
     env = rl.functional("pursuit", backend="numpy")
     state, obs = env.reset(np.array([3, 4], np.uint32))
-    done = False
-    for k in range(80):
+    done, steps = False, 0
+    for _ in range(80):
+        steps += 1
         rel = obs[:, 2:4]
         a = rel / np.linalg.norm(rel, axis=1, keepdims=True)
         state, obs, r, d, info = env.step_env(state, a)
@@ -128,7 +129,7 @@ def test_pursuit_capture_terminates_the_episode():
             done = True
             assert np.allclose(r, r[0]) and r[0] > 9.0          # the capture bonus
             break
-    assert done and k < 79
+    assert done and steps < 80
 
 
 def test_navigation_env_default_works_as_is():

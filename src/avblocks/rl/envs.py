@@ -300,7 +300,6 @@ def _make_vector_class():
                 self.state = [o[0] for o in outs]
                 obs = np.stack([o[1] for o in outs])
                 r = np.stack([o[2] for o in outs])
-                d = np.stack([o[3] for o in outs])
                 info = {k: np.stack([np.asarray(o[4][k]) for o in outs]) for k in outs[0][4]}
             r = np.asarray(r)
             term = np.asarray(info["terminated"], dtype=bool)

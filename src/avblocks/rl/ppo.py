@@ -142,7 +142,9 @@ def make_update(env, cfg, opt):
         adv = b["adv"]
         w = b["alive"].astype(jnp.float32)
         wsum = jnp.maximum(jnp.sum(w), 1.0)
-        adv = (adv - jnp.sum(adv * w) / wsum) / (jnp.sqrt(jnp.sum(w * (adv - jnp.sum(adv * w) / wsum) ** 2) / wsum) + 1e-8)
+        mu = jnp.sum(adv * w) / wsum
+        sd = jnp.sqrt(jnp.sum(w * (adv - mu) ** 2) / wsum)
+        adv = (adv - mu) / (sd + 1e-8)
         pg = -jnp.minimum(ratio * adv, jnp.clip(ratio, 1 - cfg.clip, 1 + cfg.clip) * adv)
         v = value(p, b["obs"])
         vl = 0.5 * (v - b["ret"]) ** 2

@@ -64,7 +64,7 @@ def command_source(d, controller, n, obs_ref, name="action"):
     if controller == "action":
         return d.add(Action(n, 2, low=-1.0, high=1.0), name=name), "action"
     from avblocks.controllers import Policy
-    pol = d.add(Policy.load(str(controller)), name=name)
+    pol = d.add(Policy.load(str(controller)), name="policy")
     d.connect(obs_ref, pol.obs)
     return pol, "cmd"
 

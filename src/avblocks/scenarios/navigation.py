@@ -49,8 +49,8 @@ from avblocks.vehicles import SingleIntegrator
 from ._task import (
     command_source,
     free_points,
-    others_index,
     inside,
+    others_index,
     pairwise,
     polygon_edges,
     ray_ranges,

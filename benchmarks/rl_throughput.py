@@ -70,7 +70,7 @@ def pure_jax_runner(E, T, n=4):
     from avblocks.scenarios.navigation import OBSTACLES
     edges = jnp.asarray(K.polygon_edges([K.rectangle(*o) for o in OBSTACLES]), jnp.float32)
     half, r, rmax, dt = 1.5, 0.1, 1.0, 0.1
-    angles = jnp.linspace(-jnp.pi, jnp.pi, 8, endpoint=False)
+    angles = jnp.linspace(-jnp.pi, jnp.pi, 12, endpoint=False)
     idx = K.others_index(n)
 
     def task(p, g, prev, hit):

@@ -49,7 +49,7 @@ if small:
     cfg = apg.Config(num_envs=8, updates=min(updates, 3), hidden=(32, 32), horizon=20)
 
 env = rl.functional("navigation")
-RAYS, MAX_RANGE = 8, 1.0
+RAYS, MAX_RANGE = 12, 1.0
 
 
 def smooth_cost(obs, reward, info, action, xp):

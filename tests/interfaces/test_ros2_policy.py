@@ -27,7 +27,7 @@ NAMES = "r1,r2,r3,r4"
 
 
 def _policy(path):
-    obs_dim = 4 + 8 + 2 * 3
+    obs_dim = 4 + 12 + 2 * 3
     w = np.zeros((obs_dim, 2))
     w[0, 0] = w[1, 1] = 2.0                     # cmd = clip(2 * (goal - p))
     return Policy({"w0": w, "b0": np.zeros(2)}, output="clip").save(path)

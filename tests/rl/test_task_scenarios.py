@@ -136,7 +136,14 @@ def test_navigation_env_default_works_as_is():
     from avblocks import rl
     env = rl.parallel_env("navigation")
     obs, _ = env.reset(seed=0)
-    assert len(obs) == 4 and obs["agent_0"].shape == (12,)
+    assert len(obs) == 4 and obs["agent_0"].shape == (4 + 12 + 6,)
     o, r, te, tr, info = env.step({a: np.zeros(2, np.float32) for a in env.agents})
-    # at rest, the progress reward is zero (no collision at a free start)
-    assert all(abs(v) < 1e-6 for v in r.values())
+    # at rest no progress and no collision at a free start: only the
+    # closeness warning, recomputed here from the positions
+    p = np.stack([o[a][2:4] for a in env.possible_agents]) * 1.5
+    _, edges = _world()
+    dd = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag([np.inf] * 4)
+    near = np.clip(1 - (dd - 0.2) / 0.2, 0, 1).sum(1)
+    gap = np.minimum(T.segment_distance(p, edges, np).min(-1), (1.5 - np.abs(p)).min(-1)) - 0.1
+    want = -0.5 * (near + np.clip(1 - gap / 0.2, 0, 1))
+    np.testing.assert_allclose([r[a] for a in env.possible_agents], want, atol=1e-5)

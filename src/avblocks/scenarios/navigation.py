@@ -22,6 +22,9 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
 - **reward** (per agent): ``progress * (d_prev - d)`` (``d`` the distance
   to the goal, over the last control step) ``+ 0.1 * [d < goal_radius]``
   ``- collision * [touching an obstacle, a wall or another agent]``
+  ``- proximity * closeness`` where closeness sums ``clip(1 - gap/margin,
+  0, 1)`` over the other agents and the nearest obstacle or wall (``gap``:
+  distance minus the contact distance; a smooth warning before contact)
   (``task.reward``).
 - **done**: never; episodes last ``max_steps`` control steps (default 60
   of 0.1 s).
@@ -85,12 +88,13 @@ class NavigationTask(Block):
     Parameters
     ----------
     edges : (E, 4) numeric parameter, the obstacles' edges.
-    half, radius, goal_radius, max_range, progress, collision : numeric.
+    half, radius, goal_radius, max_range, progress, collision, proximity,
+    margin : numeric (module docstring).
     rays : int (structural), number of range rays.
     """
 
     def __init__(self, n, edges, *, rays=8, half=1.5, radius=0.1, goal_radius=0.15,
-                 max_range=1.0, progress=5.0, collision=2.5):
+                 max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2):
         super().__init__()
         self.n = n
         self.rays = int(rays)
@@ -102,6 +106,8 @@ class NavigationTask(Block):
         self.declare_parameter("max_range", max_range, bounds=(0, None), unit="m")
         self.declare_parameter("progress", progress, bounds=(0, None))
         self.declare_parameter("collision", collision, bounds=(0, None))
+        self.declare_parameter("proximity", proximity, bounds=(0, None))
+        self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_discrete_state("prev", np.zeros(n), dtype="float64")
@@ -122,6 +128,18 @@ class NavigationTask(Block):
         agents = xp.any(pairwise(p, xp) < 2 * r, axis=-1)
         return near_edge | inside(p, edges, xp) | wall | agents
 
+    def _closeness(self, p, xp):
+        """Sum over the other agents and the nearest obstacle or wall of
+        ``clip(1 - gap / margin, 0, 1)`` (gap: distance minus the contact
+        distance): a smooth warning before contact."""
+        r, m = self.radius, self.margin
+        gap_a = pairwise(p, xp) - 2 * r
+        near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
+        gap_o = xp.min(segment_distance(p, self.edges, xp), axis=-1) - r
+        gap_w = xp.min(self.half - xp.abs(p), axis=-1) - r
+        gap = xp.minimum(gap_o, gap_w)
+        return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
+
     def output(self, t, x, u, xp):
         p, g = u["position"], u["goals"]
         rel = g - p
@@ -132,7 +150,8 @@ class NavigationTask(Block):
         obs = xp.concatenate([rel, p / self.half, ranges / self.max_range, rel_o], axis=-1)
         col = self._collision(p, xp)
         at = d < self.goal_radius
-        reward = self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
+        reward = (self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
+                  - self.proximity * self._closeness(p, xp))
         return {"obs": obs, "reward": reward, "done": xp.zeros((self.n,), dtype=bool),
                 "collision": col, "at_goal": at, "success": at & ~(x["hit"] | col)}
 
@@ -198,7 +217,7 @@ def _draw(n, half, edges, seed, clearance):
     return p0, g
 
 
-def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=8,
+def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
                  max_range=1.0, clearance=0.25, obstacles=OBSTACLES, controller="scripted",
                  seed=1, t_final=6.0, dt=0.1):
     """The navigation diagram and its simulation settings (module docstring)."""
@@ -232,7 +251,7 @@ def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, ra
     return d, sim
 
 
-def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=8,
+def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
             max_range=1.0, clearance=0.25, obstacles=OBSTACLES):
     """The learning task (module docstring): settings for :class:`avblocks.rl.Task`."""
     n, h = int(agents), float(half)
@@ -245,8 +264,8 @@ def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=8,
     def reset(key, xp):
         from avblocks.core import rng
         k1, k2 = rng.split(key, xp, 2)
-        p0 = free_points(k1, n, h, edges, c, xp, min_sep=4 * float(radius))
-        g = free_points(k2, n, h, edges, c, xp, min_sep=4 * float(radius))
+        p0 = free_points(k1, n, h, edges, c, xp, min_sep=5 * float(radius))
+        g = free_points(k2, n, h, edges, c, xp, min_sep=5 * float(radius))
         return {"fleet.position": p0, "goals.value": g,
                 "task.prev": xp.sqrt(xp.sum((g - p0) ** 2, -1) + 1e-12)}
 

@@ -127,3 +127,15 @@ def test_wrong_port_is_named():
     from avblocks.core.errors import AvError
     with pytest.raises(AvError, match="nosuch"):
         rl.parallel_env("spread", reward="task.nosuch")
+
+
+def test_set_param_applies_from_the_next_episode_and_is_checked():
+    from avblocks.core.errors import ParameterError
+    env = rl.parallel_env("spread")
+    env.reset(seed=1)
+    env.set_param("speed.k", 0.25)
+    obs, _ = env.reset(seed=1)
+    o, *_ = env.step({a: np.array([0.0, 1.0], np.float32) for a in env.agents})
+    np.testing.assert_allclose(o["agent_1"][:2] - obs["agent_1"][:2], [0.0, 0.025], atol=1e-6)
+    with pytest.raises(ParameterError):
+        env.set_param("task.radius", -1.0)               # below its bound

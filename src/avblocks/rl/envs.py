@@ -45,6 +45,13 @@ def _act_box(fenv, shape):
     return spaces.Box(lo, hi, dtype=np.float32)
 
 
+def _set_param(env, path, value):
+    """Set a numeric parameter ``"block.param"`` for the episodes that
+    follow (validated now; applied at the next reset)."""
+    key, v = env.fenv.validate_param(path, value)
+    env.params = {**(env.params or {}), key: v}
+
+
 class _Stepper:
     """Single-copy reset/step on either engine, returning NumPy arrays."""
 
@@ -123,6 +130,10 @@ def _make_parallel_class():
 
         def observation_space(self, agent):
             return self._obs_spaces[agent]
+
+        def set_param(self, path, value):
+            """Set a numeric parameter for the following episodes."""
+            _set_param(self, path, value)
 
         def action_space(self, agent):
             return self._act_spaces[agent]
@@ -207,6 +218,10 @@ def _make_gym_class():
             self._stepper = _Stepper(fenv)
             self.render_mode = None
 
+        def set_param(self, path, value):
+            """Set a numeric parameter for the following episodes."""
+            _set_param(self, path, value)
+
         def reset(self, *, seed=None, options=None):
             super().reset(seed=seed)
             if seed is not None:
@@ -262,6 +277,10 @@ def _make_vector_class():
                 self._reset = jax.jit(jax.vmap(fenv.reset, in_axes=(0, None)))
                 self._step = jax.jit(jax.vmap(fenv.step, in_axes=(0, 0, 0, None)))
             self.render_mode = None
+
+        def set_param(self, path, value):
+            """Set a numeric parameter for the following episodes (all copies)."""
+            _set_param(self, path, value)
 
         def _keys(self, k):
             self._key, sub = _engine.rng.split(self._key, np, 2)

@@ -213,6 +213,13 @@ class FunctionalEnv:
         return (f"FunctionalEnv({self.n} agents, obs {self.obs_dim}, act {self.act_dim}, "
                 f"{self.max_steps} steps of {self.control_dt:g} s, {self.backend})")
 
+    def validate_param(self, path, value):
+        """``("block.param", checked value)``: the parameter's declared shape
+        and bounds (ParameterError naming the block otherwise)."""
+        i, name = self.cd.param_index(path)
+        spec = self.cd.blocks[i]._params[name]
+        return f"{self.cd.names[i]}.{name}", spec.validate(value, self.cd.names[i])
+
     # ------------------------------------------------------------ helpers
     def _asarray(self, v, like=None):
         xp = self.xp

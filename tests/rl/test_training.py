@@ -40,3 +40,21 @@ def test_apg_improves_the_return_on_spread_and_runs_as_a_block(tmp_path):
     b = av.simulate(d, **sim, backend="jax")
     np.testing.assert_allclose(b["fleet.position"], a["fleet.position"], atol=1e-8)
     assert float(np.asarray(a["task.reward"])[-1, 0]) > float(np.asarray(a["task.reward"])[0, 0])
+
+
+def test_gradient_through_a_stopped_agent_is_finite():
+    # SingleIntegrator's speed limit at zero velocity: d|v|/dv is infinite
+    # at 0; the limit must not turn a zero cotangent into NaN
+    import jax.numpy as jnp
+
+    from avblocks.vehicles._common import clip_norm
+
+    def f(v):
+        return jnp.sum(clip_norm(v, jnp.array([1.0, 1.0]), jnp) * 0.0 + clip_norm(v, 1.0, jnp))
+
+    g = jax.grad(f)(jnp.zeros((2, 2)))
+    assert np.isfinite(np.asarray(g)).all()
+    np.testing.assert_allclose(np.asarray(g), 1.0)          # identity below the limit
+    v = jnp.array([[3.0, 4.0]])
+    np.testing.assert_allclose(np.asarray(clip_norm(v, jnp.array([1.0]), jnp)), [[0.6, 0.8]],
+                               rtol=1e-6)

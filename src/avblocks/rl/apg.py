@@ -56,13 +56,13 @@ def _neg_reward(obs, reward, info, action, xp):
     return -reward
 
 
-def make_step(env, cfg, opt, cost=None):
-    """The jitted ``update(carry) -> (carry, metrics)``."""
+def episode_loss_fn(env, cfg, cost=None):
+    """``loss(w, key) -> (mean cost, (return, success))`` of one episode."""
     jax = _engine.jax()
     jnp = jax.numpy
     cost = cost or _neg_reward
     lo, hi = jnp.asarray(env.action_low), jnp.asarray(env.action_high)
-    T, E = env.max_steps, cfg.num_envs
+    T = env.max_steps
     windows = -(-T // cfg.horizon)
 
     def act(w, obs):
@@ -88,6 +88,16 @@ def make_step(env, cfg, opt, cost=None):
             ret = ret + jnp.sum(rs, axis=0)
             succ = ss[-1]
         return total / (T * env.n), (jnp.mean(ret), jnp.mean(succ.astype(jnp.float32)))
+
+    return episode_loss
+
+
+def make_step(env, cfg, opt, cost=None):
+    """The jitted ``update(carry) -> (carry, metrics)``."""
+    jax = _engine.jax()
+    jnp = jax.numpy
+    E = cfg.num_envs
+    episode_loss = episode_loss_fn(env, cfg, cost)
 
     def loss(w, key):
         vals, (ret, succ) = jax.vmap(episode_loss, in_axes=(None, 0))(

@@ -145,7 +145,7 @@ def ray_ranges(p, angles, edges, half, discs, disc_r, max_range, xp, skip_self=T
     proj = xp.einsum("nmk,rk->nrm", oc, d)                     # (n, R, m)
     c2 = xp.sum(oc * oc, -1)[:, None, :] - proj * proj
     disc = disc_r * disc_r - c2
-    th = proj - xp.sqrt(xp.maximum(disc, 0.0))
+    th = proj - xp.sqrt(xp.maximum(disc, 1e-12))       # (no inf gradient at 0)
     hit = (disc >= 0) & (th >= 0)
     if skip_self:
         n = p.shape[0]

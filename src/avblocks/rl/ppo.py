@@ -53,6 +53,7 @@ class Config:
     max_grad_norm: float = 0.5
     log_std0: float = -0.5
     activation: str = "tanh"
+    anneal: bool = True        # learning rate linearly to 0 over ``updates``
 
 
 @dataclass
@@ -213,8 +214,11 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     import optax
     jax = _engine.jax()
     t0 = time.perf_counter()
+    lr = cfg.lr
+    if cfg.anneal:
+        lr = optax.linear_schedule(cfg.lr, 0.0, cfg.updates * cfg.epochs * cfg.minibatches)
     opt = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm),
-                      optax.adam(cfg.lr, eps=1e-5))
+                      optax.adam(lr, eps=1e-5))
     p = init_params(env, cfg, seed)
     carry = (p, opt.init(p), jax.random.PRNGKey(seed))
     update = make_update(env, cfg, opt)

@@ -11,35 +11,41 @@ from avblocks import rl  # noqa: E402
 from avblocks.rl import apg, ppo  # noqa: E402
 
 
-def test_ppo_improves_the_return_on_spread():
-    env = rl.functional("spread", max_steps=25)
-    cfg = ppo.Config(num_envs=16, updates=40, hidden=(32, 32), lr=1e-3)
+def test_ppo_improves_the_return_on_navigation():
+    env = rl.functional("navigation", max_steps=30)
+    cfg = ppo.Config(num_envs=16, updates=30, hidden=(32, 32), lr=1e-3)
     res = ppo.train(env, cfg, seed=0)
     r = np.asarray(res.curve["return"])
-    assert r[-5:].mean() > r[:5].mean() + 0.2 * abs(r[:5].mean())
-    # deterministic evaluation agrees: better than the untrained (zero-output) actor
-    zero = {k: np.zeros_like(v) for k, v in res.actor.items()}
-    assert ppo.evaluate(env, res.actor, 32)["return"] > ppo.evaluate(env, zero, 32)["return"]
+    assert r[-5:].mean() > r[:5].mean() + 5.0          # -11 -> about 0 here
+    # deterministic evaluation agrees: better than the untrained actor
+    from avblocks.rl.ppo import init_params
+    p0 = {k: np.asarray(v) for k, v in init_params(env, cfg, 0)["actor"].items()}
+    assert ppo.evaluate(env, res.actor, 32)["return"] > ppo.evaluate(env, p0, 32)["return"] + 1
 
 
-def test_apg_improves_the_return_on_spread_and_runs_as_a_block(tmp_path):
+def _to_go(obs, reward, info, action, xp):
+    return xp.sqrt(xp.sum(obs[:, 0:2] ** 2, -1) + 1e-9)       # distance to the goal
+
+
+def test_apg_lowers_its_cost_and_runs_as_a_block(tmp_path):
     import avblocks as av
     from avblocks.controllers import save_policy
-    from avblocks.scenarios import spread
-    env = rl.functional("spread", max_steps=25)
-    cfg = apg.Config(num_envs=16, updates=25, hidden=(32,), lr=3e-3, horizon=25)
-    res = apg.train(env, cfg, seed=0)
+    from avblocks.scenarios import navigation
+    env = rl.functional("navigation", max_steps=30)
+    cfg = apg.Config(num_envs=16, updates=30, hidden=(32,), lr=3e-3, horizon=10)
+    res = apg.train(env, cfg, seed=0, cost=_to_go)
     c = np.asarray(res.curve["cost"])
-    assert c[-3:].mean() < 0.7 * c[:3].mean()
-    ev = ppo.evaluate(env, res.actor, 32, output="tanh")
-    assert np.isclose(ev["return"], -25 * np.mean(c[-1:]), rtol=0.5)
-    # the same weights in the scenario's diagram, NumPy engine == the env's rollout
+    assert np.isfinite(c).all() and c[-3:].mean() < 0.7 * c[:3].mean()
+    # the same weights in the scenario's diagram: NumPy engine == compiled
     path = save_policy(tmp_path / "pi.npz", res.actor, output="tanh")
-    d, sim = spread.make_diagram(controller=str(path))
+    d, sim = navigation.make_diagram(controller=str(path), seed=2)
     a = av.simulate(d, **sim)
     b = av.simulate(d, **sim, backend="jax")
     np.testing.assert_allclose(b["fleet.position"], a["fleet.position"], atol=1e-8)
-    assert float(np.asarray(a["task.reward"])[-1, 0]) > float(np.asarray(a["task.reward"])[0, 0])
+    g = np.asarray(a["goals.y"])[0]
+    p = np.asarray(a["fleet.position"])
+    assert np.linalg.norm(p[-1] - g, axis=1).mean() < 0.8 * np.linalg.norm(p[0] - g,
+                                                                           axis=1).mean()
 
 
 def test_gradient_through_a_stopped_agent_is_finite():

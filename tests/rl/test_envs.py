@@ -139,3 +139,17 @@ def test_set_param_applies_from_the_next_episode_and_is_checked():
     np.testing.assert_allclose(o["agent_1"][:2] - obs["agent_1"][:2], [0.0, 0.025], atol=1e-6)
     with pytest.raises(ParameterError):
         env.set_param("task.radius", -1.0)               # below its bound
+
+
+def test_step_params_keep_the_episode_draws():
+    # parameters passed at every step change only what they name: the
+    # landmarks drawn at reset stay
+    env = rl.parallel_env("spread", params={"speed.k": 0.5})
+    obs, _ = env.reset(seed=4)
+    lm0 = obs["agent_0"][2:8] + np.tile(obs["agent_0"][:2], 3)
+    for _ in range(3):
+        o, *_ = env.step({a: np.array([0.3, -0.2], np.float32) for a in env.agents})
+    lm1 = o["agent_0"][2:8] + np.tile(o["agent_0"][:2], 3)
+    np.testing.assert_allclose(lm1, lm0, atol=1e-6)
+    marks = env.fenv.params["landmarks.value"]
+    assert not np.allclose(lm0.reshape(3, 2), marks, atol=1e-3)     # drawn, not defaults

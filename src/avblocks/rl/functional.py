@@ -233,8 +233,11 @@ class FunctionalEnv:
         return Signals({f"{cd.names[i]}.{o}": v for i, y in enumerate(Y)
                         for o, v in y.items()})
 
-    def _params(self, params):
-        theta = {k: self.xp.asarray(v) for k, v in self.params.items()}
+    def _params(self, params, base=None):
+        """``base`` (default: every declared value) with ``params`` set."""
+        if base is None:
+            base = {k: self.xp.asarray(v) for k, v in self.params.items()}
+        theta = dict(base)
         for path, v in (params or {}).items():
             i, name = self.cd.param_index(path)
             key = f"{self.cd.names[i]}.{name}"
@@ -315,7 +318,8 @@ class FunctionalEnv:
         """One control step without automatic reset:
         ``(state, obs, reward, done, info)``."""
         xp, eng, solver = self.xp, self._eng, self._solver
-        theta = state.theta if params is None else {**state.theta, **self._params(params)}
+        # only the given parameters change: the episode's drawn values stay
+        theta = state.theta if params is None else self._params(params, state.theta)
         X = list(state.X)
         ai = self._ai
         a = xp.reshape(xp.asarray(action), (self.n, self.act_dim))

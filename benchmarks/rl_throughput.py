@@ -84,7 +84,12 @@ def pure_jax_runner(E, T, n=4):
                | jnp.any(jnp.abs(p) > half - r, -1)
                | jnp.any(K.pairwise(p, jnp) < 2 * r, -1))
         at = d < 0.15
-        reward = 5.0 * (prev - d) + 0.1 * at - 2.5 * col
+        gap_a = K.pairwise(p, jnp) - 2 * r
+        near = jnp.sum(jnp.clip(1.0 - gap_a / 0.2, 0.0, 1.0), -1)
+        gap = jnp.minimum(jnp.min(K.segment_distance(p, edges, jnp), -1),
+                          jnp.min(half - jnp.abs(p), -1)) - r
+        close = near + jnp.clip(1.0 - gap / 0.2, 0.0, 1.0)
+        reward = 5.0 * (prev - d) + 0.1 * at - 2.5 * col - 0.5 * close
         return obs, reward, d, hit | col
 
     def episode(key):

@@ -15,8 +15,10 @@ Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each:
 
 Each figure: the best of ``--repeats`` timed runs after one warm-up (the
 compile excluded). Each step's observation is summed into the result
-(as a policy would read it), so XLA cannot drop the sensing. Run: ``python benchmarks/rl_throughput.py [--quick]``;
-prints a markdown table and writes rl_throughput.png.
+(as a policy would read it), so XLA cannot drop the sensing.
+
+Run: ``python benchmarks/rl_throughput.py [--quick]``; prints a markdown
+table and writes rl_throughput.png.
 """
 
 from __future__ import annotations

@@ -5,7 +5,8 @@ LeaderFollower, RandomWalk, HolonomicToUnicycle (+ OffAxisPoint).
 Single integrators (``position`` in, ``velocity`` out): HolonomicPointToPoint,
 Consensus, DisplacementFormation, CyclicPursuit, Coverage,
 CollisionAvoidance. Double integrators (``accel`` out): Flocking.
-Discrete-event: Supervisor, AgentModes. Learned: Policy (obs in, cmd out; mlp). Formation helpers: formation() etc.
+Discrete-event: Supervisor, AgentModes.
+Learned: Policy (obs in, cmd out; mlp). Formation helpers: formation() etc.
 """
 
 from .collision_avoidance import CollisionAvoidance, safety_filter

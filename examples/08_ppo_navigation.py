@@ -5,10 +5,10 @@
 ``rl.functional("navigation")`` is the navigation scenario's diagram as pure
 ``reset``/``step`` functions on the compiled (JAX) engine. ``rl.ppo.train``
 runs independent PPO with one shared actor and critic (every agent's
-transition a sample): each update runs 64 episodes of 60 steps in lockstep
-(one vmapped ``lax.scan``), then 4 epochs of 4 minibatches of Adam, all in
-one jitted call; the learning rate decays linearly to zero over UPDATES
-updates (default 2500, about 8 minutes here). Training stops after them or
+transition a sample): each update runs 128 episodes of 60 steps in
+lockstep (one vmapped ``lax.scan``), then 4 epochs of 8 minibatches of
+Adam, all in one jitted call; the learning rate decays linearly to zero
+over UPDATES updates (default 2500, about 8.5 minutes here). Training stops after them or
 after MINUTES of wall time (default 10, compile included).
 
 The trained actor is evaluated on 100 new episodes (mean action, no
@@ -40,7 +40,7 @@ from avblocks.scenarios import navigation  # noqa: E402
 updates = int(sys.argv[1]) if len(sys.argv) > 1 else 2500
 minutes = float(sys.argv[2]) if len(sys.argv) > 2 else 10.0
 small = bool(os.environ.get("AVBLOCKS_EXAMPLE_SMALL"))
-cfg = ppo.Config(num_envs=64, updates=updates)
+cfg = ppo.Config(num_envs=128, minibatches=8, updates=updates)
 if small:
     cfg = ppo.Config(num_envs=8, updates=min(updates, 3), hidden=(32, 32))
 

@@ -1,5 +1,6 @@
 """Generic blocks: sources, math, continuous and discrete, routing over agents."""
 
+from .action import Action
 from .continuous import Integrator
 from .discrete import UnitDelay, ZeroOrderHold
 from .function import Function
@@ -9,7 +10,7 @@ from .routing import Concatenate, Demux, Gather, Mux, Select
 from .sources import Clock, Constant, Sine, Step
 
 __all__ = [
-    "Constant", "Clock", "Step", "Sine", "Gain", "Sum", "Product", "Integrator",
+    "Action", "Constant", "Clock", "Step", "Sine", "Gain", "Sum", "Product", "Integrator",
     "Saturation", "DeadZone", "RateLimiter", "UnitDelay", "ZeroOrderHold",
     "Select", "Gather", "Concatenate", "Mux", "Demux", "Function",
 ]

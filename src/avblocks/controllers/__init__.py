@@ -5,7 +5,8 @@ LeaderFollower, RandomWalk, HolonomicToUnicycle (+ OffAxisPoint).
 Single integrators (``position`` in, ``velocity`` out): HolonomicPointToPoint,
 Consensus, DisplacementFormation, CyclicPursuit, Coverage,
 CollisionAvoidance. Double integrators (``accel`` out): Flocking.
-Discrete-event: Supervisor, AgentModes. Formation helpers: formation() etc.
+Discrete-event: Supervisor, AgentModes.
+Learned: Policy (obs in, cmd out; mlp). Formation helpers: formation() etc.
 """
 
 from .collision_avoidance import CollisionAvoidance, safety_filter
@@ -19,6 +20,7 @@ from .holonomic_point_to_point import HolonomicPointToPoint, holonomic_point_to_
 from .leader_follower import LeaderFollower, leader_follower_law, leader_follower_terms
 from .offaxis import HolonomicToUnicycle, OffAxisPoint, holonomic_to_unicycle, off_axis_point
 from .point_to_point import PointToPoint, point_to_point_law
+from .policy import Policy, mlp, mlp_init, save_policy
 from .random_walk import Distribution, RandomWalk, random_walk_cmd
 from .supervisor import AgentModes, Supervisor
 
@@ -35,4 +37,5 @@ __all__ = [
     "Supervisor", "AgentModes",
     "RandomWalk", "Distribution", "random_walk_cmd",
     "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
+    "Policy", "mlp", "mlp_init", "save_policy",
 ]

@@ -1,0 +1,310 @@
+"""Navigation (a learning task): N agents reach their goals among polygon
+obstacles, sensing with range rays, without collisions.
+
+Set-up
+------
+``agents`` single integrators (``vehicles.SingleIntegrator``, speed
+``speed`` per unit of command) in the square arena ``[-half, half]^2``
+with rectangular obstacles (``obstacles``: a list of ``(cx, cy, w, h)``).
+Each agent has a goal (``goals.value``, a ``blocks.Constant``). Each agent
+carries ``rays`` range rays, evenly spread in the world frame, reading the
+distance to the first obstacle edge, arena wall or other agent (disc of
+``radius``) up to ``max_range`` (written with ``xp`` in the task block;
+checked against shapely in the tests).
+
+Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
+------------------------------------------------------------------------
+- **action** (per agent, 2): velocity command in ``[-1, 1]^2`` times
+  ``speed`` [m/s].
+- **observation** (per agent, ``4 + rays + 2(N-1)``): goal relative to
+  the agent (m), own position divided by ``half``, the ray ranges divided
+  by ``max_range``, the other agents relative to it (m) (``task.obs``).
+- **reward** (per agent): ``progress * (d_prev - d)`` (``d`` the distance
+  to the goal, over the last control step) ``+ 0.1 * [d < goal_radius]``
+  ``- collision * [touching an obstacle, a wall or another agent]``
+  ``- proximity * closeness`` where closeness sums ``clip(1 - gap/margin,
+  0, 1)`` over the other agents and the nearest obstacle or wall (``gap``:
+  distance minus the contact distance; a smooth warning before contact)
+  (``task.reward``).
+- **done**: never; episodes last ``max_steps`` control steps (default 60
+  of 0.1 s).
+- **success** (per agent, ``task.success``): at its goal (within
+  ``goal_radius``) and no collision so far in the episode. The success
+  rate of a policy is the fraction of agents with ``success`` at the last
+  step, over evaluation episodes.
+
+Starts and goals are drawn anew at every reset, at least ``clearance`` from
+obstacles and walls and ``4 * radius`` apart. ``avblocks run navigation``
+runs the scripted controller (goal attraction plus repulsion from the
+nearest obstacle points and agents); ``controller="policy.npz"`` runs a
+trained :class:`~avblocks.controllers.Policy` instead.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from avblocks.blocks import Constant, Function, Gain
+from avblocks.core.block import Block
+from avblocks.core.diagram import Diagram
+from avblocks.vehicles import SingleIntegrator
+
+from ._task import (
+    command_source,
+    free_points,
+    inside,
+    others_index,
+    pairwise,
+    polygon_edges,
+    ray_ranges,
+    rectangle,
+    segment_distance,
+)
+
+MOVIE = {"pose": "fleet.position", "trail": 3.0}
+
+OBSTACLES = ((0.0, 0.0, 0.8, 0.5), (-0.9, 0.8, 0.5, 0.3), (0.9, -0.8, 0.3, 0.6))
+
+
+class NavigationTask(Block):
+    """Observation, reward, collisions and success of the navigation task.
+
+    Ports
+    -----
+    position : in, (N, 2) [m]
+    goals : in, (N, 2) [m]
+    obs : out, (N, 4 + rays + 2(N-1))
+    reward : out, (N,)
+    done : out, (N,) bool (always false)
+    collision : out, (N,) bool: touching an obstacle, a wall or an agent now
+    at_goal : out, (N,) bool
+    success : out, (N,) bool: at the goal and no collision so far
+
+    State
+    -----
+    prev : discrete (N,), distance to the goal at the previous step
+    hit : discrete (N,) bool, a collision happened this episode
+
+    Parameters
+    ----------
+    edges : (E, 4) numeric parameter, the obstacles' edges.
+    half, radius, goal_radius, max_range, progress, collision, proximity,
+    margin : numeric (module docstring).
+    rays : int (structural), number of range rays.
+    """
+
+    def __init__(self, n, edges, *, rays=8, half=1.5, radius=0.1, goal_radius=0.15,
+                 max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2):
+        super().__init__()
+        self.n = n
+        self.rays = int(rays)
+        self.angles = np.linspace(-np.pi, np.pi, self.rays, endpoint=False)
+        self.declare_parameter("edges", np.asarray(edges, float).reshape(-1, 4), unit="m")
+        self.declare_parameter("half", half, bounds=(0, None), unit="m")
+        self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
+        self.declare_parameter("goal_radius", goal_radius, bounds=(0, None), unit="m")
+        self.declare_parameter("max_range", max_range, bounds=(0, None), unit="m")
+        self.declare_parameter("progress", progress, bounds=(0, None))
+        self.declare_parameter("collision", collision, bounds=(0, None))
+        self.declare_parameter("proximity", proximity, bounds=(0, None))
+        self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
+        self.declare_input("position", (n, 2), unit="m")
+        self.declare_input("goals", (n, 2), unit="m")
+        self.declare_discrete_state("prev", np.zeros(n), dtype="float64")
+        self.declare_discrete_state("hit", np.zeros(n, dtype=bool))
+        self.idx = others_index(n)
+        self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)))
+        self.declare_output("reward", (n,))
+        self.declare_output("done", (n,), "bool")
+        self.declare_output("collision", (n,), "bool")
+        self.declare_output("at_goal", (n,), "bool")
+        self.declare_output("success", (n,), "bool")
+
+    def _collision(self, p, xp):
+        edges = self.edges
+        r = self.radius
+        near_edge = xp.min(segment_distance(p, edges, xp), axis=-1) < r
+        wall = xp.any(xp.abs(p) > self.half - r, axis=-1)
+        agents = xp.any(pairwise(p, xp) < 2 * r, axis=-1)
+        return near_edge | inside(p, edges, xp) | wall | agents
+
+    def _closeness(self, p, xp):
+        """Sum over the other agents and the nearest obstacle or wall of
+        ``clip(1 - gap / margin, 0, 1)`` (gap: distance minus the contact
+        distance): a smooth warning before contact."""
+        r, m = self.radius, self.margin
+        gap_a = pairwise(p, xp) - 2 * r
+        near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
+        gap_o = xp.min(segment_distance(p, self.edges, xp), axis=-1) - r
+        gap_w = xp.min(self.half - xp.abs(p), axis=-1) - r
+        gap = xp.minimum(gap_o, gap_w)
+        return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
+
+    def output(self, t, x, u, xp):
+        p, g = u["position"], u["goals"]
+        rel = g - p
+        d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
+        ranges = ray_ranges(p, self.angles, self.edges, self.half, p, self.radius,
+                            self.max_range, xp)
+        rel_o = xp.reshape(p[self.idx] - p[:, None, :], (self.n, -1))
+        obs = xp.concatenate([rel, p / self.half, ranges / self.max_range, rel_o], axis=-1)
+        col = self._collision(p, xp)
+        at = d < self.goal_radius
+        reward = (self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
+                  - self.proximity * self._closeness(p, xp))
+        return {"obs": obs, "reward": reward, "done": xp.zeros((self.n,), dtype=bool),
+                "collision": col, "at_goal": at, "success": at & ~(x["hit"] | col)}
+
+    def update(self, t, x, u, xp):
+        p, g = u["position"], u["goals"]
+        rel = g - p
+        return {"prev": xp.sqrt(xp.sum(rel * rel, -1) + 1e-12),
+                "hit": x["hit"] | self._collision(p, xp)}
+
+
+def scripted_law(edges, half, speed, radius):
+    """The hand-written controller: unit attraction to the goal (slowing
+    within 0.3 m), repulsion from the nearest point of each obstacle edge,
+    the walls and other agents within 0.35 m, plus a sideways term that
+    slides around an obstacle in front. Returns ``f(t, position, goals, xp)``
+    giving a command in ``[-1, 1]^2``."""
+    edges = np.asarray(edges, float)
+    d0 = 0.35
+
+    def law(t, position, goals, xp):
+        p = position
+        rel = goals - p
+        dist = xp.sqrt(xp.sum(rel * rel, -1, keepdims=True) + 1e-12)
+        att = rel / dist * xp.minimum(1.0, dist / 0.3)
+        # nearest points on edges
+        a, b = edges[:, :2], edges[:, 2:]
+        ab = b - a
+        ap = p[:, None, :] - a
+        s = xp.clip(xp.sum(ap * ab, -1) / xp.sum(ab * ab, -1), 0.0, 1.0)
+        away = ap - s[..., None] * ab                              # (n, E, 2)
+        da = xp.sqrt(xp.sum(away * away, -1) + 1e-12)
+        w = xp.where(da < d0, (1.0 / da - 1.0 / d0) * 0.15, 0.0)
+        rep = xp.sum(away / da[..., None] * w[..., None], axis=1)
+        # walls
+        for k in (0, 1):
+            lo = p[:, k] + half
+            hi = half - p[:, k]
+            f = xp.where(lo < d0, (1.0 / lo - 1.0 / d0) * 0.15, 0.0) - \
+                xp.where(hi < d0, (1.0 / hi - 1.0 / d0) * 0.15, 0.0)
+            rep = rep + f[:, None] * np.eye(2)[k]
+        # agents
+        dp = p[:, None, :] - p[None, :, :]
+        dd = xp.sqrt(xp.sum(dp * dp, -1) + 1e-12) + np.eye(p.shape[0]) * 1e3
+        wa = xp.where(dd < d0, (1.0 / dd - 1.0 / d0) * 0.1, 0.0)
+        rep = rep + xp.sum(dp / dd[..., None] * wa[..., None], axis=1)
+        # slide: the repulsion turned 90 degrees towards the goal's side
+        perp = xp.stack([-rep[:, 1], rep[:, 0]], axis=-1)
+        side = xp.sign(xp.sum(perp * rel, -1, keepdims=True) + 1e-9)
+        v = att + rep + 0.5 * side * perp
+        nv = xp.sqrt(xp.sum(v * v, -1, keepdims=True) + 1e-12)
+        return v / xp.maximum(nv, 1.0)
+
+    return law
+
+
+def _draw(n, half, edges, seed, clearance):
+    rng = np.random.default_rng([int(seed), 57])
+    from avblocks.core import rng as avrng
+    k = avrng.key(int(rng.integers(2**31)), "navigation")
+    k1, k2 = avrng.split(k, np, 2)
+    p0 = free_points(k1, n, half, edges, clearance, np, min_sep=0.4)
+    g = free_points(k2, n, half, edges, clearance, np, min_sep=0.4)
+    return p0, g
+
+
+def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
+                 max_range=1.0, clearance=0.25, obstacles=OBSTACLES, controller="scripted",
+                 seed=1, t_final=6.0, dt=0.1):
+    """The navigation diagram and its simulation settings (module docstring)."""
+    n, h = int(agents), float(half)
+    edges = polygon_edges([rectangle(*o) for o in obstacles])
+    p0, goals = _draw(n, h, edges, seed, float(clearance))
+    d = Diagram("navigation")
+    fleet = d.add(SingleIntegrator(p0, v_max=float(speed) * np.sqrt(2)), name="fleet")
+    gl = d.add(Constant(goals), name="goals")
+    task = d.add(NavigationTask(n, edges, rays=int(rays), half=h, radius=float(radius),
+                                goal_radius=float(goal_radius),
+                                max_range=float(max_range)), name="task")
+    task.block.set_initial("prev", np.linalg.norm(goals - p0, axis=1))
+    d.connect(fleet.position, task.position)
+    d.connect(gl.y, task.goals)
+    if controller == "scripted":
+        law = scripted_law(edges, h, float(speed), float(radius))
+        src = d.add(Function(law, inputs={"position": (n, 2), "goals": (n, 2)},
+                             outputs={"cmd": (n, 2)}), name="drive")
+        d.connect(fleet.position, src.position)
+        d.connect(gl.y, src.goals)
+        cmd = src.cmd
+    else:
+        src, port = command_source(d, controller, n, task.obs)
+        cmd = getattr(src, port)
+    gain = d.add(Gain(float(speed)), name="speed")
+    d.connect(cmd, gain.u)
+    d.connect(gain.y, fleet.velocity)
+    sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4", "seed": int(seed),
+           "log": [fleet.position, gl.y, task.success, task.collision, task.reward]}
+    return d, sim
+
+
+def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
+            max_range=1.0, clearance=0.25, obstacles=OBSTACLES):
+    """The learning task (module docstring): settings for :class:`avblocks.rl.Task`."""
+    n, h = int(agents), float(half)
+    d, sim = make_diagram(agents=n, half=h, speed=speed, radius=radius,
+                          goal_radius=goal_radius, rays=rays, max_range=max_range,
+                          clearance=clearance, obstacles=obstacles, controller="action")
+    edges = polygon_edges([rectangle(*o) for o in obstacles])
+    c = float(clearance)
+
+    def reset(key, xp):
+        from avblocks.core import rng
+        k1, k2 = rng.split(key, xp, 2)
+        p0 = free_points(k1, n, h, edges, c, xp, min_sep=5 * float(radius))
+        g = free_points(k2, n, h, edges, c, xp, min_sep=5 * float(radius))
+        return {"fleet.position": p0, "goals.value": g,
+                "task.prev": xp.sqrt(xp.sum((g - p0) ** 2, -1) + 1e-12)}
+
+    return {"diagram": d, "act": "action", "observe": "task.obs", "reward": "task.reward",
+            "done": "task.done", "reset": reset,
+            "info": {"success": "task.success", "collision": "task.collision"},
+            "dt": sim["dt"], "substeps": 1, "max_steps": 60, "solver": "euler"}
+
+
+def outcome(res, params):
+    """Agents at their goals without a collision at the end; collisions seen."""
+    ok = np.asarray(res["task.success"])[-1]
+    col = np.asarray(res["task.collision"]).any(axis=0)
+    n = ok.size
+    return (f"{int(ok.sum())} of {n} agents at their goals without collision at "
+            f"{res.t[-1]:.3g} s ({int(col.sum())} touched something)",
+            {"success": int(ok.sum()), "agents": n, "collided": int(col.sum())})
+
+
+def figures(res, out, params):
+    """navigation.png: obstacles, paths, goals."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    from avblocks.scenarios.report import save_figure
+    p = np.asarray(res["fleet.position"])
+    g = np.asarray(res["goals.y"])[0]
+    h = float(params.get("half", 1.5))
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    for cx, cy, w, hh in params.get("obstacles", OBSTACLES):
+        ax.add_patch(Rectangle((cx - w / 2, cy - hh / 2), w, hh, color="0.55"))
+    for i in range(p.shape[1]):
+        line, = ax.plot(p[:, i, 0], p[:, i, 1], lw=1.5)
+        ax.plot(*p[0, i], "o", color=line.get_color(), ms=4)
+        ax.plot(*g[i], "x", color=line.get_color(), ms=9, mew=2)
+    ax.add_patch(Rectangle((-h, -h), 2 * h, 2 * h, fill=False, lw=1.5))
+    ax.set_xlim(-h * 1.05, h * 1.05)
+    ax.set_ylim(-h * 1.05, h * 1.05)
+    ax.set_aspect("equal")
+    line, _ = outcome(res, params)
+    ax.set_title(line, fontsize=8)
+    return [save_figure(fig, f"{out}/navigation.png")]

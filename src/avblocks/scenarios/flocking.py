@@ -180,3 +180,25 @@ def ensemble_x0(seeds, agents=50, d=7.0, spread=50.0, v0=2.0):
     starts = [initial_conditions(agents, d, spread, v0, s) for s in seeds]
     return {"flock.position": np.stack([p for p, _ in starts]),
             "flock.velocity": np.stack([v for _, v in starts])}
+
+
+def pairs(adjacency):
+    """Index arrays ``(i, j)``, ``i < j``, of the edges of an (N, N) adjacency."""
+    i, j = np.nonzero(np.triu(np.asarray(adjacency), 1))
+    return i, j
+
+
+def lattice_cost(position, accel, pairs_ij, d, effort=0.01, xp=np):
+    """Flocking cost of a run: mean over samples and neighbour pairs of the
+    squared distance error ``(|q_i - q_j| - d)^2`` plus ``effort`` times the
+    mean squared control ``|u_i|^2``.
+
+    ``position``, ``accel``: (T, N, D) logs; ``pairs_ij``: the frozen
+    neighbour pairs (:func:`pairs`). Works on NumPy and ``jax.numpy`` arrays
+    (``xp``), so the same function gives the cost of a NumPy run and the
+    traced cost of :func:`avblocks.grad`.
+    """
+    i, j = pairs_ij
+    dq = position[:, i] - position[:, j]
+    dist = xp.sqrt(xp.sum(dq * dq, axis=-1))
+    return xp.mean((dist - d) ** 2) + effort * xp.mean(xp.sum(accel * accel, axis=-1))

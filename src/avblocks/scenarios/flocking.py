@@ -102,7 +102,7 @@ def make_diagram(agents=50, d=7.0, spread=50.0, v0=2.0, target=(25.0, 25.0),
                            outputs={"pose": (n, 3), "order": ()}), name="view")
     if neighbors == "search":
         nb = dg.add(Neighbors(n, int(k), radius=1.2 * d, input="position",
-                              period=float(dt)), name="neighbors")
+                              period=float(dt), method="auto"), name="neighbors")
         dg.connect(flock.position, nb.position)
         dg.connect(nb.neighbors, law.neighbors)
     dg.connect(flock.position, law.position)

@@ -52,3 +52,13 @@ def test_cli_flocking_sweep_ensemble(tmp_path, capsys):
                "--no-plot", "--quiet"])
     assert rc == 0
     assert "2 done, 0 failed" in capsys.readouterr().out
+
+
+def test_final_order_from_velocity_when_no_order_is_logged():
+    v = np.array([[[1.0, 0.0], [0.0, 1.0]], [[3.0, 4.0], [-3.0, 4.0]]])   # (T, N, 2)
+    res = av.Results(np.array([0.0, 1.0]), {"flock.velocity": v})
+    # |(0, 8)| / (5 + 5) = 0.8 at the last sample
+    assert av.sweep.METRICS["final_order"](res) == pytest.approx(0.8, rel=1e-15)
+    res2 = av.Results(np.array([0.0, 1.0]), {"view.order": np.array([0.1, 0.7]),
+                                             "flock.velocity": v})
+    assert av.sweep.METRICS["final_order"](res2) == 0.7

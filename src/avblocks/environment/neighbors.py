@@ -148,6 +148,45 @@ def to_networkx(idx, dist=None, *, directed=False):
 #: padded (the simulator rejects infinite outputs; the index ``-1`` is the mask).
 PAD_DISTANCE = -1.0
 
+#: Largest agent count whose compiled Neighbors compares every pair.
+DENSE_MAX = 128
+
+
+def dense_nearest(points, radius, k, xp=np):
+    """The ``k`` nearest other points within ``radius`` (inclusive) of each
+    point by comparing every pair: ``(idx (N, k) -1 padded, dist (N, k) inf
+    padded)``, sorted by squared distance ``dx^2 + dy^2``, ties by the smaller
+    index (``k`` passes of a row minimum) -- the order and the arithmetic of
+    :func:`avblocks.utility.spatial.nearest`, so both give the same
+    neighbours. O(N^2) memory: for small N (``Neighbors`` uses it for compiled
+    runs with ``method="dense"``, or ``"auto"`` and at most :data:`DENSE_MAX`
+    agents)."""
+    n = points.shape[0]
+    cols = [points[:, a] for a in range(points.shape[1])]
+    d2 = 0.0
+    for c in cols:
+        da = c[None, :] - c[:, None]
+        d2 = d2 + da * da
+    ids = xp.arange(n)
+    r = xp.asarray(radius, dtype=d2.dtype)
+    d2 = xp.where((d2 <= r * r) & (ids[None, :] != ids[:, None]), d2, xp.inf)
+    kk = min(int(k), n)
+    big = np.iinfo(np.int64).max if np.dtype(ids.dtype).itemsize == 8 else \
+        np.iinfo(np.int32).max
+    oi, od = [], []
+    for _ in range(kk):
+        m = xp.min(d2, axis=1)
+        j = xp.min(xp.where(d2 == m[:, None], ids[None, :], big), axis=1)
+        got = xp.isfinite(m)
+        oi.append(xp.where(got, j, -1))
+        od.append(m)
+        d2 = xp.where(ids[None, :] == j[:, None], xp.inf, d2)
+    pad = int(k) - len(oi)
+    idx = xp.stack(oi + [xp.full((n,), -1, dtype=ids.dtype)] * pad, axis=1)
+    m2 = xp.stack(od + [xp.full((n,), xp.inf, dtype=d2.dtype)] * pad, axis=1)
+    fin = idx >= 0
+    return idx, xp.where(fin, xp.sqrt(xp.where(fin, m2, 1.0)), xp.inf)
+
 
 class Neighbors(Block):
     """Range-limited, k-nearest and field-of-view neighbour sets.
@@ -177,6 +216,12 @@ class Neighbors(Block):
     box : (L_x, L_y), optional
         Periodic world ``[0, L_x) x [0, L_y)``: distances by the minimum
         image (``radius <= min(L) / 2``).
+    method : "cells" (default), "dense" or "auto"
+        How a compiled run searches: the cell list (below); every pair, an
+        (N, N) array (:func:`dense_nearest`; the same neighbours, cheaper for
+        small N and across ensembles; not with ``fov`` or ``box``); or
+        ``"auto"``: every pair up to :data:`DENSE_MAX` agents, else the cell
+        list. The NumPy engine always uses the k-d tree.
     capacity : int, optional
         Fix the compiled search's static capacity (candidates per agent, see
         :mod:`avblocks.utility.spatial`) instead of letting the compiled
@@ -214,8 +259,12 @@ class Neighbors(Block):
     """
 
     def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None,
-                 box=None, capacity=None):
+                 box=None, capacity=None, method="cells"):
         super().__init__()
+        if method not in ("cells", "dense", "auto"):
+            raise ParameterError("method must be 'cells', 'dense' or 'auto'",
+                                 block="Neighbors", param="method", found=method)
+        self.method = method
         self.n = n = agent_count(n, "Neighbors")
         self.k = k = agent_count(k, "Neighbors")
         radius = float(radius)
@@ -249,12 +298,25 @@ class Neighbors(Block):
                             doc="neighbour distances, -1 where padded")
         maybe_periodic(self, period)
 
+    def _dense(self):
+        """Whether a compiled run compares every pair (``method``; no field of
+        view, no periodic box): for small N an (N, N) array costs less than
+        the sort and binary searches, and vectorises across an ensemble."""
+        if self.method == "cells" or self.fov is not None or self.search.box is not None:
+            return False
+        return self.method == "dense" or self.n <= DENSE_MAX
+
     def searches(self):
-        """The neighbour searches this block owns (planned by the compiled engine)."""
-        return [self.search]
+        """The neighbour searches this block owns (planned by the compiled
+        engine; none when small compiled runs compare every pair)."""
+        return [] if self._dense() else [self.search]
 
     def output(self, t, x, u, xp):
         p = u[self.input]
+        if xp is not np and self._dense():
+            idx, dist = dense_nearest(p[:, :2], self.radius, self.k, xp)
+            return {"neighbors": idx,
+                    "distance": xp.where(idx >= 0, dist, PAD_DISTANCE)}
         if self.fov is None:
             idx, dist = self.search.nearest(p[:, :2], self.radius, self.k, xp=xp)
         else:

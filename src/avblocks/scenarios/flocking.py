@@ -44,28 +44,69 @@ def pose_and_order(t, position, velocity, xp):
             "order": order_parameter(velocity, xp)}
 
 
+def initial_conditions(agents=50, d=7.0, spread=50.0, v0=2.0, seed=1):
+    """Start positions and velocities ``(p0, vel0)``, each (agents, 2), of seed ``seed``."""
+    n = int(agents)
+    rng = np.random.default_rng([int(seed), 3])
+    p0 = random_positions(n, area=(float(spread), float(spread)),
+                          min_separation=0.6 * float(d), seed=int(seed))
+    vel0 = rng.uniform(-float(v0), float(v0), (n, 2))
+    return p0, vel0
+
+
+def frozen_adjacency(position, k=12, r=8.4):
+    """(N, N) 0/1 adjacency: each agent's ``k`` nearest others within ``r`` of
+    ``position`` (made symmetric). The "frozen neighbours" graph of
+    ``make_diagram(neighbors="frozen")``."""
+    from scipy.spatial import cKDTree
+    n = len(position)
+    dist, idx = cKDTree(position).query(position, k=min(int(k) + 1, n),
+                                        distance_upper_bound=float(r))
+    a = np.zeros((n, n))
+    for col in range(1, idx.shape[1]):          # column 0 is the agent itself
+        ok = np.isfinite(dist[:, col])
+        a[np.flatnonzero(ok), idx[ok, col]] = 1.0
+    return np.maximum(a, a.T)
+
+
 def make_diagram(agents=50, d=7.0, spread=50.0, v0=2.0, target=(25.0, 25.0),
                  target_velocity=(2.0, 1.0), k=12, seed=1, t_final=60.0, dt=0.02,
-                 log_every=5):
-    """The flocking diagram and its simulation settings."""
+                 log_every=5, neighbors="search", c1=1.0, c2=1.0):
+    """The flocking diagram and its simulation settings.
+
+    ``neighbors="search"`` (default) lists up to ``k`` agents within
+    ``r = 1.2 d`` every step (``environment.Neighbors``). ``neighbors="frozen"``
+    fixes each agent's neighbour set to the one at the start
+    (:func:`frozen_adjacency`, a fixed graph of ``controllers.Flocking``; no
+    search block): the neighbour sets then cannot switch when a gain or an
+    initial velocity is perturbed, which is what a gradient through the run
+    (and finite differences that agree with it) assumes. ``c1``, ``c2`` are
+    the alpha-lattice gains of ``controllers.Flocking``.
+    """
     n = int(agents)
     d = float(d)
-    rng = np.random.default_rng([int(seed), 3])
-    p0 = random_positions(n, area=(float(spread), float(spread)), min_separation=0.6 * d,
-                          seed=int(seed))
-    vel0 = rng.uniform(-float(v0), float(v0), (n, 2))
+    if neighbors not in ("search", "frozen"):
+        from avblocks.core.errors import ParameterError
+        raise ParameterError("neighbors must be 'search' or 'frozen'", block="flocking",
+                             param="neighbors", found=neighbors)
+    p0, vel0 = initial_conditions(n, d, spread, v0, seed)
     dg = Diagram("flocking")
     flock = dg.add(DoubleIntegrator(p0, velocity0=vel0), name="flock")
-    nb = dg.add(Neighbors(n, int(k), radius=1.2 * d, input="position", period=float(dt)),
-                name="neighbors")
+    opts = {}
+    if neighbors == "frozen":
+        opts["adjacency"] = frozen_adjacency(p0, k, 1.2 * d)
     law = dg.add(Flocking(n, d, gamma=True, target=np.asarray(target, float),
-                          target_velocity=np.asarray(target_velocity, float)), name="law")
+                          target_velocity=np.asarray(target_velocity, float),
+                          c1=float(c1), c2=float(c2), **opts), name="law")
     view = dg.add(Function(pose_and_order, inputs={"position": (n, 2), "velocity": (n, 2)},
                            outputs={"pose": (n, 3), "order": ()}), name="view")
-    dg.connect(flock.position, nb.position)
+    if neighbors == "search":
+        nb = dg.add(Neighbors(n, int(k), radius=1.2 * d, input="position",
+                              period=float(dt), method="auto"), name="neighbors")
+        dg.connect(flock.position, nb.position)
+        dg.connect(nb.neighbors, law.neighbors)
     dg.connect(flock.position, law.position)
     dg.connect(flock.velocity, law.velocity)
-    dg.connect(nb.neighbors, law.neighbors)
     dg.connect(law.accel, flock.accel)
     dg.connect(flock.position, view.position)
     dg.connect(flock.velocity, view.velocity)
@@ -123,3 +164,41 @@ def figures(res, out, params):
     b.set_title("alignment of the velocities")
     b.grid(True, alpha=0.3)
     return [save_figure(fig, f"{out}/flocking.png")]
+
+
+def ensemble_x0(seeds, agents=50, d=7.0, spread=50.0, v0=2.0):
+    """``x0`` for :meth:`avblocks.Runner.ensemble`: run ``k`` starts from the
+    positions and velocities of ``make_diagram(seed=seeds[k])``.
+
+    Example (256 runs of 50 agents over 30 s in one call)::
+
+        dg, sim = flocking.make_diagram(agents=50, t_final=30.0)
+        runner = av.compile(dg, **{k: v for k, v in sim.items() if k != "seed"})
+        res = runner.ensemble(seeds=range(256), x0=flocking.ensemble_x0(range(256)))
+        res["flock.position"]          # (256, T, 50, 2)
+    """
+    starts = [initial_conditions(agents, d, spread, v0, s) for s in seeds]
+    return {"flock.position": np.stack([p for p, _ in starts]),
+            "flock.velocity": np.stack([v for _, v in starts])}
+
+
+def pairs(adjacency):
+    """Index arrays ``(i, j)``, ``i < j``, of the edges of an (N, N) adjacency."""
+    i, j = np.nonzero(np.triu(np.asarray(adjacency), 1))
+    return i, j
+
+
+def lattice_cost(position, accel, pairs_ij, d, effort=0.01, xp=np):
+    """Flocking cost of a run: mean over samples and neighbour pairs of the
+    squared distance error ``(|q_i - q_j| - d)^2`` plus ``effort`` times the
+    mean squared control ``|u_i|^2``.
+
+    ``position``, ``accel``: (T, N, D) logs; ``pairs_ij``: the frozen
+    neighbour pairs (:func:`pairs`). Works on NumPy and ``jax.numpy`` arrays
+    (``xp``), so the same function gives the cost of a NumPy run and the
+    traced cost of :func:`avblocks.grad`.
+    """
+    i, j = pairs_ij
+    dq = position[:, i] - position[:, j]
+    dist = xp.sqrt(xp.sum(dq * dq, axis=-1))
+    return xp.mean((dist - d) ** 2) + effort * xp.mean(xp.sum(accel * accel, axis=-1))

@@ -11,7 +11,8 @@ axis). Each run's slice of the logs goes through the same metric functions
 and into the same store layout as the NumPy path.
 
 It needs the diagram to be traceable (every block ``traceable = True``;
-of the built-in scenarios ``waypoints``, ``nest`` and ``honeybee`` are) and the seeds of a grid
+of the built-in scenarios ``waypoints``, ``nest``, ``honeybee``, ``flocking``,
+``swap`` and ``formation`` are) and the seeds of a grid
 point to share its structure (same agent count, same blocks): seeds change
 values, not shapes. Metrics agree with the NumPy path to round-off (float64),
 not bit for bit; they are the same whether a case runs in a sweep or is

@@ -14,7 +14,8 @@ name               value
                    (waypoints, swap) or ``*.informed`` (nest) [-]
 ``time_to_done``   first logged time at which every agent is done; NaN when
                    never [s]
-``final_order``    last value of an ``*.order`` signal (flocking) [-]
+``final_order``    last value of an ``*.order`` signal, else the order
+                   parameter of the last ``*.velocity`` (flocking) [-]
 ``path_length``    mean distance driven per agent [m]
 ``collisions``     number of logged samples with any ``*.hit_*`` true [-]
 =================  ==========================================================
@@ -89,8 +90,13 @@ def time_to_done(res):
 
 
 def final_order(res):
-    """Last value of the ``*.order`` signal."""
-    return float(np.asarray(res[_find(res, ("order",), "final_order")])[-1])
+    """Last value of the ``*.order`` signal; without one, the order parameter
+    ``|sum_i v_i| / sum_i |v_i|`` of the last ``*.velocity`` sample."""
+    if any(k.rsplit(".", 1)[-1] == "order" for k in res.keys()):
+        return float(np.asarray(res[_find(res, ("order",), "final_order")])[-1])
+    v = np.asarray(res[_find(res, ("order", "velocity"), "final_order")][-1], float)
+    return float(np.linalg.norm(v.sum(axis=0)) / max(np.linalg.norm(v, axis=-1).sum(),
+                                                      1e-300))
 
 
 def path_length(res):

@@ -16,11 +16,14 @@ def any_finite(*arrays):
 def clip_norm(vec, max_norm, xp=np):
     """Scale rows of ``vec`` (N, k) down to Euclidean norm ``<= max_norm`` (N,).
 
-    A zero row stays zero; its gradient is finite too (the square root is
-    taken of 1 there, not of 0, whose derivative is infinite: a gradient
-    through a run where an agent stops exactly would otherwise be NaN)."""
-    n2 = dot(vec, vec)
-    moving = n2 > 0
-    nrm = xp.sqrt(xp.where(moving, n2, 1.0))
-    scale = xp.where(moving, xp.minimum(1.0, max_norm / nrm), 1.0)
+    Differentiable everywhere it is finite: rows within the limit (always the
+    case for ``max_norm = inf``) get scale 1 through a double ``where`` whose
+    other branch only ever sees finite numbers (``max_norm / nrm`` with
+    ``max_norm = inf`` or ``nrm = 0`` would put ``0 * inf = NaN`` into the
+    gradient of a traced run).
+    """
+    sq = dot(vec, vec)
+    over = sq > max_norm * max_norm
+    nrm = xp.sqrt(xp.where(over, sq, 1.0))
+    scale = xp.where(over, xp.where(over, max_norm, 1.0) / nrm, 1.0)
     return vec * scale[:, None]

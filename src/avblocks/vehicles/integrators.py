@@ -49,10 +49,12 @@ def _dim(position0, dim, block):
 
 def speed_limited_accel(vel, acc, v_max, xp=np):
     """Remove the part of ``acc`` that would push ``|vel|`` beyond ``v_max``."""
-    speed = xp.sqrt(dot(vel, vel))
-    vhat = vel / xp.maximum(speed, 1e-300)[:, None]
+    sq = dot(vel, vel)
+    moving = sq > 0
+    speed = xp.sqrt(xp.where(moving, sq, 1.0))      # double where: finite gradients
+    vhat = vel / speed[:, None]
     along = dot(acc, vhat)
-    cut = xp.where((speed >= v_max) & (along > 0), along, 0.0)
+    cut = xp.where(moving & (speed >= v_max) & (along > 0), along, 0.0)
     return acc - cut[:, None] * vhat
 
 

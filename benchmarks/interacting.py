@@ -1,0 +1,356 @@
+"""Interacting swarms: Olfati-Saber flocking on the NumPy engine, compiled
+(JAX) and as a fused Numba cell-list loop; and the flocking ensemble.
+
+Workload (the ``flocking`` scenario's maths at any N): N double
+integrators on a jittered square lattice (spacing 5 m: constant density,
+about 9 others within r), random velocities in [-2, 2]^2 m/s; every step
+``environment.Neighbors`` lists the K = 12 nearest others within
+r = 1.2 d = 8.4 m (held over the step), ``controllers.Flocking``
+(Algorithm 1 + gamma term towards a target moving from the lattice's
+centre) gives the accelerations; RK4, dt = 0.02 s. Columns, seconds per
+step (median over the rounds; each (column, N) runs in a fresh process, the
+columns alternate within a round, so a shared machine disturbs them alike):
+
+  numpy   avblocks.simulate(..., backend="numpy")
+  jax     avblocks.compile(...) then runner(), second call (compile excluded)
+  numba   a fused single-threaded Numba loop of the same maths (cell list of
+          side r, K nearest by insertion, RK4), written here; numba is a
+          benchmark-only dependency. Checked against the NumPy engine at
+          N = 100 (final positions to 1e-9 m) before timing.
+
+Peak RSS (MiB) of each process is reported too: no (N, N) array anywhere,
+so memory grows as O(N). Real-time factor = dt / (seconds per step).
+
+    python benchmarks/interacting.py                  # N = 1e2 .. 1e5, plot
+    python benchmarks/interacting.py --quick          # N = 1e2 .. 1e4
+    python benchmarks/interacting.py --ensemble       # 256 flocking seeds
+
+``--ensemble``: the ``flocking`` scenario (50 agents, 30 s, dt 0.02, RK4) for
+256 seeds in one ``runner.ensemble`` call (second call) against sequential
+NumPy runs (``--numpy-runs`` of them timed, scaled to 256).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+D, R, K, DT = 7.0, 8.4, 12, 0.02
+SPACING = 5.0
+STEPS = {100: 200, 1000: 50, 10000: 12, 100000: 5, 1000000: 3}
+
+
+def initial(n, seed=0):
+    rng = np.random.default_rng(seed)
+    m = int(np.ceil(np.sqrt(n)))
+    g = np.stack(np.meshgrid(np.arange(m), np.arange(m), indexing="ij"), -1).reshape(-1, 2)
+    p0 = (g[:n] + rng.uniform(-0.3, 0.3, (n, 2))) * SPACING
+    v0 = rng.uniform(-2.0, 2.0, (n, 2))
+    centre = p0.mean(axis=0)
+    return p0, v0, centre
+
+
+def diagram(n):
+    import avblocks as av
+    p0, v0, centre = initial(n)
+    dg = av.Diagram("flocking-bench")
+    flock = dg.add(av.vehicles.DoubleIntegrator(p0, velocity0=v0), name="flock")
+    nb = dg.add(av.environment.Neighbors(n, K, radius=R, input="position", period=DT),
+                name="neighbors")
+    law = dg.add(av.controllers.Flocking(n, D, r=R, gamma=True, target=centre,
+                                         target_velocity=np.array([2.0, 1.0])),
+                 name="law")
+    dg.connect(flock.position, nb.position)
+    dg.connect(flock.position, law.position)
+    dg.connect(flock.velocity, law.velocity)
+    dg.connect(nb.neighbors, law.neighbors)
+    dg.connect(law.accel, flock.accel)
+    return dg
+
+
+# --------------------------------------------------------------- Numba twin
+def numba_kernels():
+    import numba as nb
+
+    @nb.njit(cache=True)
+    def neighbours(q, k, r):
+        n = q.shape[0]
+        lo0, lo1 = q[:, 0].min(), q[:, 1].min()
+        nx = int((q[:, 0].max() - lo0) / r) + 1
+        ny = int((q[:, 1].max() - lo1) / r) + 1
+        cell = np.empty(n, np.int64)
+        count = np.zeros(nx * ny + 1, np.int64)
+        for i in range(n):
+            c = int((q[i, 0] - lo0) / r) * ny + int((q[i, 1] - lo1) / r)
+            cell[i] = c
+            count[c + 1] += 1
+        for c in range(nx * ny):
+            count[c + 1] += count[c]
+        order = np.empty(n, np.int64)
+        fill = count[:-1].copy()
+        for i in range(n):
+            order[fill[cell[i]]] = i
+            fill[cell[i]] += 1
+        idx = -np.ones((n, k), np.int64)
+        best = np.empty(k)
+        r2 = r * r
+        for i in range(n):
+            m = 0
+            cx = int((q[i, 0] - lo0) / r)
+            cy = int((q[i, 1] - lo1) / r)
+            for ax in range(max(cx - 1, 0), min(cx + 2, nx)):
+                for ay in range(max(cy - 1, 0), min(cy + 2, ny)):
+                    c = ax * ny + ay
+                    for s in range(count[c], count[c + 1]):
+                        j = order[s]
+                        if j == i:
+                            continue
+                        dx = q[j, 0] - q[i, 0]
+                        dy = q[j, 1] - q[i, 1]
+                        dd = dx * dx + dy * dy
+                        if dd > r2:
+                            continue
+                        if m == k and (dd > best[k - 1] or (dd == best[k - 1]
+                                                             and j > idx[i, k - 1])):
+                            continue
+                        p = m if m < k else k - 1
+                        while p > 0 and (best[p - 1] > dd or (best[p - 1] == dd
+                                                              and idx[i, p - 1] > j)):
+                            if p < k:
+                                best[p] = best[p - 1]
+                                idx[i, p] = idx[i, p - 1]
+                            p -= 1
+                        best[p] = dd
+                        idx[i, p] = j
+                        if m < k:
+                            m += 1
+        return idx
+
+    @nb.njit(cache=True)
+    def accel(q, p, idx, t, target, tvel, out):
+        eps, a, b, h, c1, c2, c1g, c2g = 0.1, 5.0, 5.0, 0.2, 1.0, 1.0, 0.2, 0.4
+        r_a = (np.sqrt(1.0 + eps * R * R) - 1.0) / eps
+        d_a = (np.sqrt(1.0 + eps * D * D) - 1.0) / eps
+        c = abs(a - b) / np.sqrt(4.0 * a * b)
+        for i in range(q.shape[0]):
+            ax = 0.0
+            ay = 0.0
+            for s in range(idx.shape[1]):
+                j = idx[i, s]
+                if j < 0:
+                    continue
+                dx = q[j, 0] - q[i, 0]
+                dy = q[j, 1] - q[i, 1]
+                root = np.sqrt(1.0 + eps * (dx * dx + dy * dy))
+                sn = (root - 1.0) / eps
+                x = sn / r_a
+                if x < h:
+                    rho = 1.0
+                elif x <= 1.0:
+                    rho = 0.5 * (1.0 + np.cos(np.pi * (x - h) / (1.0 - h)))
+                else:
+                    rho = 0.0
+                z = sn - d_a + c
+                phi = 0.5 * ((a + b) * z / np.sqrt(1.0 + z * z) + (a - b))
+                wq = rho * phi / root
+                ax += c1 * wq * dx + c2 * rho * (p[j, 0] - p[i, 0])
+                ay += c1 * wq * dy + c2 * rho * (p[j, 1] - p[i, 1])
+            out[i, 0] = ax - c1g * (q[i, 0] - target[0] - tvel[0] * t) \
+                - c2g * (p[i, 0] - tvel[0])
+            out[i, 1] = ay - c1g * (q[i, 1] - target[1] - tvel[1] * t) \
+                - c2g * (p[i, 1] - tvel[1])
+
+    @nb.njit(cache=True)
+    def run(q, p, steps, dt, target, tvel):
+        n = q.shape[0]
+        k1 = np.empty((n, 2))
+        k2 = np.empty((n, 2))
+        k3 = np.empty((n, 2))
+        k4 = np.empty((n, 2))
+        t = 0.0
+        for _ in range(steps):
+            idx = neighbours(q, K, R)
+            accel(q, p, idx, t, target, tvel, k1)
+            q2 = q + 0.5 * dt * p
+            p2 = p + 0.5 * dt * k1
+            accel(q2, p2, idx, t + 0.5 * dt, target, tvel, k2)
+            q3 = q + 0.5 * dt * p2
+            p3 = p + 0.5 * dt * k2
+            accel(q3, p3, idx, t + 0.5 * dt, target, tvel, k3)
+            q4 = q + dt * p3
+            p4 = p + dt * k3
+            accel(q4, p4, idx, t + dt, target, tvel, k4)
+            q = q + dt / 6.0 * (p + 2.0 * p2 + 2.0 * p3 + p4)
+            p = p + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+            t += dt
+        return q, p
+
+    return run
+
+
+def one(engine, n, steps):
+    """Seconds per step of one column at one N (run in its own process)."""
+    t_final = steps * DT
+    if engine == "numba":
+        run = numba_kernels()
+        p0, v0, centre = initial(n)
+        tv = np.array([2.0, 1.0])
+        run(p0, v0, 1, DT, centre, tv)                      # compile
+        t = time.perf_counter()
+        run(p0, v0, steps, DT, centre, tv)
+        wall = time.perf_counter() - t
+    else:
+        import avblocks as av
+        dg = diagram(n)
+        if engine == "numpy":
+            t = time.perf_counter()
+            av.simulate(dg, t_final, dt=DT, log=["flock.position"], log_every=steps,
+                        progress=False)
+            wall = time.perf_counter() - t
+        else:
+            runner = av.compile(dg, t_final, dt=DT, log=["flock.position"],
+                                log_every=steps)
+            runner()
+            t = time.perf_counter()
+            runner()
+            wall = time.perf_counter() - t
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {"engine": engine, "n": n, "steps": steps, "s_per_step": wall / steps,
+            "rss_mib": rss}
+
+
+def check_numba(n=100, steps=100):
+    """Final positions of the Numba twin against the NumPy engine."""
+    import avblocks as av
+    run = numba_kernels()
+    p0, v0, centre = initial(n)
+    q, _ = run(p0, v0, steps, DT, centre, np.array([2.0, 1.0]))
+    res = av.simulate(diagram(n), steps * DT, dt=DT, log=["flock.position"],
+                      log_every=steps, progress=False)
+    return float(np.abs(np.asarray(res["flock.position"])[-1] - q).max())
+
+
+def child(engine, n, steps):
+    env = dict(os.environ)
+    out = subprocess.run([sys.executable, __file__, "--one", engine, str(n), str(steps)],
+                         capture_output=True, text=True, env=env, timeout=1800)
+    if out.returncode:
+        return {"engine": engine, "n": n, "error": out.stderr.strip().splitlines()[-1:]}
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def scaling(ns, engines, rounds, plot):
+    err = check_numba()
+    print(f"numba twin vs NumPy engine, N = 100, 100 steps: max |dq| = {err:.2e} m")
+    assert err < 1e-9, err
+    rows = {}
+    for _ in range(rounds):
+        for n in ns:
+            for e in engines:
+                r = child(e, n, STEPS.get(n, 3))
+                rows.setdefault((e, n), []).append(r)
+    print(f"\n{'N':>8} " + " ".join(f"{e + ' s/step':>14}" for e in engines)
+          + "   " + " ".join(f"{e + '/numba':>12}" for e in engines if e != "numba")
+          + "   " + " ".join(f"{e + ' MiB':>10}" for e in engines) + "   RTF(jax)")
+    table = {}
+    for n in ns:
+        med = {}
+        for e in engines:
+            good = [r for r in rows[(e, n)] if "error" not in r]
+            if not good:
+                print(f"{e} at N={n} failed: {rows[(e, n)][0].get('error')}")
+                med[e] = (float("nan"), float("nan"))
+                continue
+            med[e] = (float(np.median([r["s_per_step"] for r in good])),
+                      float(np.median([r["rss_mib"] for r in good])))
+        table[n] = med
+        nbt = med.get("numba", (np.nan,))[0]
+        rtf = DT / med["jax"][0] if "jax" in med else float("nan")
+        print(f"{n:>8} " + " ".join(f"{med[e][0]:>14.3e}" for e in engines)
+              + "   " + " ".join(f"{med[e][0] / nbt:>12.2f}" for e in engines if e != "numba")
+              + "   " + " ".join(f"{med[e][1]:>10.0f}" for e in engines) + f"   {rtf:8.2f}")
+    if plot:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.2))
+        for e, style in zip(engines, ("o-", "s-", "^-")):
+            a.loglog(ns, [table[n][e][0] for n in ns], style, label=e)
+            b.loglog(ns, [table[n][e][1] for n in ns], style, label=e)
+        a.set_xlabel("agents N")
+        a.set_ylabel("seconds per RK4 step (median)")
+        a.set_title(f"flocking, K = {K} within r, dt = {DT} s")
+        b.set_xlabel("agents N")
+        b.set_ylabel("peak RSS of the process [MiB]")
+        b.set_title("memory (no (N, N) array: O(N))")
+        for ax in (a, b):
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend()
+        fig.tight_layout()
+        fig.savefig(plot, dpi=100)
+        print(f"wrote {plot}")
+    return table
+
+
+def ensemble(runs, numpy_runs):
+    import avblocks as av
+    from avblocks.scenarios import flocking as F
+    dg, sim = F.make_diagram(agents=50, t_final=30.0)
+    settings = {k: v for k, v in sim.items() if k != "seed"}
+    seeds = list(range(runs))
+    x0 = F.ensemble_x0(seeds)
+    runner = av.compile(dg, **settings)
+    t = time.perf_counter()
+    runner.ensemble(seeds=seeds, x0=x0)
+    first = time.perf_counter() - t
+    t = time.perf_counter()
+    ens = runner.ensemble(seeds=seeds, x0=x0)
+    second = time.perf_counter() - t
+    ts = []
+    for s in range(numpy_runs):
+        d, sm = F.make_diagram(agents=50, t_final=30.0, seed=s)
+        t = time.perf_counter()
+        ref = av.simulate(d, progress=False, **sm)
+        ts.append(time.perf_counter() - t)
+        if s == numpy_runs - 1:
+            err = np.abs(np.asarray(ref["flock.position"])
+                         - ens["flock.position"][s]).max()
+    seq = float(np.mean(ts)) * runs
+    print(f"flocking, 50 agents, 30 s, {runs} seeds: ensemble {second:.2f} s (first call "
+          f"{first:.2f} s with compile); sequential NumPy {np.mean(ts):.3f} s per run "
+          f"x {runs} = {seq:.1f} s (measured {numpy_runs} runs); speed-up "
+          f"{seq / second:.1f}x; run {numpy_runs - 1} agrees to {err:.1e} m")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="N up to 1e4")
+    ap.add_argument("--n", type=int, nargs="*", help="agent counts")
+    ap.add_argument("--engines", default="numpy,jax,numba")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--out", default="docs/images/interacting.png")
+    ap.add_argument("--ensemble", action="store_true")
+    ap.add_argument("--runs", type=int, default=256)
+    ap.add_argument("--numpy-runs", type=int, default=16, dest="numpy_runs")
+    ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
+                    help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.one:
+        print(json.dumps(one(a.one[0], int(a.one[1]), int(a.one[2]))))
+        return
+    if a.ensemble:
+        ensemble(a.runs, a.numpy_runs)
+        return
+    ns = a.n or ([100, 1000, 10000] + ([] if a.quick else [100000]))
+    scaling(ns, a.engines.split(","), a.rounds, a.out)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,74 @@
+"""Neighbors(method="dense"|"auto"): every pair compared in compiled runs;
+the same neighbours, in the same order, as the k-d tree (independent truth:
+SciPy's cKDTree through kd_nearest, and a brute-force lexsort)."""
+
+import numpy as np
+import pytest
+
+import avblocks as av
+from avblocks.environment import Neighbors
+from avblocks.environment.neighbors import DENSE_MAX, dense_nearest
+from avblocks.utility import spatial as sp
+
+
+def brute(p, r, k):
+    n = len(p)
+    d = np.sqrt(((p[:, None] - p[None]) ** 2).sum(-1))
+    idx = -np.ones((n, k), int)
+    for i in range(n):
+        ok = [j for j in range(n) if j != i and d[i, j] <= r]
+        ok = sorted(ok, key=lambda j: (d[i, j], j))[:k]
+        idx[i, :len(ok)] = ok
+    return idx
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_dense_nearest_equals_kd_tree_and_brute_force(seed):
+    rng = np.random.default_rng(seed)
+    p = rng.uniform(0, 20, (60, 2))
+    if seed % 2:
+        p = np.round(p)                 # lattice points: many tied distances
+    i1, d1 = dense_nearest(p, 5.0, 12, np)
+    i2, d2 = sp.kd_nearest(p, 5.0, 12)
+    np.testing.assert_array_equal(i1, i2)
+    np.testing.assert_array_equal(np.where(i1 >= 0, d1, 0), np.where(i2 >= 0, d2, 0))
+    if not seed % 2:                    # brute force in sqrt distances (no ties)
+        np.testing.assert_array_equal(i1, brute(p, 5.0, 12))
+
+
+def test_compiled_dense_and_auto_equal_numpy_and_plan_no_search():
+    pytest.importorskip("jax")
+    rng = np.random.default_rng(3)
+    n = 40
+    p0 = rng.uniform(0, 15, (n, 2))
+    for method in ("dense", "auto"):
+        d = av.Diagram()
+        fl = d.add(av.vehicles.SingleIntegrator(p0), name="fl")
+        c = d.add(av.blocks.Constant(rng.uniform(-1, 1, (n, 2))), name="c")
+        blk = Neighbors(n, 6, radius=3.0, input="position", method=method)
+        nb = d.add(blk, name="nb")
+        d.connect(c.y, fl.velocity)
+        d.connect(fl.position, nb.position)
+        assert blk.searches() == []            # n <= DENSE_MAX: nothing to plan
+        a = av.simulate(d, 2.0, dt=0.1, log=[nb.neighbors, nb.distance])
+        b = av.simulate(d, 2.0, dt=0.1, log=[nb.neighbors, nb.distance], backend="jax")
+        np.testing.assert_array_equal(a[nb.neighbors], b[nb.neighbors])
+        np.testing.assert_allclose(a[nb.distance], b[nb.distance], rtol=0, atol=1e-12)
+    assert Neighbors(DENSE_MAX + 1, 4, radius=1.0, method="auto").searches() != []
+    assert Neighbors(n, 4, radius=1.0).searches() != []      # default: the cell list
+    with pytest.raises(av.ParameterError, match="method"):
+        Neighbors(n, 4, radius=1.0, method="kd")
+
+
+def test_traced_dense_nearest_equals_numpy_on_ties():
+    jax = pytest.importorskip("jax")
+    import jax.numpy as jnp
+    rng = np.random.default_rng(7)
+    p = np.round(rng.uniform(0, 10, (50, 2)))          # many tied distances
+    from avblocks.core.compiled import _jax
+    with _jax.x64(True):
+        for k in (3, 12, 60):                          # k > n pads
+            i1, d1 = dense_nearest(p, 3.0, k, np)
+            i2, d2 = jax.jit(lambda q: dense_nearest(q, 3.0, k, jnp))(p)
+            np.testing.assert_array_equal(i1, np.asarray(i2))
+            np.testing.assert_array_equal(d1, np.asarray(d2))

@@ -59,20 +59,20 @@ def main(argv=None):
         reps = 7 if n <= 10000 else 3
 
         def kd():
-            return cKDTree(p).query(p, k=min(k + 1, n),
+            return cKDTree(p).query(p, k=min(k + 1, n),  # noqa: B023 (timed at once, in the loop)
                                     distance_upper_bound=np.nextafter(r, np.inf))
 
         free = sp.CellList(r)
         t_kd = timed(kd, reps)
-        t_np = timed(lambda: sp.nearest(free, p, r, k, xp=np), reps)
+        t_np = timed(lambda: sp.nearest(free, p, r, k, xp=np), reps)  # noqa: B023 (timed at once, in the loop)
         t_jx = float("nan")
         if not a.no_jax:
             plan = sp.plan_cells(p, r)
-            f = jax.jit(lambda q: sp.nearest(plan, q, r, k, xp=jnp)[:2])
+            f = jax.jit(lambda q: sp.nearest(plan, q, r, k, xp=jnp)[:2])  # noqa: B023 (timed at once, in the loop)
             pj = jnp.asarray(p)
             ref = sp.nearest(free, p, r, k, xp=np)[0]
             assert np.array_equal(np.asarray(f(pj)[0]), ref), "jax and numpy differ"
-            t_jx = timed(lambda: jax.block_until_ready(f(pj)), reps)
+            t_jx = timed(lambda: jax.block_until_ready(f(pj)), reps)  # noqa: B023 (timed at once, in the loop)
         print(f"{n:>8} {t_kd:>10.2f} {t_np:>12.2f} {t_jx:>10.2f}", flush=True)
 
 

@@ -69,6 +69,6 @@ def test_traced_dense_nearest_equals_numpy_on_ties():
     with _jax.x64(True):
         for k in (3, 12, 60):                          # k > n pads
             i1, d1 = dense_nearest(p, 3.0, k, np)
-            i2, d2 = jax.jit(lambda q: dense_nearest(q, 3.0, k, jnp))(p)
+            i2, d2 = jax.jit(lambda q: dense_nearest(q, 3.0, k, jnp))(p)  # noqa: B023
             np.testing.assert_array_equal(i1, np.asarray(i2))
             np.testing.assert_array_equal(d1, np.asarray(d2))

@@ -24,6 +24,7 @@ def _p(k=3):
 
 # one runnable instance per public block (N = 3), with limits finite so they act
 FACTORIES = {
+    "blocks.Action": lambda: av.blocks.Action(N, 2, low=-0.5, high=0.5),
     "blocks.Clock": lambda: av.blocks.Clock(),
     "blocks.Concatenate": lambda: av.blocks.Concatenate(2),
     "blocks.Constant": lambda: av.blocks.Constant(_p(2)),
@@ -53,6 +54,8 @@ FACTORIES = {
                                                                       angle=0.3),
     "controllers.DisplacementFormation": lambda: av.controllers.DisplacementFormation(
         _p(2), gain=1.5),
+    "controllers.Policy": lambda: av.controllers.Policy(
+        av.controllers.mlp_init([2, 8, 2], seed=1), n=N),
     "controllers.Flocking": lambda: av.controllers.Flocking(
         N, 1.0, gamma=True, target=[1.0, 2.0], target_velocity=[0.1, 0.0]),
     "controllers.HolonomicPointToPoint": lambda: av.controllers.HolonomicPointToPoint(
@@ -288,6 +291,11 @@ WITH_PARAMS = [n for n in RUNNABLE if n not in NO_PARAMETERS]
 # parameters whose change cannot show in the harness's 6 steps of constant
 # inputs (documented reasons)
 NO_EFFECT_HERE = {
+    # an Action holds what an environment sets from outside, clipped to
+    # [low, high]; here nobody sets it, so only the clipped initial value
+    # shows (the doctest of avblocks.blocks.Action checks the clipping)
+    ("blocks.Action", "low"),
+    ("blocks.Action", "high"),
     # arrival radius: no agent reaches its waypoint in 6 steps
     ("controllers.PointToPoint", "radius"),
     ("controllers.HolonomicPointToPoint", "radius"),

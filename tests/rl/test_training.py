@@ -35,7 +35,7 @@ def test_apg_lowers_its_cost_and_runs_as_a_block(tmp_path):
     cfg = apg.Config(num_envs=16, updates=30, hidden=(32,), lr=3e-3, horizon=10)
     res = apg.train(env, cfg, seed=0, cost=_to_go)
     c = np.asarray(res.curve["cost"])
-    assert np.isfinite(c).all() and c[-3:].mean() < 0.7 * c[:3].mean()
+    assert np.isfinite(c).all() and c[-3:].mean() < 0.8 * c[:3].mean()
     # the same weights in the scenario's diagram: NumPy engine == compiled
     path = save_policy(tmp_path / "pi.npz", res.actor, output="tanh")
     d, sim = navigation.make_diagram(controller=str(path), seed=2)

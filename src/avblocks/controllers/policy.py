@@ -3,7 +3,8 @@
 ``cmd = squash(f(params, obs))``, row by row over the agents, where ``f``
 is a pure function of its parameters and the observation written with
 ``xp`` (default: a multilayer perceptron, :func:`mlp`). The parameters are
-the block's numeric parameters (``"policy.w0"``, ``"policy.b0"``, ...), so
+the block's numeric parameters, one weight matrix ``w<k>`` and one bias
+``b<k>`` per layer (``w0, b0, w1, b1, w2, b2``...; ``"policy.w0"``), so
 a trained policy is set, swept, vmapped and differentiated like any gain,
 and the same diagram runs it on the NumPy engine, compiled, live, on the
 ROS 2 emulator or in MuJoCo: a policy swaps to robots exactly like a

@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..utility.spatial import NeighborSearch
+from ..utility.spatial.queries import k_smallest
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
 
@@ -170,21 +171,14 @@ def dense_nearest(points, radius, k, xp=np):
     ids = xp.arange(n)
     r = xp.asarray(radius, dtype=d2.dtype)
     d2 = xp.where((d2 <= r * r) & (ids[None, :] != ids[:, None]), d2, xp.inf)
-    kk = min(int(k), n)
-    big = np.iinfo(np.int64).max if np.dtype(ids.dtype).itemsize == 8 else \
-        np.iinfo(np.int32).max
-    oi, od = [], []
-    for _ in range(kk):
-        m = xp.min(d2, axis=1)
-        j = xp.min(xp.where(d2 == m[:, None], ids[None, :], big), axis=1)
-        got = xp.isfinite(m)
-        oi.append(xp.where(got, j, -1))
-        od.append(m)
-        d2 = xp.where(ids[None, :] == j[:, None], xp.inf, d2)
-    pad = int(k) - len(oi)
-    idx = xp.stack(oi + [xp.full((n,), -1, dtype=ids.dtype)] * pad, axis=1)
-    m2 = xp.stack(od + [xp.full((n,), xp.inf, dtype=d2.dtype)] * pad, axis=1)
-    fin = idx >= 0
+    # the search's own exact selection (k passes of a row minimum, ties by index)
+    m2, j = k_smallest(d2, xp.broadcast_to(ids[None, :], (n, n)), k, xp)
+    pad = int(k) - m2.shape[1]
+    if pad:
+        m2 = xp.concatenate([m2, xp.full((n, pad), xp.inf, dtype=m2.dtype)], axis=1)
+        j = xp.concatenate([j, xp.full((n, pad), -1, dtype=j.dtype)], axis=1)
+    fin = xp.isfinite(m2)
+    idx = xp.where(fin, j, -1)
     return idx, xp.where(fin, xp.sqrt(xp.where(fin, m2, 1.0)), xp.inf)
 
 

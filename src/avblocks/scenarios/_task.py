@@ -23,9 +23,10 @@ import numpy as np
 
 def others_index(n):
     """(n, n-1) int array: for agent i, the indices of the other agents."""
-    idx = np.arange(n)
-    return np.stack([np.delete(idx, i) for i in range(n)]) if n > 1 else \
-        np.zeros((1, 0), dtype=int)
+    if n < 2:
+        return np.zeros((max(n, 1), 0), dtype=int)
+    j = np.arange(n - 1)[None, :]
+    return j + (j >= np.arange(n)[:, None])          # skip column i in row i
 
 
 def pairwise(p, xp):
@@ -56,6 +57,15 @@ def uniform_points(key, n, half, xp, min_sep=0.0, tries=8):
             best = xp.where(better, p, best)
             best_d = xp.where(better, d, best_d)
     return best
+
+
+def drive_at_speed(d, cmd, velocity, speed):
+    """Wire ``cmd`` (unit commands) through a ``speed`` gain into the
+    vehicles' ``velocity`` input: the last link of every task scenario."""
+    from avblocks.blocks import Gain
+    gain = d.add(Gain(float(speed)), name="speed")
+    d.connect(cmd, gain.u)
+    d.connect(gain.y, velocity)
 
 
 def command_source(d, controller, n, obs_ref, name="action"):

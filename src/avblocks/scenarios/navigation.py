@@ -44,13 +44,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from avblocks.blocks import Constant, Function, Gain
+from avblocks.blocks import Constant, Function
 from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
 from avblocks.vehicles import SingleIntegrator
 
 from ._task import (
     command_source,
+    drive_at_speed,
     free_points,
     inside,
     others_index,
@@ -243,9 +244,7 @@ def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, ra
     else:
         src, port = command_source(d, controller, n, task.obs)
         cmd = getattr(src, port)
-    gain = d.add(Gain(float(speed)), name="speed")
-    d.connect(cmd, gain.u)
-    d.connect(gain.y, fleet.velocity)
+    drive_at_speed(d, cmd, fleet.velocity, speed)
     sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4", "seed": int(seed),
            "log": [fleet.position, gl.y, task.success, task.collision, task.reward]}
     return d, sim

@@ -31,12 +31,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from avblocks.blocks import Function, Gain
+from avblocks.blocks import Function
 from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, others_index
+from ._task import command_source, drive_at_speed, others_index
 
 MOVIE = {"pose": "pursuers.position", "trail": 3.0}
 
@@ -147,9 +147,7 @@ def make_diagram(agents=3, half=1.5, speed=1.0, evader_speed=0.7, capture=0.15,
     else:
         src, port = command_source(d, controller, n, task.obs)
         cmd = getattr(src, port)
-    gain = d.add(Gain(float(speed)), name="speed")
-    d.connect(cmd, gain.u)
-    d.connect(gain.y, purs.velocity)
+    drive_at_speed(d, cmd, purs.velocity, speed)
     sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4", "seed": int(seed),
            "log": [purs.position, ev.position, task.distance, task.success]}
     return d, sim

@@ -32,12 +32,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from avblocks.blocks import Constant, Gain
+from avblocks.blocks import Constant
 from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, others_index, pairwise, uniform_points
+from ._task import command_source, drive_at_speed, others_index, pairwise, uniform_points
 
 MOVIE = {"pose": "fleet.position", "trail": 2.0}
 
@@ -112,9 +112,7 @@ def make_diagram(agents=3, half=1.0, speed=1.0, radius=0.1, cover=0.1, controlle
         d.connect(drive.velocity, fleet.velocity)
     else:
         src, port = command_source(d, controller, n, task.obs)
-        gain = d.add(Gain(float(speed)), name="speed")
-        d.connect(getattr(src, port), gain.u)
-        d.connect(gain.y, fleet.velocity)
+        drive_at_speed(d, getattr(src, port), fleet.velocity, speed)
     sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4", "seed": int(seed),
            "log": [fleet.position, task.reward, task.success, marks.y]}
     return d, sim

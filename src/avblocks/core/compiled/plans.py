@@ -7,13 +7,12 @@ engine (:func:`avblocks.compile`):
 1. **plans** every search a block owns (``block.searches()``, or each
    attribute that is a ``NeighborSearch``; see
    :func:`avblocks.core.diagnostics.searches_of`) from the block's input
-   values at ``t0`` (or, when the search's ``points`` names a parameter,
-   such as fixed targets, from that parameter's value), computed by the
-   NumPy engine (one initial evaluation, no step), unless the user fixed
+   values at ``t0`` the first time the block is compiled (or, when the
+   search's ``points`` names a parameter such as fixed targets, from that
+   parameter's value), computed by the NumPy engine (one initial evaluation, no step), unless the user fixed
    ``capacity=``. The plan is part of the block's structure, so it is part
-   of the compile-cache key. Plans only grow over a block's life (a new
-   plan keeps the larger of the old and the new sizes), so a plan grown
-   after an overflow is kept;
+   of the compile-cache key; it is kept for the block's life and only grows
+   (after an overflow, step 3), so a grown plan is not planned away again;
 2. during the run, each search call tests ``need > plan`` and records an
    excess (:mod:`avblocks.core.diagnostics`; nothing is called back while
    the plan suffices);
@@ -31,7 +30,6 @@ An ensemble's need is the largest over its runs.
 
 from __future__ import annotations
 
-import dataclasses
 import warnings
 from types import SimpleNamespace
 
@@ -59,19 +57,14 @@ def owned(cd):
     return out
 
 
-def _merge(old, new):
-    """The larger of two plans of one search (None: no old plan)."""
-    if old is None or old.reach != new.reach or old.box != new.box:
-        return new
-    cap = max(old.capacity or 0, new.capacity or 0) or None
-    hits = max(old.hits or 0, new.hits or 0) or None
-    return dataclasses.replace(new, capacity=cap, hits=hits)
-
-
 def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
     """Plan every search of ``cd`` not fixed by its user, from the NumPy
     engine's block inputs at ``t0``. Returns the number planned."""
-    todo = [(i, s) for i, _, s in owned(cd) if not getattr(s, "fixed", False)]
+    # a search planned before keeps its plan: a run that outgrows it is caught
+    # after the run and re-planned (step 3), so a second compile of the same
+    # blocks (every ``simulate(backend="jax")`` call) needs no NumPy evaluation
+    todo = [(i, s) for i, _, s in owned(cd)
+            if not getattr(s, "fixed", False) and getattr(s, "cells", None) is None]
     if not todo:
         return 0
     from ..simulator import Simulator
@@ -89,9 +82,7 @@ def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
                                  "parameter of its block", block=cd.names[i],
                                  param="points", expected=sorted(u) + sorted(params),
                                  found=s.points)
-        old = s.cells
         s.plan(np.asarray(pts))
-        s.cells = _merge(old, s.cells)
     return len(todo)
 
 

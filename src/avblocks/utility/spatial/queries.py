@@ -218,7 +218,7 @@ def _compact(ok, cols, width, xp):
     return outs, need
 
 
-def _smallest(d2, idx, k, xp):
+def k_smallest(d2, idx, k, xp):
     """The ``k`` smallest ``(d2, idx)`` pairs of each row, sorted: ``k``
     passes of a row minimum (distance first, then the smaller index among
     equal distances), each removing what it took. Exact; O(k M) per row.
@@ -301,7 +301,7 @@ def _smallest_np(d2, idx, k, n):
     od = np.where(finite[:, :kk], np.take_along_axis(d2, cols[:, :kk], 1), np.inf)
     bad = np.nonzero(np.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]), axis=1))[0]
     if bad.size:
-        ed, ei = _smallest(d2[bad], idx[bad], kk, np)
+        ed, ei = k_smallest(d2[bad], idx[bad], kk, np)
         sel[bad] = np.where(np.isfinite(ed), ei, -1)
         od[bad] = ed
     return sel, od
@@ -394,7 +394,7 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     pcols = _cols(points)
 
     def exact(d2, idx):
-        od, oi = _smallest(d2, idx, k, xp)
+        od, oi = k_smallest(d2, idx, k, xp)
         fin = xp.isfinite(od)
         return xp.where(fin, oi, -1), od
 

@@ -98,3 +98,66 @@ def test_import_contracts_hold():
     proc = subprocess.run(cmd + ["--config", str(ROOT / "pyproject.toml"), "--no-cache"],
                           cwd=ROOT, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout + proc.stderr
+
+
+# ------------------------------------------------ private names stay at home
+#: the top-level areas of the package; the application layer (the CLI, its
+#: commands, the run guard they share and the sweep CLI) counts as one
+_APPS = {"cli", "commands", "_runio", "sweep", "__main__"}
+
+
+def _area(module: str) -> str:
+    parts = module.split(".")[1:]
+    if parts[:2] == ["core", "compiled"]:
+        return "core.compiled"              # the compiled engine: a layer of its own
+    head = parts[0] if parts else ""
+    return "apps" if head in _APPS else head
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not name.startswith("__")
+
+
+def private_imports(src: Path = ROOT / "src" / "avblocks") -> list[str]:
+    """``module:line name`` for every import of a private name (or from a
+    private module) of another area of the package, functions included."""
+    import ast
+
+    found = []
+    for f in sorted(src.rglob("*.py")):
+        rel = f.relative_to(src.parent).with_suffix("").parts
+        module = ".".join(rel[:-1] if rel[-1] == "__init__" else rel)
+        package = module.split(".") if rel[-1] == "__init__" else module.split(".")[:-1]
+        for node in ast.walk(ast.parse(f.read_text(encoding="utf-8"))):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level:
+                base = package[:len(package) - node.level + 1]
+                target = ".".join(base + ([node.module] if node.module else []))
+            elif (node.module or "").split(".")[0] == "avblocks":
+                target = node.module
+            else:
+                continue
+            if _area(target) == _area(module):
+                continue
+            for alias in node.names:
+                if any(_private(p) for p in target.split(".")[1:]) or _private(alias.name):
+                    found.append(f"{module}:{node.lineno} {target}.{alias.name}")
+    return found
+
+
+def test_private_name_finder_sees_relative_and_absolute_imports(tmp_path):
+    pkg = tmp_path / "avblocks"
+    (pkg / "core").mkdir(parents=True)
+    (pkg / "viz").mkdir()
+    for p in (pkg, pkg / "core", pkg / "viz"):
+        (p / "__init__.py").write_text("")
+    (pkg / "core" / "diagram.py").write_text("def _flatten(): pass\n")
+    (pkg / "viz" / "draw.py").write_text(
+        "from ..core.diagram import _flatten\n"
+        "def f():\n    from avblocks.core import diagram\n    from . import _own\n")
+    assert private_imports(pkg) == ["avblocks.viz.draw:1 avblocks.core.diagram._flatten"]
+
+
+def test_no_private_names_cross_areas():
+    assert private_imports() == []

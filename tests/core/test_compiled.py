@@ -486,3 +486,38 @@ def test_compile_refuses_a_run_that_is_not_whole_steps():
     assert "1 or 1.01" in str(e.value)
     with pytest.raises(av.ParameterError, match="finite number"):
         av.compile(d, float("nan"), dt=0.01)
+
+
+def test_structure_key_sees_every_structural_change_and_ignores_values():
+    """The compile-cache key is worked out on every simulate(backend="jax")
+    call, with records that can never change (frozen ports) fingerprinted
+    once: a port of another shape, a frozen record holding a list that is
+    changed in place, and a changed non-parameter array each give a new key;
+    parameter values and a parameter's bounds (validation only) do not."""
+    import dataclasses
+
+    from avblocks.core.compiled.structure import block_fingerprint, fingerprint
+
+    def key(b):
+        return block_fingerprint(b)
+
+    a, b = GoToGoal(np.zeros((3, 2))), GoToGoal(np.zeros((3, 2)))
+    assert key(a) == key(b)
+    b.set_parameter("k", [2.0, 3.0, 4.0])
+    b._params["k"].bounds = (1.0, None)
+    assert key(a) == key(b)                         # values and bounds are data
+    b.goal[0, 0] = 1.0                              # in place, not a parameter
+    assert key(a) != key(b)
+    c = GoToGoal(np.zeros((4, 2)))                  # ports of another shape
+    assert key(a) != key(c)
+
+    @dataclasses.dataclass(frozen=True)
+    class Rec:
+        items: list
+    r = Rec([1, 2])
+    before = fingerprint(r)
+    r.items.append(3)                               # frozen, but not plain
+    assert fingerprint(r) != before
+    p = av.Port("y", (2, 3))
+    assert fingerprint(p) == fingerprint(av.Port("y", (2, 3)))
+    assert fingerprint(p) != fingerprint(av.Port("y", (2, 4)))

@@ -47,8 +47,8 @@ def test_thirty_thousand_agents_with_the_default_cap():
     n, steps = 30_000, 3000
     per = n * 3 * 8
     assert (steps + 1) * per > 2 * 1024**3                 # the README's log is too big
-    from avblocks.core.simulator import _log_every_that_fits
-    k = _log_every_that_fits(per, steps, 2 * 1024**3)
+    from avblocks.core.simulator import log_every_that_fits
+    k = log_every_that_fits(per, steps, 2 * 1024**3)
     assert k == 2 and (steps // k + 1) * per <= 2 * 1024**3
     d, f = fleet(n)
     cap = math.ceil(per * 60)                              # 60 samples of 30,000 poses

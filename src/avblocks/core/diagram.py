@@ -410,6 +410,13 @@ def _find_handle(d: Diagram, path: str):
     return h
 
 
+def flatten(diagram: Diagram):
+    """The leaf blocks and wires of ``diagram`` with subsystems opened:
+    ``([(path, block)], [((src_path, output), (dst_path, input))])``, paths
+    dotted from the top (``"team.fleet"``), in the order blocks were added."""
+    return _flatten(diagram, "")
+
+
 def _flatten(d: Diagram, prefix: str):
     """Leaves ``[(path, block)]`` and wires ``[((src_path, out), (dst_path, in))]``."""
     leaves, wires = [], []

@@ -17,7 +17,7 @@ from .block import Periodic
 from .errors import ShapeError, SimulationError
 
 
-def _select(hit, new, old, xp):
+def select(hit, new, old, xp):
     """``new`` where ``hit`` else ``old`` (dicts of arrays); Python or traced."""
     if hit is True:
         return new
@@ -133,7 +133,7 @@ class Engine:
                 h = hits[i]
                 if h is False:
                     continue
-                Y[i] = _select(h, self._out(i, t, X, Y), Yprev[i], xp)
+                Y[i] = select(h, self._out(i, t, X, Y), Yprev[i], xp)
             else:
                 Y[i] = self._out(i, t, X, Y)
         return Y
@@ -167,7 +167,7 @@ class Engine:
             else:
                 new = b.update(t, X[i], self.gather(i, Y), xp)
             merged = {**X[i], **new}
-            X[i] = _select(h, merged, X[i], xp)
+            X[i] = select(h, merged, X[i], xp)
         return X
 
     def derivs(self, t, X, Y):

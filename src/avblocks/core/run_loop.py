@@ -19,8 +19,8 @@ from .errors import ParameterError, SimulationError
 from .params import integer
 from .results import Results
 from .runguard import (
-    _finite,
-    _log_every_that_fits,
+    finite_number,
+    log_every_that_fits,
     _param_binding,
     _progress_wanted,
     default_log,
@@ -51,11 +51,11 @@ def run(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None, se
 
 
 def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, params):
-    t_final = _finite(t_final, "t_final")
+    t_final = finite_number(t_final, "t_final")
     nsteps = whole_steps(sim.t0, t_final, sim.dt)
     auto_log = log_every is None       # default: every step, unless too big
     log_every = 1 if auto_log else integer(log_every, None, "log_every", lo=1)
-    if realtime is not None and not (_finite(realtime, "realtime") > 0):
+    if realtime is not None and not (finite_number(realtime, "realtime") > 0):
         raise ParameterError("realtime factor must be > 0", param="realtime",
                              expected="> 0", found=realtime)
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
@@ -92,7 +92,7 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
     nlog = nsteps // log_every + 1
     need = sum(nlog * int(np.prod(p.shape)) * np.dtype(p.dtype).itemsize for p in specs)
     if need > max_log_bytes:
-        fit = _log_every_that_fits(need // nlog, nsteps, max_log_bytes)
+        fit = log_every_that_fits(need // nlog, nsteps, max_log_bytes)
         if auto_log and fit is not None:
             import warnings
             warnings.warn(f"logging every step would take {need / 1e9:.2f} GB (more than "

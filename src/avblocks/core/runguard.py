@@ -27,7 +27,7 @@ def _seed(seed):
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
 
 
-def _finite(v, name):
+def finite_number(v, name):
     ok = not isinstance(v, (bool, np.bool_, str, bytes))
     f = math.nan
     if ok:
@@ -72,7 +72,7 @@ def whole_steps(t0, t_final, dt):
     return n
 
 
-def _log_every_that_fits(per_sample, nsteps, max_log_bytes):
+def log_every_that_fits(per_sample, nsteps, max_log_bytes):
     """The smallest decimation whose log (``nsteps // k + 1`` samples of
     ``per_sample`` bytes) fits in ``max_log_bytes``, or None."""
     samples = int(max_log_bytes // max(int(per_sample), 1))

@@ -47,8 +47,8 @@ from .diagram import CompiledDiagram, Diagram
 from .engine import Engine
 from .errors import AvError, ParameterError, ShapeError, SimulationError
 from .runguard import (  # noqa: F401  (default_log, initial_values: importable here as before)
-    _finite,
-    _log_every_that_fits,
+    finite_number,
+    log_every_that_fits,
     _seed,
     default_log,
     initial_values,
@@ -115,7 +115,7 @@ class Simulator:
         self.dt = dt
         self.solver = make_solver(solver)
         self.seed = _seed(seed)
-        self.t0 = _finite(t0, "t0")
+        self.t0 = finite_number(t0, "t0")
         if not isinstance(check_finite, (bool, np.bool_)):
             raise ParameterError("check_finite must be True or False",
                                  param="check_finite", found=repr(check_finite)[:40])

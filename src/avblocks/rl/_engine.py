@@ -16,20 +16,14 @@ from ..core.solvers import make_solver
 
 def traced_engine(compiled, dt, jnp, canon):
     """The compiled backend's engine (errors name the block, fixed dtypes)."""
-    try:
-        from ..core.compiled.engine import TracedEngine
-    except ImportError:  # pragma: no cover - after the packages move
-        from ..compiled.engine import TracedEngine
+    from ..core.compiled.engine import TracedEngine
     return TracedEngine(compiled, dt, jnp, canon)
 
 
 def jax():
     """The ``jax`` module (deferred import with avblocks' install hint)."""
-    try:
-        from ..core.compiled import _jax
-    except ImportError:  # pragma: no cover - after the packages move
-        from ..compiled import _jax
-    return _jax.jax()
+    from ..core.compiled import require_jax
+    return require_jax()
 
 
 __all__ = ["Engine", "bound_parameters", "make_solver", "rng", "traced_engine", "jax"]

@@ -101,6 +101,16 @@ def _unit_mixer(frame):
 _MIXERS = {f: _unit_mixer(f) for f in _ANGLES}
 
 
+def rotor_angles(frame="x"):
+    """Azimuth of each rotor arm in the body frame (rad, from +x towards +y),
+    in motor order, for ``frame`` ``"+"``, ``"x"``, ``"crazyflie"`` or
+    ``"px4"`` (a copy)."""
+    if frame not in _ANGLES:
+        raise ParameterError("unknown frame", param="frame", expected=sorted(_ANGLES),
+                             found=frame)
+    return _ANGLES[frame].copy()
+
+
 def mixer_matrix(frame="x"):
     """The 4x4 unit mixer B: ``(T, tau_x/l, tau_y/l, tau_z/k_m) = B f`` (read-only)."""
     if frame not in _MIXERS:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.diagram import Diagram
+from ..core.diagram import Diagram, flatten
 from ..core.errors import ParameterError
 
 
@@ -255,10 +255,8 @@ def draw_diagram_matplotlib(diagram: Diagram):
     from matplotlib.figure import Figure
     from matplotlib.patches import FancyArrowPatch, FancyBboxPatch, Rectangle
 
-    from ..core.diagram import _flatten
-
     _resolve_shapes(diagram)
-    leaves, wires = _flatten(diagram, "")
+    leaves, wires = flatten(diagram)
     names = [p for p, _ in leaves]
     blocks = [b for _, b in leaves]
     if not names:

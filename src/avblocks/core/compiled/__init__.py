@@ -11,9 +11,10 @@ ahead-of-time compiled ``jit(lax.scan)``; compiled programs are cached by the
 diagram's structure. See docs/compiled.md.
 """
 
+from ._jax import jax as require_jax
 from .build import compile, grad, simulate_compiled
 from .program import cache_info, clear_cache, enable_persistent_cache
 from .runner import Runner
 
 __all__ = ["compile", "grad", "Runner", "simulate_compiled", "cache_info", "clear_cache",
-           "enable_persistent_cache"]
+           "enable_persistent_cache", "require_jax"]

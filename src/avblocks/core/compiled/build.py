@@ -8,7 +8,7 @@ import numpy as np
 
 from ..diagram import CompiledDiagram, Diagram, PortRef
 from ..errors import CompileError, ParameterError
-from ..runguard import _finite, whole_steps
+from ..runguard import finite_number, whole_steps
 from ..solvers import make_solver
 from . import _jax
 from . import devices as _devices
@@ -131,12 +131,12 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                              expected="Diagram", found=type(diagram).__name__)
     # the same checks as every engine (core.runguard): finite numbers, dt > 0,
     # a whole number of steps (never a silently shortened run)
-    dt = _finite(dt, "dt")
+    dt = finite_number(dt, "dt")
     if not dt > 0:
         raise ParameterError("major step must be a positive number", param="dt",
                              expected="> 0", found=dt)
-    t0 = _finite(t0, "t0")
-    nsteps = whole_steps(t0, _finite(t_final, "t_final"), dt)
+    t0 = finite_number(t0, "t0")
+    nsteps = whole_steps(t0, finite_number(t_final, "t_final"), dt)
     try:
         log_every = int(log_every)
     except (TypeError, ValueError):

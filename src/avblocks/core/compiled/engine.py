@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import diagnostics as _diagnostics
 from ..engine import Engine as _Engine
-from ..engine import _select
+from ..engine import select
 from ..errors import AvError, CompileError, ShapeError
 
 
@@ -96,7 +96,7 @@ class TracedEngine(_Engine):
             # keep the declared dtypes (a block may return e.g. int32 from a where)
             merged = {k: self.xp.asarray(v, dtype=X[i][k].dtype) for k, v in merged.items()
                       if k in X[i]}
-            X[i] = _select(hits[i] if self.periodic[i] else True, merged, X[i], self.xp)
+            X[i] = select(hits[i] if self.periodic[i] else True, merged, X[i], self.xp)
         return X
 
     def derivs(self, t, X, Y):

@@ -20,10 +20,43 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import types
+import weakref
 
 import numpy as np
 
 _MAX_DEPTH = 6
+_PLAIN = (type(None), bool, int, float, complex, str, bytes)
+
+#: fingerprints of frozen dataclasses whose fields are plain values (ports):
+#: they can never change, so each is worked out once (keyed by value)
+_FROZEN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _plain(v):
+    """True for a value that can never change in place (plain scalars and
+    tuples of them), whose equality is its structure."""
+    if isinstance(v, _PLAIN):
+        return True
+    return type(v) is tuple and all(_plain(x) for x in v)
+
+
+def _frozen_fp(obj, depth):
+    try:
+        fp = _FROZEN.get(obj)
+    except TypeError:               # unhashable field: not a plain record
+        fp = None
+    if fp is not None:
+        return fp
+    fields = dataclasses.fields(obj)
+    values = [getattr(obj, f.name) for f in fields]
+    fp = (type(obj).__qualname__,
+          tuple((f.name, fingerprint(v, depth + 1)) for f, v in zip(fields, values)))
+    if all(_plain(v) for v in values):
+        try:
+            _FROZEN[obj] = fp
+        except TypeError:
+            pass
+    return fp
 
 
 def _array_fp(a):
@@ -47,6 +80,9 @@ def fingerprint(obj, depth=0):
     if isinstance(obj, (list, tuple)):
         return (type(obj).__name__, tuple(fingerprint(v, depth + 1) for v in obj))
     if isinstance(obj, dict):
+        if all(type(k) is str for k in obj):
+            return ("dict", tuple(sorted((k, fingerprint(v, depth + 1))
+                                         for k, v in obj.items())))
         return ("dict", tuple(sorted(((repr(k), fingerprint(v, depth + 1))
                                       for k, v in obj.items()), key=lambda kv: kv[0])))
     if isinstance(obj, (set, frozenset)):
@@ -54,7 +90,9 @@ def fingerprint(obj, depth=0):
     if isinstance(obj, (types.FunctionType, types.BuiltinFunctionType, types.MethodType,
                         types.ModuleType, type)):
         return ("ref", obj)           # identity; the key holds the object alive
-    if dataclasses.is_dataclass(obj):
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        if obj.__dataclass_params__.frozen:
+            return _frozen_fp(obj, depth)
         return (type(obj).__qualname__,
                 tuple((f.name, fingerprint(getattr(obj, f.name), depth + 1))
                       for f in dataclasses.fields(obj)))
@@ -84,6 +122,10 @@ def block_fingerprint(b):
             continue
         if k in params:
             items.append((k, ("param", tuple(np.shape(v)))))
+        elif k == "_params":
+            # the specs' bounds, units and docs only validate values: the
+            # trace sees each parameter's name and shape
+            items.append((k, tuple((n, p.shape) for n, p in v.items())))
         elif k == "_init":
             items.append((k, tuple(sorted((n, np.asarray(a).dtype.str, np.shape(a))
                                           for n, a in v.items()))))

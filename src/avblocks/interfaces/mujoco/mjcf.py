@@ -14,7 +14,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from ...vehicles.quadrotor import _ANGLES
+from ...vehicles.quadrotor import rotor_angles
 
 
 def _f(*vals):
@@ -92,7 +92,7 @@ class MJCFWriter:
     def _quad_xml(self, g):
         p = g.params
         rgba = _f(*p["color"])
-        ang = _ANGLES[p["frame"]]
+        ang = rotor_angles(p["frame"])
         out = []
         for i, b in enumerate(g.bodies):
             arm = p["arm_length"][i]

@@ -52,7 +52,7 @@ import numpy as np
 from ...core.block import Block
 from ...core.errors import ParameterError
 from ...utility.angles import wrap_angle
-from ...vehicles._rotations import quat_to_rotmat, quat_yaw
+from ...vehicles import quat_to_rotmat, quat_yaw
 from ...vehicles.diffdrive import wheels_to_twist
 from ...vehicles.quadrotor import rotors_to_wrench
 from ._gl import import_mujoco

@@ -93,7 +93,7 @@ def camera_pose(body_position, body_attitude, mount_pos, mount_rot):
     (N, 3, 3), for a camera at ``mount_pos`` (3,) in the body frame with
     axes ``mount_rot`` (3, 3) (MuJoCo convention: columns x right, y up,
     z backwards, as :meth:`~avblocks.interfaces.mujoco.CameraMount.rotation`)."""
-    from ...vehicles._rotations import quat_normalize, quat_to_rotmat
+    from ...vehicles import quat_normalize, quat_to_rotmat
     q = quat_normalize(np.asarray(body_attitude, float))
     Rb = quat_to_rotmat(q)
     pos = np.asarray(body_position, float) + Rb @ np.asarray(mount_pos, float)

@@ -19,7 +19,7 @@ import numpy as np
 from ...core.diagram import PortRef
 from ...core.errors import ParameterError
 from ...core.results import Results
-from ...core.runguard import _log_every_that_fits, default_log
+from ...core.runguard import log_every_that_fits, default_log
 
 
 class Recording:
@@ -66,7 +66,7 @@ class Recording:
         per = sum(int(np.prod(self.specs[n].shape)) * np.dtype(self.specs[n].dtype).itemsize
                   for n in self.names)
         if self._auto_log and (self.nsteps + 1) * per > max_log_bytes:
-            self.log_every = _log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
+            self.log_every = log_every_that_fits(per, self.nsteps, max_log_bytes) or 1
         self.nlog = self.nsteps // self.log_every + 1
         need = self.nlog * per
         if need > max_log_bytes:

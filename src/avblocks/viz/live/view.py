@@ -43,7 +43,7 @@ import numpy as np
 from ...core.diagram import CompiledDiagram, Diagram
 from ...core.errors import ParameterError, SimulationError
 from ...core.params import integer
-from ...core.runguard import _finite, whole_steps
+from ...core.runguard import finite_number, whole_steps
 from . import _scene
 from ._server import LiveViewError, open_server  # noqa: F401  (importable here as before)
 from .controls import Controls
@@ -128,11 +128,11 @@ class LiveView(Recording, Drawing, Controls):
         self.sim = Simulator(diagram, dt, solver, seed=self.seed, t0=t0,
                              check_finite=check_finite, x0=x0)
         # the shared run guard: the same arguments mean the same as in simulate()
-        self.nsteps = whole_steps(self.sim.t0, _finite(t_final, "t_final"), self.sim.dt)
+        self.nsteps = whole_steps(self.sim.t0, finite_number(t_final, "t_final"), self.sim.dt)
         self._auto_log = log_every is None     # as simulate(): every step unless too big
         self.log_every = 1 if log_every is None else integer(log_every, None, "log_every",
                                                              lo=1)
-        if realtime is not None and not (_finite(realtime, "realtime") > 0):
+        if realtime is not None and not (finite_number(realtime, "realtime") > 0):
             raise ParameterError("realtime factor must be > 0", param="realtime",
                                  expected="> 0 or None", found=realtime)
         self.speed = None if realtime is None else float(realtime)

@@ -163,6 +163,78 @@ def numba_loop():
     return run
 
 
+def jax_loop():
+    """The W1 law, Euler step and arrival latch written by hand as one JAX
+    ``lax.scan`` (compiled with avblocks' XLA options): the floor of what a
+    compiled avblocks run of W1 can reach."""
+    from avblocks.core.compiled import require_jax
+    from avblocks.core.compiled.program import compiler_options
+    jax = require_jax()
+    jnp = jax.numpy
+
+    def run_(pose, goal, steps):
+        def step(carry, _):
+            pose, done = carry
+            c, s = jnp.cos(pose[:, 2]), jnp.sin(pose[:, 2])
+            ex = goal[:, 0] - pose[:, 0] - D * c
+            ey = goal[:, 1] - pose[:, 1] - D * s
+            done = done | (ex * ex + ey * ey <= R * R)
+            wx, wy = K * ex, K * ey
+            scale = jnp.minimum(1.0, VMAX / jnp.maximum(jnp.hypot(wx, wy), 1e-300))
+            wx, wy = wx * scale, wy * scale
+            v = c * wx + s * wy
+            w = (c * wy - s * wx) / D
+            return (pose + DT * jnp.stack([v * c, v * s, w], axis=1), done), None
+        carry, _ = jax.lax.scan(step, (pose, jnp.zeros(pose.shape[0], bool)), None,
+                                length=steps)
+        return carry
+
+    cache = {}
+
+    def run(n, steps):
+        p0, goal = setup(n)
+        with jax.enable_x64(True):
+            key = (n, steps)
+            if key not in cache:
+                cache[key] = jax.jit(run_, static_argnums=2).lower(
+                    p0, goal, steps).compile(compiler_options())
+            return jax.block_until_ready(cache[key](p0, goal))
+    return run
+
+
+def percall_main(args):
+    """Per-call cost at small N: a second ``simulate(backend="jax")``, a
+    ``Runner`` call, the hand-written JAX scan and the fused Numba loop,
+    timed alternately (25 rounds; min and median)."""
+    import os
+    import statistics
+    n, steps = 10, STEPS
+    d, fleet = diagram(n)
+    kw = dict(dt=DT, solver="euler", log=[fleet.pose], log_every=100)
+    runner = av.compile(d, steps * DT, **kw)
+    nb, hand = numba_loop(), jax_loop()
+    cases = {"simulate(backend='jax')": lambda: av.simulate(d, steps * DT, backend="jax",
+                                                             progress=False, **kw),
+             "Runner call": runner, "hand-written JAX scan": lambda: hand(n, steps),
+             "fused Numba loop": lambda: nb(n, steps)}
+    times = {k: [] for k in cases}
+    for f in cases.values():
+        f()                                          # compile outside the timings
+    for _ in range(25):
+        for k, f in cases.items():
+            t = time.perf_counter()
+            f()
+            times[k].append(time.perf_counter() - t)
+    base = min(times["fused Numba loop"])
+    print(f"\nPer-call cost, W1, N = {n}, Euler, {steps} steps, log every 100; 25 "
+          f"alternating rounds; load average {os.getloadavg()[0]:.1f}\n")
+    print("| call | min ms | median ms | min / Numba |")
+    print("|---|---:|---:|---:|")
+    for k, v in times.items():
+        print(f"| {k} | {min(v) * 1e3:.3f} | {statistics.median(v) * 1e3:.3f} | "
+              f"{min(v) / base:.2f} |")
+
+
 def jax_main(args):
     """The compiled backend vs a fused Numba loop and the NumPy engine."""
     import os
@@ -295,6 +367,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N up to 3000 only")
     ap.add_argument("--full", action="store_true", help="run every case for 3000 steps")
+    ap.add_argument("--percall", action="store_true",
+                    help="only the per-call cost at N = 10 (simulate, Runner, "
+                         "hand-written JAX, Numba)")
     ap.add_argument("--ratios", action="store_true",
                     help="only the NumPy engine / plain NumPy ratio, from alternating "
                          "runs (steady on a shared machine)")
@@ -310,6 +385,9 @@ def main():
     args = ap.parse_args()
     global CLOCK
     CLOCK = time.process_time if args.clock == "cpu" else time.perf_counter
+    if args.percall:
+        percall_main(args)
+        return
     if args.ratios:
         ratios_main(args)
         return

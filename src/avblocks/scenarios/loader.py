@@ -204,11 +204,15 @@ class Scenario:
         if not isinstance(d.get("movie") or {}, dict):
             raise ScenarioError("'movie' must be a mapping of movie options",
                                 file=self.source, entry="movie")
-        if d.get("report") is not None and d["report"] not in REPORTS:
-            raise ScenarioError(f"unknown report '{d['report']}'", file=self.source,
+        rep = d.get("report")
+        if rep is not None and (not isinstance(rep, str) or rep not in REPORTS):
+            shown = rep if isinstance(rep, str) else repr(rep)[:60]
+            raise ScenarioError(f"unknown report '{shown}'", file=self.source,
                                 entry="report",
-                                hint=did_you_mean(d["report"], REPORTS)
+                                hint=did_you_mean(shown, REPORTS)
                                 + f"reports: {list(REPORTS)}")
+        from ._report_schema import check_sections
+        check_sections(d.get("outcome"), d.get("figures"), self.source)
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")

@@ -134,7 +134,8 @@ def load_any(target, overrides, out=None):
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build(output_dir=sc.output_dir(out))
     from .report import hooks_from_data, hooks_from_report
-    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
+    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source,
+                            log=sim.get("log"))
     if sc.data.get("report"):
         hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
     movie = sc._value(sc.movie_options(), "movie")      # generators too

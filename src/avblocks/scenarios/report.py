@@ -172,16 +172,27 @@ PLOTS = {"trajectories": _plot_trajectories, "signals": _plot_signals,
 
 
 def save_figure(fig, path, dpi=110):
-    """Save and close a figure; returns the path."""
+    """Save and close a figure; returns the path. The file is written whole
+    or not at all (:func:`avblocks.core.atomic.atomic_path`); a failed write
+    (a full disk, a read-only folder) is an :class:`AvError` naming the file."""
     import matplotlib.pyplot as plt
+
+    from ..core.atomic import atomic_path, os_reason
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        fig.tight_layout()
-    except Exception:  # noqa: BLE001 - colour bars can refuse; the file is still fine
-        pass
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+        try:
+            fig.tight_layout()
+        except Exception:  # noqa: BLE001 - colour bars can refuse; the file is still fine
+            pass
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise AvError(f"could not write the figure '{path}': {os_reason(e)}") from None
+        fmt = path.suffix.lstrip(".").lower() or None
+        with atomic_path(path, hint="the figure was not written") as tmp:
+            fig.savefig(tmp, dpi=dpi, format=fmt)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -47,6 +47,7 @@ from ._numeric import is_numeric_key, resolve
 from .files import _read
 from .generators import GENERATORS
 from .limits import MAX_FILE_BYTES, MAX_YAML_VALUES, memory_limit  # noqa: F401  (as before)
+from .limits import MAX_WIRES, max_blocks, too_many_blocks
 from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
@@ -216,6 +217,8 @@ class Scenario:
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")
+        if len(d["blocks"]) > max_blocks():
+            raise too_many_blocks(len(d["blocks"]), self.source)
         params = d.get("parameters") or {}
         if not isinstance(params, dict):
             raise ScenarioError("'parameters' must be a mapping", file=self.source,
@@ -223,6 +226,9 @@ class Scenario:
         wires = d.get("wires") or []
         if not isinstance(wires, list):
             raise ScenarioError("'wires' must be a list of [source, destination]",
+                                file=self.source, entry="wires")
+        if len(wires) > MAX_WIRES:
+            raise ScenarioError(f"{len(wires):,} wires, more than {MAX_WIRES:,}",
                                 file=self.source, entry="wires")
         sim = d.get("simulation") or {}
         if not isinstance(sim, dict):

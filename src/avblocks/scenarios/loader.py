@@ -150,11 +150,14 @@ class Scenario:
                         raise ScenarioError(f"'{k}' ran out of memory", file=self.source,
                                             entry=where, hint="use fewer agents/points"
                                             ) from None
-                    except (TypeError, ValueError, AvError, OverflowError,
-                            IndexError, RecursionError) as e:
+                    except (AvError, RecursionError) as e:
                         raise ScenarioError(f"'{k}' failed: {e}", file=self.source,
                                             entry=where, hint=f"'{k}' takes {sig}"
                                             ) from None
+                    except Exception as e:  # noqa: BLE001 - a generator's own failure
+                        raise ScenarioError(f"'{k}' failed: {type(e).__name__}: {e}",
+                                            file=self.source, entry=where,
+                                            hint=f"'{k}' takes {sig}") from None
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)

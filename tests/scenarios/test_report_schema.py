@@ -241,3 +241,25 @@ def test_signals_plot_components_and_agents_exist(tmp_path, extra, entry):
     with pytest.raises(av.ScenarioError) as e:
         load_any(str(p), {}, tmp_path / "out")
     assert e.value.entry == entry and "out of range" in str(e.value)
+
+
+@pytest.mark.parametrize("name", ["nest", "formation", "flocking", "swap"])
+def test_report_signals_must_be_logged(tmp_path, name):
+    """``report: <case study>`` on a file that does not log what the case
+    study reads is refused at load, naming the signals; the built-in files
+    log exactly what their report reads."""
+    import yaml
+
+    from avblocks.scenarios.loader import builtin_dir
+    from avblocks.scenarios.report import REPORT_SIGNALS
+    data = yaml.safe_load((builtin_dir() / f"{name}.yaml").read_text())
+    assert data["report"] == name
+    assert set(data["simulation"]["log"]) == set(REPORT_SIGNALS[name])
+    p = tmp_path / f"{name}.yaml"
+    p.write_text(yaml.safe_dump(data))
+    assert load_any(str(p), {}, tmp_path / "o").hooks.outcome is not None
+    dropped = data["simulation"]["log"].pop()
+    p.write_text(yaml.safe_dump(data))
+    with pytest.raises(av.ScenarioError) as e:
+        load_any(str(p), {}, tmp_path / "o")
+    assert e.value.entry == "report" and dropped in str(e.value)

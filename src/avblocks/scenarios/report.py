@@ -247,11 +247,31 @@ def hooks_from_namespace(ns, overrides=None) -> Hooks:
     return Hooks(o, f)
 
 
-def hooks_from_report(name, params, base=None) -> Hooks:
+#: Signals each case study's ``outcome``/``figures`` read (``report: nest``
+#: in a scenario file): the file must log them.
+REPORT_SIGNALS = {
+    "nest": ("bees.pose", "gossip.informed"),
+    "formation": ("fleet.pose", "lf.error", "supervisor.mode", "collision.hit_obstacle",
+                  "collision.hit_agent"),
+    "flocking": ("flock.position", "flock.velocity"),
+    "swap": ("fleet.position", "drive.done"),
+    "honeybee": ("bees.pose", "gossip.informed", "modes.mode"),
+}
+
+
+def hooks_from_report(name, params, base=None, logged=None, source=None) -> Hooks:
     """Hooks of the built-in case study ``name`` (``report: nest`` in a
     scenario file) called with the file's parameters; the file's own
-    ``outcome``/``figures`` sections, if any, take precedence."""
+    ``outcome``/``figures`` sections, if any, take precedence. With
+    ``logged`` (the names the run will log), a signal the case study reads
+    and the file does not log is refused now, naming it."""
     import importlib
+    missing = [s for s in REPORT_SIGNALS.get(name, ()) if logged is not None
+               and s not in logged]
+    if missing:
+        raise ScenarioError(f"report '{name}' reads {missing}, which will not be logged",
+                            file=source, entry="report",
+                            hint=f"log {list(REPORT_SIGNALS[name])} (simulation.log)")
     mod = importlib.import_module(f"avblocks.scenarios.{name}")
     full = scenario_params(vars(mod), {})
     full.update(params)

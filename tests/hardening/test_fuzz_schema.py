@@ -233,3 +233,27 @@ def test_generator_failing_inside_is_a_scenario_error(tmp_path):
     with pytest.raises(av.ScenarioError) as e:
         load_any(str(p), {}, tmp_path / "out")
     assert e.value.entry == "blocks.bees.pose0" and "nest_poses" in str(e.value)
+
+
+MOVIE_BASE = """
+blocks:
+  fleet: {type: vehicles.Unicycle, pose0: {zeros: {shape: [2, 3]}}}
+  c: {type: blocks.Constant, value: [[1.0, 0.0], [1.0, 0.1]]}
+wires: [[c.y, fleet.cmd]]
+simulation: {t_final: 0.5, dt: 0.1}
+"""
+
+
+@pytest.mark.parametrize("movie, extra, words", [
+    ('{obstacles: [[1, 2], "x"]}', [], "movie: the trajectory figure (pose, obstacles) failed"),
+    ("{trail: abc}", ["--movie", "m.gif"], "a 'movie:' option is wrong"),
+])
+def test_bad_movie_options_keep_the_results(tmp_path, monkeypatch, capsys, movie, extra,
+                                            words):
+    from avblocks.cli import main
+    (tmp_path / "m.yaml").write_text(MOVIE_BASE + f"movie: {movie}\n")
+    monkeypatch.chdir(tmp_path)
+    rc = main(["run", "m.yaml", "--out", "o", "--quiet", *extra])
+    err = capsys.readouterr().err
+    assert rc == 3 and words in err and "kept: o/results.nc" in err, err
+    assert av.Results.load(tmp_path / "o" / "results.nc").t[-1] == pytest.approx(0.5)

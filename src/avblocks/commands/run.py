@@ -148,6 +148,9 @@ def _guarded_run(args, guard, load_any):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
+            except (TypeError, ValueError, KeyError, IndexError, AttributeError) as e:
+                write_errors.append(f"movie: a 'movie:' option is wrong: "
+                                    f"{type(e).__name__}: {e}")
     from ..scenarios.report import jsonable
     outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:

@@ -355,7 +355,9 @@ def default_figures(res, out, movie_options=None):
     pose = options.get("pose") if options.get("pose") in res else (keys[0] if keys else None)
     if pose is None:
         return []
-    fig = plot_trajectories(res, pose=pose, obstacles=options.get("obstacles"))
+    fig = _guarded(lambda: plot_trajectories(res, pose=pose,
+                                             obstacles=options.get("obstacles")),
+                   "movie", "the trajectory figure (pose, obstacles)", None)
     return [save_figure(fig, Path(out) / "trajectories.png")]
 
 

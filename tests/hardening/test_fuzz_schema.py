@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import avblocks as av
@@ -161,6 +161,7 @@ def _schema_property(data, draw_figures=True):
             return                      # not writable as YAML: not a file a user has
         out = Path(tmp) / "out"
         loaded = _clean(lambda: load_any(str(p), {}, out))
+        event("loaded" if loaded is not None else "refused at load")
         if loaded is None:
             return
         d, sim, _name, _movie = loaded
@@ -204,6 +205,56 @@ def test_fuzz_scenario_schema(data):
 @given(st.data())
 def test_fuzz_scenario_schema_long(data):
     _schema_property(data)
+
+
+CLI_FAST = settings(max_examples=20, deadline=None, database=None,
+                    suppress_health_check=list(HealthCheck))
+CLI_LONG = settings(max_examples=300, deadline=None, database=None,
+                    suppress_health_check=list(HealthCheck))
+
+
+def _cli_property(data):
+    """The same files through ``avblocks run`` (two steps of 0.1 s, no
+    pacing): exit status 0, 2 (refused) or 3 (run failed or a file could
+    not be written, results kept), one error line per problem, never a
+    traceback."""
+    import contextlib
+    import io
+
+    from avblocks.cli import main
+    seed = data.draw(st.sampled_from(range(len(SEEDS))), label="seed scenario")
+    scenario = _mutate(data, copy.deepcopy(SEEDS[seed]))
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "s.yaml"
+        try:
+            p.write_text(yaml.safe_dump(scenario, allow_unicode=True))
+        except (yaml.YAMLError, RecursionError, UnicodeEncodeError):
+            return
+        out, err = io.StringIO(), io.StringIO()
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            rc = main(["run", str(p), "--out", str(Path(tmp) / "o"), "--quiet",
+                       "--set", "simulation.dt=0.1",
+                       "--set", "simulation.realtime=null", "--t-final", "0.2"])
+        import matplotlib.pyplot as plt
+        plt.close("all")
+        event(f"exit status {rc}")
+        assert rc in (0, 2, 3), (rc, err.getvalue())
+        assert "Traceback" not in err.getvalue()
+        if rc == 2:
+            assert err.getvalue().startswith("avblocks: error: ")
+
+
+@CLI_FAST
+@given(st.data())
+def test_fuzz_scenario_schema_cli(data):
+    _cli_property(data)
+
+
+@pytest.mark.slow
+@CLI_LONG
+@given(st.data())
+def test_fuzz_scenario_schema_cli_long(data):
+    _cli_property(data)
 
 
 def test_seeds_are_valid_and_their_reports_run(tmp_path):
@@ -257,3 +308,13 @@ def test_bad_movie_options_keep_the_results(tmp_path, monkeypatch, capsys, movie
     err = capsys.readouterr().err
     assert rc == 3 and words in err and "kept: o/results.nc" in err, err
     assert av.Results.load(tmp_path / "o" / "results.nc").t[-1] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("section", ["simulation: null", "simulation: {}", ""])
+def test_set_simulation_on_an_empty_simulation_section(tmp_path, section):
+    """``--set simulation.dt=...`` on a file whose simulation section is null."""
+    p = tmp_path / "m.yaml"
+    p.write_text(MOVIE_BASE.replace("simulation: {t_final: 0.5, dt: 0.1}", section))
+    d, sim, *_ = load_any(str(p), {"simulation.dt": 0.25, "t_final": 0.5}, tmp_path / "o")
+    assert sim["dt"] == 0.25 and sim["t_final"] == 0.5
+    assert av.simulate(d, **sim).t.tolist() == [0.0, 0.25, 0.5]

@@ -168,6 +168,7 @@ class Scenario:
         """A copy with ``--set`` values applied: parameter names, or
         ``simulation.<key>``."""
         import copy
+        self.validate()
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
         for key, val in overrides.items():
@@ -178,13 +179,13 @@ class Scenario:
                                         file=self.source, entry=f"--set {key}",
                                         hint=did_you_mean(sub, _SIM_KEYS)
                                         + f"known: {sorted(_SIM_KEYS)}")
-                data.setdefault("simulation", {})[sub] = val
+                data["simulation"] = {**(data.get("simulation") or {}), sub: val}
             elif is_numeric_key(key):          # block.param: checked on build
                 data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
             elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
-                data.setdefault("simulation", {})[key] = val
+                data["simulation"] = {**(data.get("simulation") or {}), key: val}
             else:
                 raise ScenarioError(f"unknown parameter '{key}'", file=self.source,
                                     entry=f"--set {key}",

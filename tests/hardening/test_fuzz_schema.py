@@ -207,6 +207,10 @@ def test_fuzz_scenario_schema_long(data):
     _schema_property(data)
 
 
+SET_KEYS = ["agents", "seed", "speed", "density", "simulation.log", "simulation.solver",
+            "simulation.log_every", "simulation.seed", "simulation.nope", "drive.gain",
+            "drive.nope", "nope.gain", "fleet.pose0", "log_every", "solver", "x", "",
+            "simulation.", "."]
 CLI_FAST = settings(max_examples=20, deadline=None, database=None,
                     suppress_health_check=list(HealthCheck))
 CLI_LONG = settings(max_examples=300, deadline=None, database=None,
@@ -230,9 +234,18 @@ def _cli_property(data):
             p.write_text(yaml.safe_dump(scenario, allow_unicode=True))
         except (yaml.YAMLError, RecursionError, UnicodeEncodeError):
             return
+        sets = []
+        for _ in range(data.draw(st.integers(0, 2), label="--set count")):
+            key = data.draw(st.sampled_from(SET_KEYS), label="--set key")
+            val = data.draw(HOSTILE, label="--set value")
+            try:
+                text = yaml.safe_dump(val, default_flow_style=True).strip()
+            except (yaml.YAMLError, RecursionError):
+                continue
+            sets += ["--set", f"{key}={text.removesuffix('...').strip()}"]
         out, err = io.StringIO(), io.StringIO()
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            rc = main(["run", str(p), "--out", str(Path(tmp) / "o"), "--quiet",
+            rc = main(["run", str(p), "--out", str(Path(tmp) / "o"), "--quiet", *sets,
                        "--set", "simulation.dt=0.1",
                        "--set", "simulation.realtime=null", "--t-final", "0.2"])
         import matplotlib.pyplot as plt

@@ -46,8 +46,14 @@ from ..core.errors import AvError, ScenarioError, did_you_mean
 from ._numeric import is_numeric_key, resolve
 from .files import _read
 from .generators import GENERATORS
-from .limits import MAX_FILE_BYTES, MAX_YAML_VALUES, memory_limit  # noqa: F401  (as before)
-from .limits import MAX_WIRES, max_blocks, too_many_blocks
+from .limits import (  # noqa: F401  (as before)
+    MAX_FILE_BYTES,
+    MAX_WIRES,
+    MAX_YAML_VALUES,
+    max_blocks,
+    memory_limit,
+    too_many_blocks,
+)
 from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")

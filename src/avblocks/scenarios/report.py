@@ -277,10 +277,10 @@ def hooks_from_report(name, params, base=None, logged=None, source=None) -> Hook
     full.update(params)
     h = hooks_from_namespace(vars(mod), {})
     src = f"report: {name}"
-    o = (lambda res: _guarded(lambda: mod.outcome(res, full), "report",
-                              f"the '{name}' outcome", src)) if h.outcome else None
-    f = (lambda res, out: _guarded(lambda: mod.figures(res, out, full), "report",
-                                   f"the '{name}' figures", src)) if h.figures else None
+    o = (lambda res: _guarded("report", f"the '{name}' outcome", src,
+                              mod.outcome, res, full)) if h.outcome else None
+    f = (lambda res, out: _guarded("report", f"the '{name}' figures", src,
+                                   mod.figures, res, out, full)) if h.figures else None
     base = base or Hooks()
     return Hooks(base.outcome or o, base.figures or f)
 
@@ -315,8 +315,8 @@ def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>
         lines, numbers = [], {}
         for i, item in enumerate(outcome_spec):
             args = {k: v for k, v in item.items() if k != "metric"}
-            line, nums = _guarded(lambda: METRICS[item["metric"]](res, **args),
-                                  f"outcome[{i}]", f"metric '{item['metric']}'", source)
+            line, nums = _guarded(f"outcome[{i}]", f"metric '{item['metric']}'", source,
+                                  METRICS[item["metric"]], res, **args)
             lines.append(line)
             numbers.update(nums)
         return ", ".join(lines), numbers
@@ -325,19 +325,20 @@ def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>
         paths = []
         for i, item in enumerate(figures_spec):
             args = {k: v for k, v in item.items() if k not in ("plot", "file")}
-            fig = _guarded(lambda: PLOTS[item["plot"]](res, diagram=diagram, **args),
-                           f"figures[{i}]", f"plot '{item['plot']}'", source)
+            fig = _guarded(f"figures[{i}]", f"plot '{item['plot']}'", source,
+                           PLOTS[item["plot"]], res, diagram=diagram, **args)
             paths.append(save_figure(fig, Path(out) / item["file"]))
         return paths
 
     return Hooks(outcome if outcome_spec else None, figures if figures_spec else None)
 
 
-def _guarded(fn, entry, what, source):
-    """``fn()``; an exception that is not an avblocks error (a shape the
-    load-time checks could not foresee) as a ScenarioError naming the entry."""
+def _guarded(entry, what, source, fn, /, *args, **kwargs):
+    """``fn(*args, **kwargs)``; an exception that is not an avblocks error (a
+    shape the load-time checks could not foresee) as a ScenarioError naming
+    the entry."""
     try:
-        return fn()
+        return fn(*args, **kwargs)
     except AvError:
         raise
     except (KeyboardInterrupt, MemoryError, OSError):
@@ -355,9 +356,8 @@ def default_figures(res, out, movie_options=None):
     pose = options.get("pose") if options.get("pose") in res else (keys[0] if keys else None)
     if pose is None:
         return []
-    fig = _guarded(lambda: plot_trajectories(res, pose=pose,
-                                             obstacles=options.get("obstacles")),
-                   "movie", "the trajectory figure (pose, obstacles)", None)
+    fig = _guarded("movie", "the trajectory figure (pose, obstacles)", None,
+                   plot_trajectories, res, pose=pose, obstacles=options.get("obstacles"))
     return [save_figure(fig, Path(out) / "trajectories.png")]
 
 

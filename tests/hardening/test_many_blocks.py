@@ -104,3 +104,19 @@ def test_many_blocks_through_the_executable(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "more than 2,000 blocks" in r.stderr and "Traceback" not in r.stderr
     assert wall - startup < 1.0, f"{wall:.2f} s against {startup:.2f} s to start"
+
+
+def test_agents_times_blocks_past_the_memory_limit(tmp_path, monkeypatch):
+    """Each generated array within the limit, all of them together past it:
+    refused at the block that crosses it, before the diagram is built."""
+    monkeypatch.setenv("AVBLOCKS_MAX_MEMORY", "1000000")          # 1 MB
+    blocks = "".join(f"  f{i}: {{type: vehicles.Unicycle, pose0: {{zeros: "
+                     f"{{shape: [20000, 3]}}}}}}\n" for i in range(3))    # 0.48 MB each
+    p = _write(tmp_path, "m.yaml", "blocks:\n" + blocks)
+    from avblocks.scenarios.targets import load_any
+    with pytest.raises(ScenarioError) as e:
+        load_any(str(p), {}, tmp_path / "o")
+    assert e.value.entry == "blocks.f2.pose0" and "0.00144 GB in all" in str(e.value)
+    monkeypatch.setenv("AVBLOCKS_MAX_MEMORY", "2000000")
+    with pytest.raises(ScenarioError, match="input is not connected|every input"):
+        load_any(str(p), {}, tmp_path / "o")              # gets as far as the wiring

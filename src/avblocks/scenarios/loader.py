@@ -151,7 +151,9 @@ class Scenario:
                                             file=self.source, entry=where,
                                             hint=f"'{k}' takes {sig}") from None
                     try:
-                        return GENERATORS[k](**args)
+                        return self._count(GENERATORS[k](**args), k, where)
+                    except ScenarioError:
+                        raise
                     except MemoryError:
                         raise ScenarioError(f"'{k}' ran out of memory", file=self.source,
                                             entry=where, hint="use fewer agents/points"
@@ -169,6 +171,20 @@ class Scenario:
                                         where, self.folder, self.source)
             return {k: self._value(x, f"{where}.{k}") for k, x in v.items()}
         return v
+
+    def _count(self, value, generator, where):
+        """``value``, after adding its size to what this build generated so
+        far: past the memory limit in all (many blocks times many agents,
+        each array within the limit) the build stops here."""
+        total = getattr(self, "_generated_bytes", 0) + int(getattr(value, "nbytes", 0))
+        self._generated_bytes = total
+        lim = memory_limit()
+        if total > lim:
+            raise ScenarioError(f"the generated values take {total / 1e9:.3g} GB in all "
+                                f"(more than {lim / 1e9:.3g} GB) after '{generator}'",
+                                file=self.source, entry=where,
+                                hint="use fewer agents or blocks (AVBLOCKS_MAX_MEMORY)")
+        return value
 
     def with_overrides(self, overrides: dict) -> Scenario:
         """A copy with ``--set`` values applied: parameter names, or
@@ -297,6 +313,7 @@ class Scenario:
     def _build(self, out):
         self.validate()
         self.params = dict(self.data.get("parameters") or {})
+        self._generated_bytes = 0
         reg = block_registry()
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():

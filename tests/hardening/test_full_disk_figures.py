@@ -73,3 +73,15 @@ def test_save_figure_names_the_file_and_leaves_nothing(tmp_path, full_disk_for_i
     assert not plt.fignum_exists(fig.number)                 # closed all the same
     # vector formats do not go through Pillow: written
     assert save_figure(plt.figure(), tmp_path / "b.svg").stat().st_size > 0
+
+
+def test_save_figure_formats_by_suffix(tmp_path):
+    """Written whole under the real name, in the format the suffix names
+    (no suffix: Matplotlib's default, PNG); nothing else left behind."""
+    import matplotlib.pyplot as plt
+
+    from avblocks.scenarios.report import save_figure
+    heads = {"a": b"\x89PNG", "b.PNG": b"\x89PNG", "c.pdf": b"%PDF", "d.svg": b"<?xm"}
+    for name, head in heads.items():
+        assert save_figure(plt.figure(), tmp_path / name).read_bytes()[:4] == head
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(heads)

@@ -188,7 +188,8 @@ def save_figure(fig, path, dpi=110):
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as e:
             raise AvError(f"could not write the figure '{path}': {os_reason(e)}") from None
-        fmt = path.suffix.lstrip(".").lower() or None
+        import matplotlib as mpl
+        fmt = path.suffix.lstrip(".").lower() or mpl.rcParams["savefig.format"]
         with atomic_path(path, hint="the figure was not written") as tmp:
             fig.savefig(tmp, dpi=dpi, format=fmt)
     finally:

@@ -10,7 +10,7 @@ report sections, a run of two steps, then the outcome line and the figures.
 Every step must succeed or end in an avblocks error (``AvError`` with a
 message), never another exception.
 
-A fast profile runs in every CI run (120 examples; figures are drawn for
+A fast profile runs in every CI run (200 examples; figures are drawn for
 about one in eight, as drawing costs a few tenths of a second); the long
 one (1,500 examples, figures always) is marked slow.
 ``AVBLOCKS_FUZZ_EXAMPLES`` sets the fast profile's count.
@@ -32,7 +32,7 @@ import avblocks as av
 from avblocks.scenarios.loader import builtin_dir
 from avblocks.scenarios.targets import load_any
 
-FAST = settings(max_examples=int(os.environ.get("AVBLOCKS_FUZZ_EXAMPLES", 120)),
+FAST = settings(max_examples=int(os.environ.get("AVBLOCKS_FUZZ_EXAMPLES", 200)),
                 deadline=None, database=None, suppress_health_check=list(HealthCheck))
 LONG = settings(max_examples=1500, deadline=None, database=None,
                 suppress_health_check=list(HealthCheck))
@@ -211,7 +211,7 @@ SET_KEYS = ["agents", "seed", "speed", "density", "simulation.log", "simulation.
             "simulation.log_every", "simulation.seed", "simulation.nope", "drive.gain",
             "drive.nope", "nope.gain", "fleet.pose0", "log_every", "solver", "x", "",
             "simulation.", "."]
-CLI_FAST = settings(max_examples=20, deadline=None, database=None,
+CLI_FAST = settings(max_examples=40, deadline=None, database=None,
                     suppress_health_check=list(HealthCheck))
 CLI_LONG = settings(max_examples=300, deadline=None, database=None,
                     suppress_health_check=list(HealthCheck))

@@ -136,6 +136,10 @@ def _guarded_run(args, guard, load_any):
                 files += default_figures(res, out, movie)
         except AvError as e:
             write_errors.append(str(e))
+        except OSError as e:        # a Python scenario's own figures() writing itself
+            from ..core.atomic import os_reason
+            name = f" '{e.filename}'" if getattr(e, "filename", None) else ""
+            write_errors.append(f"could not write the figures{name}: {os_reason(e)}")
         if movie_path is not None and interrupted is None and guard.signum is None:
             from ..viz import save_movie
             try:
@@ -144,6 +148,9 @@ def _guarded_run(args, guard, load_any):
                 files.append(movie_path)
             except AvError as e:
                 write_errors.append(f"movie: {e}")
+            except (TypeError, ValueError, KeyError, IndexError, AttributeError) as e:
+                write_errors.append(f"movie: a 'movie:' option is wrong: "
+                                    f"{type(e).__name__}: {e}")
     from ..scenarios.report import jsonable
     outcome, numbers = None, {}
     if has_samples and interrupted is None and failed is None:
@@ -182,7 +189,8 @@ def _guarded_run(args, guard, load_any):
         summary["overruns"] = res.meta["overruns"]
         summary["max_lateness_s"] = res.meta.get("max_lateness")
     try:
-        write_text_atomic(out / "summary.json", json.dumps(summary, indent=2, default=str))
+        files.append(write_text_atomic(out / "summary.json",
+                                       json.dumps(summary, indent=2, default=str)))
     except AvError as e:
         write_errors.append(str(e))
     print(f"scenario      {name}")
@@ -197,7 +205,8 @@ def _guarded_run(args, guard, load_any):
         from ..interfaces.ros2.cli import report as _pace_report
         print(_pace_report(res))
     for f in files:
-        print(f"wrote         {f}")
+        if Path(f).name != "summary.json":
+            print(f"wrote         {f}")
     if outcome:
         print(f"outcome       {outcome}")
     sys.stdout.flush()
@@ -220,5 +229,8 @@ def _guarded_run(args, guard, load_any):
     if write_errors or summary.get("on_stop_errors"):
         if saved_results is None and has_samples:
             say(f"avblocks: the run finished but {kept}")
+        else:
+            say("avblocks: the run finished; kept: "
+                + (", ".join(str(f) for f in files) or "nothing"))
         return 3
     return 0

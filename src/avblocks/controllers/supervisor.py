@@ -43,15 +43,33 @@ def _always(u, xp):
     return True
 
 
+def _is_name(s):
+    return isinstance(s, str) and bool(s)
+
+
 def _validate(block, states, transitions, initial, outputs):
+    if isinstance(states, (str, bytes, dict)) or not isinstance(states, (list, tuple)):
+        raise ParameterError("states must be a list of unique non-empty names",
+                             block=block, param="states", expected="list of str",
+                             found=repr(states)[:60])
     states = list(states)
-    if not states or len(set(states)) != len(states) or not all(
-            isinstance(s, str) and s for s in states):
+    if not states or not all(_is_name(s) for s in states) or len(set(states)) != len(states):
         raise ParameterError("states must be unique non-empty names", block=block,
                              param="states", found=states)
     index = {s: i for i, s in enumerate(states)}
+    if not isinstance(transitions, (list, tuple)):
+        raise ParameterError("transitions must be a list of (source, target[, guard])",
+                             block=block, param="transitions",
+                             expected="list of tuples", found=repr(transitions)[:60])
+    if outputs is not None and not isinstance(outputs, dict):
+        raise ParameterError("outputs must map output names to {state: value}",
+                             block=block, param="outputs", expected="dict",
+                             found=repr(outputs)[:60])
     src, dst, guards = [], [], []
     for k, tr in enumerate(transitions):
+        if not isinstance(tr, (list, tuple)):
+            raise ParameterError(f"transition {k} is not (source, target[, guard])",
+                                 block=block, param="transitions", found=repr(tr)[:60])
         if len(tr) == 2:
             tr = (*tr, _always)
         if len(tr) != 3:
@@ -59,7 +77,7 @@ def _validate(block, states, transitions, initial, outputs):
                                  param="transitions", found=tr)
         s, d, g = tr
         for end in (s, d):
-            if end not in index:
+            if not _is_name(end) or end not in index:
                 raise ParameterError(f"transition {k} names an unknown state", block=block,
                                      param="transitions", expected=states, found=end)
         if not callable(g):
@@ -68,9 +86,18 @@ def _validate(block, states, transitions, initial, outputs):
         src.append(index[s])
         dst.append(index[d])
         guards.append(g)
-    init = np.atleast_1d(np.asarray(initial, dtype=object))
+    try:
+        init = np.atleast_1d(np.asarray(initial, dtype=object))
+    except (TypeError, ValueError):
+        raise ParameterError("initial must be a state name or one per agent", block=block,
+                             param="initial", expected=states,
+                             found=repr(initial)[:60]) from None
+    if init.ndim != 1:
+        raise ParameterError("initial must be a state name or a list of them",
+                             block=block, param="initial", expected=states,
+                             found=repr(initial)[:60])
     for s in init:
-        if s not in index:
+        if not _is_name(s) or s not in index:
             raise ParameterError("unknown initial state", block=block, param="initial",
                                  expected=states, found=s)
     init_idx = np.array([index[s] for s in init], dtype=np.int64)
@@ -93,13 +120,42 @@ def _validate(block, states, transitions, initial, outputs):
                                  block=block, param="outputs", expected=states,
                                  found=sorted(per_state) if isinstance(per_state, dict)
                                  else per_state)
-        vals = [np.asarray(per_state[s]) for s in states]
+        if not _is_name(name):
+            raise ParameterError("output names must be non-empty strings", block=block,
+                                 param="outputs", found=repr(name)[:60])
+        try:
+            vals = [np.asarray(per_state[s]) for s in states]
+        except (TypeError, ValueError):
+            raise ParameterError(f"output {name!r} needs one array value per state",
+                                 block=block, param="outputs") from None
+        if any(v.dtype.kind not in "biuf" for v in vals):
+            raise ParameterError(f"output {name!r} values must be numbers or bools",
+                                 block=block, param="outputs",
+                                 found=sorted({v.dtype.name for v in vals}))
         if len({v.shape for v in vals}) != 1:
             raise ParameterError(f"output {name!r} has different shapes per state",
                                  block=block, param="outputs",
                                  found={s: v.shape for s, v in zip(states, vals)})
         tables[name] = np.stack(vals)
     return states, np.array(src, np.int64), np.array(dst, np.int64), guards, init_idx, tables
+
+
+def _input_shape(block, name, shape):
+    """An input's declared shape as a tuple of whole numbers >= 0."""
+    if not _is_name(name):
+        raise ParameterError("input names must be non-empty strings", block=block,
+                             param="inputs", found=repr(name)[:60])
+    if isinstance(shape, np.ndarray) and shape.ndim <= 1:
+        shape = shape.tolist()
+    if shape is None:
+        return ()
+    dims = tuple(shape) if isinstance(shape, (tuple, list)) else (shape,)
+    if not all(isinstance(k, (int, np.integer)) and not isinstance(k, bool) and k >= 0
+               for k in dims):
+        raise ParameterError(f"input {name!r} needs a shape of whole numbers",
+                             block=block, param="inputs", expected="int or tuple of int",
+                             found=repr(shape)[:60])
+    return tuple(int(k) for k in dims)
 
 
 def fire(mode, fired, src, dst, xp=np):
@@ -119,7 +175,14 @@ class _Machine(Block):
         name = type(self).__name__
         (self.states, self.src, self.dst, self.guards, init,
          self.tables) = _validate(name, states, transitions, initial, outputs)
+        if inputs is not None and not isinstance(inputs, dict):
+            raise ParameterError("inputs must map input names to shapes", block=name,
+                                 param="inputs", expected="dict", found=repr(inputs)[:60])
         if self._per_agent:
+            if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+                raise ParameterError("n must be a positive whole number of agents",
+                                     block=name, param="n", expected="int >= 1",
+                                     found=repr(n)[:60])
             self.n = n = int(n)
             init = np.broadcast_to(init, (n,)).copy() if init.size in (1, n) else None
             if init is None:
@@ -137,9 +200,8 @@ class _Machine(Block):
         for nm, spec in (inputs or {}).items():
             shape, dtype = (spec if isinstance(spec, tuple) and len(spec) == 2
                             and isinstance(spec[1], str) else (spec, "float64"))
-            self.declare_input(nm, tuple(np.atleast_1d(shape).tolist()) if shape != ()
-                               else (), dtype, feedthrough=False,
-                               agents=self._per_agent)
+            self.declare_input(nm, _input_shape(name, nm, shape), dtype,
+                               feedthrough=False, agents=self._per_agent)
         self.declare_output("mode", self._shape, "int64", agents=self._per_agent)
         for nm, tab in self.tables.items():
             shp = (*self._shape, *tab.shape[1:]) if self._per_agent else tab.shape[1:]

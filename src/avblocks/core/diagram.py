@@ -74,20 +74,26 @@ class BlockHandle:
         return set(_inputs_of(self.block)) | set(_outputs_of(self.block))
 
     def __getattr__(self, name) -> PortRef:
-        if name.startswith("__"):
-            raise AttributeError(name)
-        if name in self._ports():
-            return PortRef(self, name)
-        from .errors import did_you_mean
-        raise WiringError(
-            "unknown port", block=self.name, port=name,
-            expected=f"one of inputs {sorted(_inputs_of(self.block))} or "
-                     f"outputs {sorted(_outputs_of(self.block))}", found=name,
-            hint=did_you_mean(name, self._ports()).strip() or None)
+        if name.startswith("__") and name.endswith("__"):
+            # Python's protocols (copy, pickle, IPython) probe dunders with
+            # getattr(obj, name, default): they expect a plain AttributeError
+            raise AttributeError(f"'{type(self).__name__}' object has no attribute "
+                                 f"{name!r}")
+        return self.port(name)
 
     def port(self, name) -> PortRef:
-        """The port called ``name`` (for names that are not identifiers)."""
-        return self.__getattr__(name)
+        """The port called ``name`` (for names that are not identifiers);
+        a :class:`WiringError` naming the block's ports when there is none
+        (dunder names included: a wire ``fleet.__class__`` is an unknown port)."""
+        if isinstance(name, str) and name in self._ports():
+            return PortRef(self, name)
+        from .errors import did_you_mean
+        shown = name if isinstance(name, str) else repr(name)[:60]
+        raise WiringError(
+            "unknown port", block=self.name, port=shown,
+            expected=f"one of inputs {sorted(_inputs_of(self.block))} or "
+                     f"outputs {sorted(_outputs_of(self.block))}", found=shown,
+            hint=did_you_mean(shown, self._ports()).strip() or None)
 
     def __setattr__(self, name, value):
         raise AttributeError("block handles are read-only")

@@ -4,10 +4,17 @@ the file and the position."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ..core.errors import ScenarioError
-from .limits import MAX_FILE_BYTES, MAX_YAML_VALUES
+from .limits import (
+    MAX_FILE_BYTES,
+    MAX_YAML_NODES,
+    MAX_YAML_VALUES,
+    max_blocks,
+    too_many_blocks,
+)
 
 
 def _yaml_error(e):
@@ -59,6 +66,84 @@ def _children(n, yaml):
     return []
 
 
+def _prescan(text, source):
+    """Count the file's nodes, and the entries of its top-level ``blocks``
+    mapping, with libyaml's event parser before anything is composed or
+    built: a file with too many blocks (or nodes) is refused in
+    milliseconds, not after a parse of tens of seconds. Syntax errors are
+    left to the real parse (which words them)."""
+    import yaml
+    blocks_limit = max_blocks()
+    parser = getattr(yaml, "CSafeLoader", yaml.SafeLoader)(text)
+    node_events = (yaml.ScalarEvent, yaml.AliasEvent, yaml.MappingStartEvent,
+                   yaml.SequenceStartEvent)
+    stack = []            # open collections: [is_mapping, children seen, is_blocks]
+    nodes = 0
+    blocks_next = False   # the next node is the value of the top-level 'blocks' key
+    try:
+        while parser.check_event():
+            ev = parser.get_event()
+            if isinstance(ev, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+                stack.pop()
+                continue
+            if isinstance(ev, yaml.DocumentStartEvent):
+                stack, blocks_next = [], False
+            if not isinstance(ev, node_events):
+                continue
+            nodes += 1
+            if nodes > MAX_YAML_NODES:
+                raise ScenarioError(f"the file holds more than {MAX_YAML_NODES:,} values",
+                                    file=source, hint="generate large data (generators) "
+                                                      "instead of writing it out")
+            is_blocks, blocks_next = blocks_next, False
+            if stack:
+                parent = stack[-1]
+                is_key = parent[0] and parent[1] % 2 == 0
+                parent[1] += 1
+                if is_key and parent[2] and parent[1] // 2 + 1 > blocks_limit:
+                    raise too_many_blocks(None, source)
+                if (is_key and len(stack) == 1 and isinstance(ev, yaml.ScalarEvent)
+                        and ev.value == "blocks"):
+                    blocks_next = True
+            if isinstance(ev, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+                stack.append([isinstance(ev, yaml.MappingStartEvent), 0, is_blocks])
+    except yaml.YAMLError:
+        return
+    finally:
+        parser.dispose()
+
+
+_TOML_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]*?)\s*\]")
+_TOML_KEY = re.compile(r"^\s*([A-Za-z0-9_\-.\s\"']+?)\s*=")
+
+
+def _toml_prescan(text, source):
+    """A TOML file's blocks counted line by line before ``tomllib`` parses it
+    (seconds for a few MB): table headers ``[blocks.x]``, dotted keys
+    ``blocks.x.type = ...`` and keys of a ``[blocks]`` table. A heuristic
+    that sees the usual ways of writing blocks; the count after parsing
+    (:meth:`Scenario.validate`) is the exact check."""
+    limit = max_blocks()
+    names, table = set(), ""
+    for line in text.splitlines():
+        m = _TOML_HEADER.match(line)
+        if m:
+            table = m.group(1).replace(" ", "").replace('"', "").replace("'", "")
+            parts = table.split(".")
+            if len(parts) >= 2 and parts[0] == "blocks":
+                names.add(parts[1])
+        else:
+            m = _TOML_KEY.match(line)
+            if not m:
+                continue
+            key = m.group(1).replace(" ", "").replace('"', "").replace("'", "")
+            full = (table + "." + key if table else key).split(".")
+            if len(full) >= 2 and full[0] == "blocks":
+                names.add(full[1])
+        if len(names) > limit:
+            raise too_many_blocks(None, source)
+
+
 def _safe_yaml(text, source):
     """``yaml.safe_load`` that refuses duplicate keys, unhashable keys and
     alias expansions past :data:`MAX_YAML_VALUES`."""
@@ -86,6 +171,7 @@ def _safe_yaml(text, source):
         return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
 
     Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
+    _prescan(text, source)
     loader = Loader(text)
     try:
         node = loader.get_single_node()
@@ -138,6 +224,7 @@ def _read(path: Path):
                                 file=source) from None
     if path.suffix == ".toml":
         import tomllib
+        _toml_prescan(text, source)
         try:
             return tomllib.loads(text)
         except RecursionError:

@@ -46,7 +46,14 @@ from ..core.errors import AvError, ScenarioError, did_you_mean
 from ._numeric import is_numeric_key, resolve
 from .files import _read
 from .generators import GENERATORS
-from .limits import MAX_FILE_BYTES, MAX_YAML_VALUES, memory_limit  # noqa: F401  (as before)
+from .limits import (  # noqa: F401  (as before)
+    MAX_FILE_BYTES,
+    MAX_WIRES,
+    MAX_YAML_VALUES,
+    max_blocks,
+    memory_limit,
+    too_many_blocks,
+)
 from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
@@ -144,26 +151,46 @@ class Scenario:
                                             file=self.source, entry=where,
                                             hint=f"'{k}' takes {sig}") from None
                     try:
-                        return GENERATORS[k](**args)
+                        return self._count(GENERATORS[k](**args), k, where)
+                    except ScenarioError:
+                        raise
                     except MemoryError:
                         raise ScenarioError(f"'{k}' ran out of memory", file=self.source,
                                             entry=where, hint="use fewer agents/points"
                                             ) from None
-                    except (TypeError, ValueError, AvError, OverflowError,
-                            IndexError, RecursionError) as e:
+                    except (AvError, RecursionError) as e:
                         raise ScenarioError(f"'{k}' failed: {e}", file=self.source,
                                             entry=where, hint=f"'{k}' takes {sig}"
                                             ) from None
+                    except Exception as e:  # noqa: BLE001 - a generator's own failure
+                        raise ScenarioError(f"'{k}' failed: {type(e).__name__}: {e}",
+                                            file=self.source, entry=where,
+                                            hint=f"'{k}' takes {sig}") from None
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)
             return {k: self._value(x, f"{where}.{k}") for k, x in v.items()}
         return v
 
+    def _count(self, value, generator, where):
+        """``value``, after adding its size to what this build generated so
+        far: past the memory limit in all (many blocks times many agents,
+        each array within the limit) the build stops here."""
+        total = getattr(self, "_generated_bytes", 0) + int(getattr(value, "nbytes", 0))
+        self._generated_bytes = total
+        lim = memory_limit()
+        if total > lim:
+            raise ScenarioError(f"the generated values take {total / 1e9:.3g} GB in all "
+                                f"(more than {lim / 1e9:.3g} GB) after '{generator}'",
+                                file=self.source, entry=where,
+                                hint="use fewer agents or blocks (AVBLOCKS_MAX_MEMORY)")
+        return value
+
     def with_overrides(self, overrides: dict) -> Scenario:
         """A copy with ``--set`` values applied: parameter names, or
         ``simulation.<key>``."""
         import copy
+        self.validate()
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
         for key, val in overrides.items():
@@ -174,13 +201,13 @@ class Scenario:
                                         file=self.source, entry=f"--set {key}",
                                         hint=did_you_mean(sub, _SIM_KEYS)
                                         + f"known: {sorted(_SIM_KEYS)}")
-                data.setdefault("simulation", {})[sub] = val
+                data["simulation"] = {**(data.get("simulation") or {}), sub: val}
             elif is_numeric_key(key):          # block.param: checked on build
                 data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
             elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
-                data.setdefault("simulation", {})[key] = val
+                data["simulation"] = {**(data.get("simulation") or {}), key: val}
             else:
                 raise ScenarioError(f"unknown parameter '{key}'", file=self.source,
                                     entry=f"--set {key}",
@@ -204,14 +231,20 @@ class Scenario:
         if not isinstance(d.get("movie") or {}, dict):
             raise ScenarioError("'movie' must be a mapping of movie options",
                                 file=self.source, entry="movie")
-        if d.get("report") is not None and d["report"] not in REPORTS:
-            raise ScenarioError(f"unknown report '{d['report']}'", file=self.source,
+        rep = d.get("report")
+        if rep is not None and (not isinstance(rep, str) or rep not in REPORTS):
+            shown = rep if isinstance(rep, str) else repr(rep)[:60]
+            raise ScenarioError(f"unknown report '{shown}'", file=self.source,
                                 entry="report",
-                                hint=did_you_mean(d["report"], REPORTS)
+                                hint=did_you_mean(shown, REPORTS)
                                 + f"reports: {list(REPORTS)}")
+        from ._report_schema import check_sections
+        check_sections(d.get("outcome"), d.get("figures"), self.source)
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
             raise ScenarioError("'blocks' must map block names to their settings",
                                 file=self.source, entry="blocks")
+        if len(d["blocks"]) > max_blocks():
+            raise too_many_blocks(len(d["blocks"]), self.source)
         params = d.get("parameters") or {}
         if not isinstance(params, dict):
             raise ScenarioError("'parameters' must be a mapping", file=self.source,
@@ -219,6 +252,9 @@ class Scenario:
         wires = d.get("wires") or []
         if not isinstance(wires, list):
             raise ScenarioError("'wires' must be a list of [source, destination]",
+                                file=self.source, entry="wires")
+        if len(wires) > MAX_WIRES:
+            raise ScenarioError(f"{len(wires):,} wires, more than {MAX_WIRES:,}",
                                 file=self.source, entry="wires")
         sim = d.get("simulation") or {}
         if not isinstance(sim, dict):
@@ -277,6 +313,7 @@ class Scenario:
     def _build(self, out):
         self.validate()
         self.params = dict(self.data.get("parameters") or {})
+        self._generated_bytes = 0
         reg = block_registry()
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():

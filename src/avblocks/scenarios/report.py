@@ -39,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import ScenarioError
+from ..core.errors import AvError, ScenarioError
 
 
 # ------------------------------------------------------------------ numbers
@@ -132,15 +132,22 @@ def plot_fraction(res, signal, ax=None, *, label=None, title=None):
     return ax.figure
 
 
-def _block_waypoints(diagram, name):
-    if diagram is None or name not in getattr(diagram, "blocks", {}):
-        raise ScenarioError(f"'waypoints' names no block '{name}'", entry="figures")
-    b = diagram.blocks[name]
+def _block_waypoints(diagram, name, entry="figures", source=None):
+    blocks = getattr(diagram, "blocks", {}) if diagram is not None else {}
+    if name not in blocks:
+        raise ScenarioError(f"'waypoints' names no block '{name}'", file=source,
+                            entry=entry, hint=f"blocks: {sorted(blocks)}")
+    b = blocks[name]
     b = getattr(b, "block", b)
     for attr in ("wps", "waypoints", "goals"):
         if hasattr(b, attr):
-            return np.asarray(getattr(b, attr), float)[..., :2]
-    raise ScenarioError(f"block '{name}' has no waypoints", entry="figures")
+            try:
+                w = np.asarray(getattr(b, attr), float)
+            except (TypeError, ValueError):
+                continue
+            if w.ndim >= 2 and w.shape[-1] >= 2 and np.all(np.isfinite(w)):
+                return w[..., :2]
+    raise ScenarioError(f"block '{name}' has no waypoints", file=source, entry=entry)
 
 
 def _plot_trajectories(res, diagram=None, waypoints=None, obstacles=None, **kw):
@@ -165,16 +172,28 @@ PLOTS = {"trajectories": _plot_trajectories, "signals": _plot_signals,
 
 
 def save_figure(fig, path, dpi=110):
-    """Save and close a figure; returns the path."""
+    """Save and close a figure; returns the path. The file is written whole
+    or not at all (:func:`avblocks.core.atomic.atomic_path`); a failed write
+    (a full disk, a read-only folder) is an :class:`AvError` naming the file."""
     import matplotlib.pyplot as plt
+
+    from ..core.atomic import atomic_path, os_reason
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     try:
-        fig.tight_layout()
-    except Exception:  # noqa: BLE001 - colour bars can refuse; the file is still fine
-        pass
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
+        try:
+            fig.tight_layout()
+        except Exception:  # noqa: BLE001 - colour bars can refuse; the file is still fine
+            pass
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise AvError(f"could not write the figure '{path}': {os_reason(e)}") from None
+        import matplotlib as mpl
+        fmt = path.suffix.lstrip(".").lower() or mpl.rcParams["savefig.format"]
+        with atomic_path(path, hint="the figure was not written") as tmp:
+            fig.savefig(tmp, dpi=dpi, format=fmt)
+    finally:
+        plt.close(fig)
     return path
 
 
@@ -229,62 +248,105 @@ def hooks_from_namespace(ns, overrides=None) -> Hooks:
     return Hooks(o, f)
 
 
-def hooks_from_report(name, params, base=None) -> Hooks:
+#: Signals each case study's ``outcome``/``figures`` read (``report: nest``
+#: in a scenario file): the file must log them.
+REPORT_SIGNALS = {
+    "nest": ("bees.pose", "gossip.informed"),
+    "formation": ("fleet.pose", "lf.error", "supervisor.mode", "collision.hit_obstacle",
+                  "collision.hit_agent"),
+    "flocking": ("flock.position", "flock.velocity"),
+    "swap": ("fleet.position", "drive.done"),
+    "honeybee": ("bees.pose", "gossip.informed", "modes.mode"),
+}
+
+
+def hooks_from_report(name, params, base=None, logged=None, source=None) -> Hooks:
     """Hooks of the built-in case study ``name`` (``report: nest`` in a
     scenario file) called with the file's parameters; the file's own
-    ``outcome``/``figures`` sections, if any, take precedence."""
+    ``outcome``/``figures`` sections, if any, take precedence. With
+    ``logged`` (the names the run will log), a signal the case study reads
+    and the file does not log is refused now, naming it."""
     import importlib
+    missing = [s for s in REPORT_SIGNALS.get(name, ()) if logged is not None
+               and s not in logged]
+    if missing:
+        raise ScenarioError(f"report '{name}' reads {missing}, which will not be logged",
+                            file=source, entry="report",
+                            hint=f"log {list(REPORT_SIGNALS[name])} (simulation.log)")
     mod = importlib.import_module(f"avblocks.scenarios.{name}")
     full = scenario_params(vars(mod), {})
     full.update(params)
     h = hooks_from_namespace(vars(mod), {})
-    o = (lambda res: mod.outcome(res, full)) if h.outcome else None
-    f = (lambda res, out: mod.figures(res, out, full)) if h.figures else None
+    src = f"report: {name}"
+    o = (lambda res: _guarded("report", f"the '{name}' outcome", src,
+                              mod.outcome, res, full)) if h.outcome else None
+    f = (lambda res, out: _guarded("report", f"the '{name}' figures", src,
+                                   mod.figures, res, out, full)) if h.figures else None
     base = base or Hooks()
     return Hooks(base.outcome or o, base.figures or f)
 
 
-def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>"):
-    """Hooks from a scenario file's ``outcome:`` and ``figures:`` sections
-    (checked now, before any simulation)."""
-    outcome_spec = outcome_spec or []
-    figures_spec = figures_spec or []
-    for sec, spec, reg, key in (("outcome", outcome_spec, METRICS, "metric"),
-                                ("figures", figures_spec, PLOTS, "plot")):
-        if not isinstance(spec, list):
-            raise ScenarioError(f"'{sec}' must be a list of {{{key}: ...}} entries",
-                                file=source, entry=sec)
-        for i, item in enumerate(spec):
-            if not isinstance(item, dict) or key not in item:
-                raise ScenarioError(f"each '{sec}' entry needs '{key}'", file=source,
-                                    entry=f"{sec}[{i}]",
-                                    hint=f"e.g. {{{key}: {next(iter(reg))}, ...}}")
-            if item[key] not in reg:
-                raise ScenarioError(f"unknown {key} '{item[key]}'", file=source,
-                                    entry=f"{sec}[{i}]",
-                                    hint=_suggest(item[key], reg) + f"known: {sorted(reg)}")
-            if sec == "figures" and "file" not in item:
-                raise ScenarioError("each figure needs a 'file' (e.g. trajectories.png)",
-                                    file=source, entry=f"{sec}[{i}]")
+def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>",
+                    log=None, check_log=None):
+    """Hooks from a scenario file's ``outcome:`` and ``figures:`` sections,
+    checked now, before any simulation (:mod:`._report_schema`): known
+    names, arguments and types, figure formats, and, with ``diagram``,
+    that every signal named will be logged (``log``: the run's
+    ``simulation.log``; None the default log) with a usable shape.
+    ``check_log=False`` skips that last check (no diagram to check against).
+
+    A metric or plot that still fails while it runs gives a
+    :class:`ScenarioError` naming its entry; a figure that cannot be
+    written (a full disk) an :class:`AvError` naming the file."""
+    from . import _report_schema as schema
+    schema.check_sections(outcome_spec, figures_spec, source)
+    outcome_spec = list(outcome_spec or [])
+    figures_spec = [dict(f) for f in (figures_spec or [])]
+    if check_log is None:
+        check_log = diagram is not None
+    if check_log:
+        logged = schema.logged_signals(diagram, log, source)
+        schema.check_logged(outcome_spec, figures_spec, logged, source)
+    for i, item in enumerate(figures_spec):    # a block's waypoints: found now
+        if isinstance(item.get("waypoints"), str):
+            item["waypoints"] = _block_waypoints(diagram, item["waypoints"],
+                                                 f"figures[{i}].waypoints", source)
 
     def outcome(res):
         lines, numbers = [], {}
-        for item in outcome_spec:
+        for i, item in enumerate(outcome_spec):
             args = {k: v for k, v in item.items() if k != "metric"}
-            line, nums = METRICS[item["metric"]](res, **args)
+            line, nums = _guarded(f"outcome[{i}]", f"metric '{item['metric']}'", source,
+                                  METRICS[item["metric"]], res, **args)
             lines.append(line)
             numbers.update(nums)
         return ", ".join(lines), numbers
 
     def figures(res, out):
         paths = []
-        for item in figures_spec:
+        for i, item in enumerate(figures_spec):
             args = {k: v for k, v in item.items() if k not in ("plot", "file")}
-            fig = PLOTS[item["plot"]](res, diagram=diagram, **args)
+            fig = _guarded(f"figures[{i}]", f"plot '{item['plot']}'", source,
+                           PLOTS[item["plot"]], res, diagram=diagram, **args)
             paths.append(save_figure(fig, Path(out) / item["file"]))
         return paths
 
     return Hooks(outcome if outcome_spec else None, figures if figures_spec else None)
+
+
+def _guarded(entry, what, source, fn, /, *args, **kwargs):
+    """``fn(*args, **kwargs)``; an exception that is not an avblocks error (a
+    shape the load-time checks could not foresee) as a ScenarioError naming
+    the entry."""
+    try:
+        return fn(*args, **kwargs)
+    except AvError:
+        raise
+    except (KeyboardInterrupt, MemoryError, OSError):
+        raise
+    except Exception as e:  # noqa: BLE001 - turned into an error naming the entry
+        raise ScenarioError(f"{what} failed: {type(e).__name__}: {e}", file=source,
+                            entry=entry) from None
 
 
 def default_figures(res, out, movie_options=None):
@@ -295,7 +357,8 @@ def default_figures(res, out, movie_options=None):
     pose = options.get("pose") if options.get("pose") in res else (keys[0] if keys else None)
     if pose is None:
         return []
-    fig = plot_trajectories(res, pose=pose, obstacles=options.get("obstacles"))
+    fig = _guarded("movie", "the trajectory figure (pose, obstacles)", None,
+                   plot_trajectories, res, pose=pose, obstacles=options.get("obstacles"))
     return [save_figure(fig, Path(out) / "trajectories.png")]
 
 

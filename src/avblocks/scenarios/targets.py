@@ -134,8 +134,11 @@ def load_any(target, overrides, out=None):
     sc = load_scenario(target).with_overrides(overrides)
     d, sim = sc.build(output_dir=sc.output_dir(out))
     from .report import hooks_from_data, hooks_from_report
-    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source)
+    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source,
+                            log=sim.get("log"))
     if sc.data.get("report"):
-        hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks)
+        from ._report_schema import logged_signals
+        hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks,
+                                  logged_signals(d, sim.get("log"), sc.source), sc.source)
     movie = sc._value(sc.movie_options(), "movie")      # generators too
     return Loaded(d, sim, sc.name, movie, hooks)

@@ -206,10 +206,10 @@ REQUIRED = {"all_true": ("signal",), "min_distance": ("signal",),
 def _targets():
     """The Python functions the scenario arguments end in (for their signatures)."""
     from ..viz import plot_signals, plot_trajectories
-    from . import report
-    return {"all_true": report._all_true, "min_distance": report._min_distance,
-            "final_mean": report._final_mean, "trajectories": plot_trajectories,
-            "signals": plot_signals, "fraction": report.plot_fraction}
+    from . import metrics
+    return {"all_true": metrics.all_true, "min_distance": metrics.min_distance,
+            "final_mean": metrics.final_mean, "trajectories": plot_trajectories,
+            "signals": plot_signals, "fraction": metrics.plot_fraction}
 
 
 def allowed_arguments(name):

@@ -123,3 +123,15 @@ def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite():
         np.testing.assert_allclose(float(np.asarray(gq)[4, 1]), float((fd * v).sum() / 2e-6),
                                    rtol=1e-6)
 
+
+
+def test_bump_polynomial_and_library_forms_agree():
+    jnp = pytest.importorskip("jax.numpy")
+    from avblocks.core.compiled._jax import x64
+    w = np.linspace(0.0, np.pi / 2, 10001)
+    want = np.array([2.0 * math.sin(x) ** 2 for x in w])
+    np.testing.assert_allclose(F._two_sin_sq(w, np), want, rtol=0, atol=2e-15)
+    with x64(True):
+        poly = np.asarray(F._two_sin_sq(jnp.asarray(w), jnp))
+    np.testing.assert_allclose(poly, want, rtol=0, atol=2e-15)
+    assert poly[0] == 0.0 and F._two_sin_sq(np.zeros(1), np)[0] == 0.0   # beyond r: exactly 0

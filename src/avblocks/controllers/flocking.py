@@ -35,6 +35,8 @@ Without gamma, Algorithm 1 may fragment; with gamma it forms a flock.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..core import memo as _memo
@@ -88,6 +90,32 @@ def _wsum(w, x, xp):
     return xp.sum(w * x, axis=1)
 
 
+#: ``sqrt(2) (-1)^j / (2 j + 1)!``: ``sqrt(2) sin(w)`` is ``w`` times a
+#: polynomial in ``w^2`` with these coefficients (the Taylor series of sin up
+#: to ``w^21``; its remainder is below 2e-18 on [0, pi/2])
+_SQRT2_SIN = tuple(math.sqrt(2.0) * (-1) ** j / math.factorial(2 * j + 1)
+                   for j in range(11))
+
+
+def _two_sin_sq(w, xp):
+    """``2 sin(w)^2 = 1 - cos(2 w)`` for ``w`` in [0, pi/2] (exactly 0 at
+    ``w = 0``, 2 at ``pi/2`` to 1e-15).
+
+    Under NumPy the library cosine (a vectorised ufunc: the fastest there).
+    Under any other ``xp`` the polynomial of :data:`_SQRT2_SIN` (within 2e-15
+    of the library functions): plain multiply-adds that fuse into XLA's
+    loops, where a float64 cosine is a scalar library call (measured: a
+    flocking stage about 1.3x faster under XLA at 10^3 agents)."""
+    if xp is np:
+        return 1.0 - np.cos(2.0 * w)
+    w2 = w * w
+    acc = _SQRT2_SIN[-1]
+    for coef in _SQRT2_SIN[-2::-1]:
+        acc = acc * w2 + coef
+    s = w * acc
+    return s * s
+
+
 #: agents per block of the NumPy evaluation: the (block, K) temporaries of
 #: one block stay in the CPU's cache (about 2x faster than whole (N, K)
 #: arrays at N = 10^4; 512 to 4096 measured alike)
@@ -109,9 +137,10 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
       sqrt(1 + eps |dq|^2) / eps``, so ``||dq||_s = R - 1 / eps``,
       ``sigma_eps(dq) = dq / (eps R)``, and ``s / r_a`` in ``[h, 1]`` is
       ``R`` in ``[lo, hi] = [1 / eps + h r_a, 1 / eps + r_a]``: the bump is
-      ``rho = (1 + cos(pi (clip(R, lo, hi) - lo) / (hi - lo))) / 2``
-      (exactly 1 below ``h``, exactly 0 beyond ``r``; one clip instead of
-      two nested selects);
+      ``rho = (1 + cos(pi (clip(R, lo, hi) - lo) / (hi - lo))) / 2 =
+      sin(w)^2`` with ``w = pi (hi - clip(R, lo, hi)) / (2 (hi - lo))``
+      (one clip instead of two nested selects; :func:`_two_sin_sq`: 1
+      below ``h`` to 1e-15, exactly 0 beyond ``r``);
     * ``phi(s - d_a)`` takes ``z = R - (1 / eps + d_a - c)``;
     * ``u_i = c1 sum_j rho phi / root dq + c2 (sum_j rho p_j - p_i sum_j
       rho)``, with the 1/2 of the bump and the ``eps`` folded into scalars.
@@ -129,7 +158,7 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
     d_a = (rt(1.0 + eps * d * d) - 1.0) * ie
     c = abs(a - b) / rt(4.0 * a * b)
     k = dict(ie=ie, c0=ie * ie, lo=ie + h * r_a, hi=ie + r_a,
-             gain=np.pi / ((1.0 - h) * r_a), shift=ie + d_a - c,
+             gain=0.5 * np.pi / ((1.0 - h) * r_a), shift=ie + d_a - c,
              ae=0.25 * (a + b) * ie, be=0.25 * (a - b) * ie, c1=c1, c2=0.5 * c2)
     nb = _memo.shared(_self_padded, idx, xp)                        # (N, K)
     qt, pt = position.T, velocity.T                                 # (D, N)
@@ -154,7 +183,7 @@ def _alpha_block(qt, pt, nb, own, k, xp):
     big_r = xp.sqrt(k["c0"] + nrm2 * k["ie"])                      # sqrt(1 + eps |dq|^2) / eps
     z = big_r - k["shift"]
     f = (k["ae"] * z / xp.sqrt(1.0 + z * z) + k["be"]) / big_r     # phi / (2 root)
-    g = 1.0 + xp.cos((xp.clip(big_r, k["lo"], k["hi"]) - k["lo"]) * k["gain"])   # 2 rho
+    g = _two_sin_sq((k["hi"] - xp.clip(big_r, k["lo"], k["hi"])) * k["gain"], xp)  # 2 rho
     # g only meets reductions: XLA then evaluates the cosine once (an
     # elementwise consumer of g would recompute it in its own fused loop)
     gsum = xp.sum(g, axis=1)

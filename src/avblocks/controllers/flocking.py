@@ -192,8 +192,9 @@ def _alpha_block(qt, pt, nb, own, k, xp):
     z = big_r - k["shift"]
     f = (k["ae"] * z / xp.sqrt(1.0 + z * z) + k["be"]) / big_r     # phi / (2 root)
     g = _two_sin_sq((k["hi"] - xp.clip(big_r, k["lo"], k["hi"])) * k["gain"], xp)  # 2 rho
-    # g only meets reductions: XLA then evaluates the cosine once (an
-    # elementwise consumer of g would recompute it in its own fused loop)
+    # g only meets the neighbour sums: XLA then evaluates the bump once per
+    # stage (an elementwise consumer of g, such as g * f, made it recompute
+    # the bump in a second fused loop)
     gsum = _rsum(g, xp)
     out = [k["c1"] * _wsum(g, f * dq[m], xp)
            + k["c2"] * (_wsum(g, _take(pt[m], nb, xp), xp) - pt[m, own] * gsum)
@@ -232,6 +233,10 @@ class Flocking(Block):
     numeric parameters (``"flock.c1"``...; the constraints ``r > d`` and
     ``a <= b`` are checked at construction only); ``gamma``, ``neighbors``,
     ``k_max``, ``adjacency``, ``n`` and ``dim`` are structural.
+
+    Compiles (``backend="jax"``) and differentiates: the law is written in
+    ``xp`` (:func:`flocking_law`); traced, the bump's cosine is a polynomial
+    within 2e-15 of the NumPy engine's library cosine.
 
     Reference: R. Olfati-Saber, IEEE TAC 51(3):401-420, 2006, Algorithm 1
     (and the gamma term of Algorithm 2).

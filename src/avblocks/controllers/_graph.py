@@ -175,4 +175,6 @@ def gather(x, idx, xp):
     n = x.shape[0]
     own = xp.arange(n)[:, None]
     safe = xp.where(mask, idx, own)
+    if xp is np:                     # the same rows; np.take is ~10x faster
+        return np.take(x, safe, axis=0), mask
     return x[safe], mask

@@ -143,19 +143,26 @@ class NeighborSource:
             raise ShapeError("neighbors must be integer indices", block=self.block,
                              port="neighbors", expected="int64", found=sp.dtype)
 
-    def get(self, u, pos, xp):
-        """``(idx, w)``: (N, K) indices (-1 padded) and weights (1 or from A)."""
+    def indices(self, u, pos, xp):
+        """(N, K) neighbour indices, -1 padded (no weights: for laws that
+        weigh neighbours themselves)."""
         if self.mode == "fixed":
-            idx, w = self.fixed
-            return xp.asarray(idx), xp.asarray(w)
+            return xp.asarray(self.fixed[0])
         if self.mode == "radius":
             r = getattr(self._owner, self.radius_param)
             if self.search is None:                 # 1-D positions: NumPy only
                 idx, _ = radius_neighbors(np.asarray(pos), float(r), self.k_max)
             else:
                 idx, _ = self.search.nearest(pos, r, self.k_max, xp=xp)
-        else:
-            idx = u["neighbors"]
+            return idx
+        return u["neighbors"]
+
+    def get(self, u, pos, xp):
+        """``(idx, w)``: (N, K) indices (-1 padded) and weights (1 or from A)."""
+        if self.mode == "fixed":
+            idx, w = self.fixed
+            return xp.asarray(idx), xp.asarray(w)
+        idx = self.indices(u, pos, xp)
         return idx, xp.where(idx >= 0, 1.0, 0.0)
 
 
@@ -168,4 +175,6 @@ def gather(x, idx, xp):
     n = x.shape[0]
     own = xp.arange(n)[:, None]
     safe = xp.where(mask, idx, own)
+    if xp is np:                     # the same rows; np.take is ~10x faster
+        return np.take(x, safe, axis=0), mask
     return x[safe], mask

@@ -35,8 +35,11 @@ Without gamma, Algorithm 1 may fragment; with gamma it forms a flock.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from ..core import memo as _memo
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import finite_array, positive_scalar
@@ -62,33 +65,141 @@ def phi_alpha(s, r_a, d_a, a, b, h, xp=np):
     return bump(s / r_a, h, xp) * phi
 
 
+def _self_padded(idx, xp):
+    """``idx`` (N, K) with the padding (-1) replaced by the agent's own index.
+
+    A function of ``idx`` alone: :func:`~avblocks.core.memo.shared` computes
+    it once per neighbour array, i.e. once per step for a neighbour set held
+    over the step (a periodic ``Neighbors`` block), not once per RK4 stage.
+    """
+    return xp.where(idx >= 0, idx, xp.arange(idx.shape[0])[:, None])
+
+
+def _take(x, cols, xp):
+    """``x[cols]`` for a 1-D ``x``: ``np.take`` (several times faster than
+    NumPy's fancy indexing), plain indexing elsewhere (a gather in JAX)."""
+    if xp is np:
+        return np.take(x, cols)
+    return x[cols]
+
+
+def _wsum(w, x, xp):
+    """``sum_k w[n, k] x[n, k]`` (N,)."""
+    if xp is np:
+        return np.einsum("nk,nk->n", w, x)
+    return xp.sum(w * x, axis=1)
+
+
+def _rsum(w, xp):
+    """``sum_k w[n, k]`` (N,) (``np.einsum``: 3x faster than ``sum(axis=1)``
+    on short rows)."""
+    if xp is np:
+        return np.einsum("nk->n", w)
+    return xp.sum(w, axis=1)
+
+
+#: ``sqrt(2) (-1)^j / (2 j + 1)!``: ``sqrt(2) sin(w)`` is ``w`` times a
+#: polynomial in ``w^2`` with these coefficients (the Taylor series of sin up
+#: to ``w^21``; its remainder is below 2e-18 on [0, pi/2])
+_SQRT2_SIN = tuple(math.sqrt(2.0) * (-1) ** j / math.factorial(2 * j + 1)
+                   for j in range(11))
+
+
+def _two_sin_sq(w, xp):
+    """``2 sin(w)^2 = 1 - cos(2 w)`` for ``w`` in [0, pi/2] (exactly 0 at
+    ``w = 0``, 2 at ``pi/2`` to 1e-15).
+
+    Under NumPy the library cosine (a vectorised ufunc: the fastest there).
+    Under any other ``xp`` the polynomial of :data:`_SQRT2_SIN` (within 2e-15
+    of the library functions): plain multiply-adds that fuse into XLA's
+    loops, where a float64 cosine is a scalar library call (measured: a
+    flocking stage about 1.3x faster under XLA at 10^3 agents)."""
+    if xp is np:
+        return 1.0 - np.cos(2.0 * w)
+    w2 = w * w
+    acc = _SQRT2_SIN[-1]
+    for coef in _SQRT2_SIN[-2::-1]:
+        acc = acc * w2 + coef
+    s = w * acc
+    return s * s
+
+
+#: agents per block of the NumPy evaluation: the (block, K) temporaries of
+#: one block stay in the CPU's cache (about 2x faster than whole (N, K)
+#: arrays at N = 10^4; 512 to 4096 measured alike)
+NUMPY_BLOCK = 1024
+
+
 def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
                  c1=1.0, c2=1.0, xp=np):
-    """Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K).
+    r"""Olfati-Saber's u^alpha (N, D) for neighbour lists ``idx`` (N, K).
 
-    The bump is evaluated once and the unit vectors ``sigma_eps`` are folded
-    into (N, K) weights: fewer (N, K, D) temporaries than the equations
-    written term by term.
+    The equations of the module docstring, rearranged so that every
+    intermediate is one (N, K) array and the scalar constants are folded
+    before they meet an array:
+
+    * padded slots point at the agent itself (``dq = 0``: they add nothing
+      to the position term and cancel, to rounding, in the velocity term); the
+      padded index is computed once per neighbour array (:func:`_self_padded`);
+    * one square root per pair: ``R = sqrt(1 / eps^2 + |dq|^2 / eps) =
+      sqrt(1 + eps |dq|^2) / eps``, so ``||dq||_s = R - 1 / eps``,
+      ``sigma_eps(dq) = dq / (eps R)``, and ``s / r_a`` in ``[h, 1]`` is
+      ``R`` in ``[lo, hi] = [1 / eps + h r_a, 1 / eps + r_a]``: the bump is
+      ``rho = (1 + cos(pi (clip(R, lo, hi) - lo) / (hi - lo))) / 2 =
+      sin(w)^2`` with ``w = pi (hi - clip(R, lo, hi)) / (2 (hi - lo))``
+      (one clip instead of two nested selects; :func:`_two_sin_sq`: 1
+      below ``h`` to 1e-15, exactly 0 beyond ``r``);
+    * ``phi(s - d_a)`` takes ``z = R - (1 / eps + d_a - c)``;
+    * ``u_i = c1 sum_j rho phi / root dq + c2 (sum_j rho p_j - p_i sum_j
+      rho)``, with the 1/2 of the bump and the ``eps`` folded into scalars.
+
+    Under NumPy the agents are taken :data:`NUMPY_BLOCK` at a time (cache
+    blocking; the same expressions on each block), under other ``xp`` all
+    at once. Same values as the equations written pair by pair to rounding
+    (tested at 1e-12 against such a loop); traceable and smooth in the
+    positions, velocities and gains (``clip`` has zero slope where the bump
+    is flat).
     """
-    r_a = (xp.sqrt(1.0 + eps * r * r) - 1.0) / eps
-    d_a = (xp.sqrt(1.0 + eps * d * d) - 1.0) / eps
-    mask = idx >= 0
-    safe = xp.where(mask, idx, xp.arange(position.shape[0])[:, None])
-    dq = position[safe] - position[:, None, :]                # (N, K, D)
-    nrm2 = xp.sum(dq * dq, axis=-1)
-    root = xp.sqrt(1.0 + eps * nrm2)
-    s = (root - 1.0) / eps
-    x = s / r_a                                               # >= 0: bump inline
-    rho = xp.where(x < h, 1.0, xp.where(
-        x <= 1.0, 0.5 * (1.0 + xp.cos(np.pi * (x - h) / (1.0 - h))), 0.0))
-    c = abs(a - b) / xp.sqrt(4.0 * a * b)
-    z = s - d_a + c
-    phi = 0.5 * ((a + b) * z / xp.sqrt(1.0 + z * z) + (a - b))
-    w_q = xp.where(mask, rho * phi / root, 0.0)                # phi_a sigma_eps weight
-    w_p = xp.where(mask, rho, 0.0)                             # a_ij
-    return (c1 * xp.sum(w_q[..., None] * dq, axis=1)
-            + c2 * xp.sum(w_p[..., None] * (velocity[safe] - velocity[:, None, :]),
-                          axis=1))
+    rt = xp.sqrt
+    ie = 1.0 / eps
+    r_a = (rt(1.0 + eps * r * r) - 1.0) * ie
+    d_a = (rt(1.0 + eps * d * d) - 1.0) * ie
+    c = abs(a - b) / rt(4.0 * a * b)
+    k = dict(ie=ie, c0=ie * ie, lo=ie + h * r_a, hi=ie + r_a,
+             gain=0.5 * np.pi / ((1.0 - h) * r_a), shift=ie + d_a - c,
+             ae=0.25 * (a + b) * ie, be=0.25 * (a - b) * ie, c1=c1, c2=0.5 * c2)
+    nb = _memo.shared(_self_padded, idx, xp)                        # (N, K)
+    qt, pt = position.T, velocity.T                                 # (D, N)
+    if xp is np:
+        qt, pt = np.ascontiguousarray(qt), np.ascontiguousarray(pt)
+    n = position.shape[0]
+    if xp is np and n > NUMPY_BLOCK:
+        return np.concatenate([_alpha_block(qt, pt, nb[i:i + NUMPY_BLOCK],
+                                            slice(i, i + NUMPY_BLOCK), k, xp)
+                               for i in range(0, n, NUMPY_BLOCK)], axis=0)
+    return _alpha_block(qt, pt, nb, slice(None), k, xp)
+
+
+def _alpha_block(qt, pt, nb, own, k, xp):
+    """u^alpha of the agents ``own`` (their neighbours ``nb``, (m, K)) from
+    all positions and velocities ``qt``, ``pt`` (D, N); (m, D)."""
+    dim = qt.shape[0]
+    dq = [_take(qt[m], nb, xp) - qt[m, own][:, None] for m in range(dim)]  # (m, K)
+    nrm2 = dq[0] * dq[0]
+    for m in range(1, dim):
+        nrm2 = nrm2 + dq[m] * dq[m]
+    big_r = xp.sqrt(k["c0"] + nrm2 * k["ie"])                      # sqrt(1 + eps |dq|^2) / eps
+    z = big_r - k["shift"]
+    f = (k["ae"] * z / xp.sqrt(1.0 + z * z) + k["be"]) / big_r     # phi / (2 root)
+    g = _two_sin_sq((k["hi"] - xp.clip(big_r, k["lo"], k["hi"])) * k["gain"], xp)  # 2 rho
+    # g only meets the neighbour sums: XLA then evaluates the bump once per
+    # stage (an elementwise consumer of g, such as g * f, made it recompute
+    # the bump in a second fused loop)
+    gsum = _rsum(g, xp)
+    out = [k["c1"] * _wsum(g, f * dq[m], xp)
+           + k["c2"] * (_wsum(g, _take(pt[m], nb, xp), xp) - pt[m, own] * gsum)
+           for m in range(dim)]
+    return xp.stack(out, axis=1)
 
 
 def order_parameter(velocity, xp=np):
@@ -122,6 +233,10 @@ class Flocking(Block):
     numeric parameters (``"flock.c1"``...; the constraints ``r > d`` and
     ``a <= b`` are checked at construction only); ``gamma``, ``neighbors``,
     ``k_max``, ``adjacency``, ``n`` and ``dim`` are structural.
+
+    Compiles (``backend="jax"``) and differentiates: the law is written in
+    ``xp`` (:func:`flocking_law`); traced, the bump's cosine is a polynomial
+    within 2e-15 of the NumPy engine's library cosine.
 
     Reference: R. Olfati-Saber, IEEE TAC 51(3):401-420, 2006, Algorithm 1
     (and the gamma term of Algorithm 2).
@@ -179,7 +294,7 @@ class Flocking(Block):
 
     def output(self, t, x, u, xp):
         q, p = u["position"], u["velocity"]
-        idx, _ = self.graph.get(u, q, xp)
+        idx = self.graph.indices(u, q, xp)
         acc = flocking_law(q, p, idx, self.d, self.r, eps=self.eps, a=self.a,
                            b=self.b, h=self.h, c1=self.c1, c2=self.c2, xp=xp)
         if self.gamma:

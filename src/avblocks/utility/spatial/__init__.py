@@ -34,7 +34,9 @@ Under NumPy, :class:`NeighborSearch` answers radius queries with SciPy's
 k-d tree (:func:`kd_nearest`: faster at every N measured here, see
 ``benchmarks/neighbors.py``), made exact on ties: a row whose ``k``-th
 distance equals the farthest the tree returned is answered again by the
-cell list. Both give the same neighbours in the same order.
+cell list. Both give the same neighbours in the same order. Radius
+queries (:meth:`NeighborSearch.within`) in free space take the tree's
+pairs too (:func:`kd_within`), arranged as the cell list's rows.
 
 Static shapes and overflow
 --------------------------
@@ -76,10 +78,10 @@ must not exceed half the smallest box edge.
 """
 
 from .cells import CellList, Need
-from .kdtree import kd_nearest
+from .kdtree import kd_nearest, kd_within
 from .layout import _sort, layout  # noqa: F401 (_sort: tests of the traced sort)
 from .queries import CHUNK, candidates, displacement, nearest, plan_cells, within
 from .search import NeighborSearch
 
 __all__ = ["Need", "CellList", "plan_cells", "layout", "candidates", "displacement",
-           "within", "nearest", "kd_nearest", "NeighborSearch", "CHUNK"]
+           "within", "nearest", "kd_nearest", "kd_within", "NeighborSearch", "CHUNK"]

@@ -14,7 +14,7 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..utility.spatial import Need, NeighborSearch
 from ..utility.spatial import verlet
-from ..utility.spatial.queries import _compact, k_smallest
+from ..utility.spatial.queries import _compact
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
 
@@ -172,6 +172,26 @@ def dense_within(points, radius, width, xp=np):
     return idx, most
 
 
+def _k_smallest_columns(d2, ids, k, xp):
+    """:func:`k_smallest` of each column of ``d2`` (candidates ``ids`` along
+    axis 0): ``(d2 (N, k), index (N, k))`` per column, sorted, ties by the
+    smaller index."""
+    kk = min(int(k), d2.shape[0])
+    big = np.iinfo(np.int64).max if np.dtype(ids.dtype).itemsize == 8 else \
+        np.iinfo(np.int32).max
+    od, oi = [], []
+    for _ in range(kk):
+        m = xp.min(d2, axis=0)
+        j = xp.min(xp.where(d2 == m[None, :], ids[:, None], big), axis=0)
+        od.append(m)
+        oi.append(j)
+        d2 = xp.where(ids[:, None] == j[None, :], xp.inf, d2)
+    if kk == 0:
+        n = d2.shape[1]
+        return xp.zeros((n, 0), dtype=d2.dtype), xp.zeros((n, 0), dtype=ids.dtype)
+    return xp.stack(od, axis=1), xp.stack(oi, axis=1)
+
+
 def dense_nearest(points, radius, k, xp=np):
     """The ``k`` nearest other points within ``radius`` (inclusive) of each
     point by comparing every pair: ``(idx (N, k) -1 padded, dist (N, k) inf
@@ -190,8 +210,12 @@ def dense_nearest(points, radius, k, xp=np):
     ids = xp.arange(n)
     r = xp.asarray(radius, dtype=d2.dtype)
     d2 = xp.where((d2 <= r * r) & (ids[None, :] != ids[:, None]), d2, xp.inf)
-    # the search's own exact selection (k passes of a row minimum, ties by index)
-    m2, j = k_smallest(d2, xp.broadcast_to(ids[None, :], (n, n)), k, xp)
+    # the search's exact selection (k passes of a minimum, ties by index:
+    # k_smallest) over the candidates of each point; d2 is symmetric (the
+    # same squares either way), so the candidates of point q are column q
+    # and each pass takes elementwise minima of rows (measured 25 % faster
+    # than minima of each row in a vmapped ensemble)
+    m2, j = _k_smallest_columns(d2, ids, k, xp)
     pad = int(k) - m2.shape[1]
     if pad:
         m2 = xp.concatenate([m2, xp.full((n, pad), xp.inf, dtype=m2.dtype)], axis=1)

@@ -52,7 +52,7 @@ def test_staleness_bound_never_misses_a_pair():
     translations, rotations, contractions and random jitter."""
     rng = np.random.default_rng(0)
     r, skin, seen_ok = 1.0, 0.3, 0
-    for trial in range(400):
+    for _ in range(400):
         a = rng.uniform(0, 6, (40, 2))
         ang, scale = rng.normal(0, 0.05), 1 + rng.normal(0, 0.03)
         rot = scale * np.array([[np.cos(ang), -np.sin(ang)], [np.sin(ang), np.cos(ang)]])

@@ -131,9 +131,10 @@ def test_jit_matches_brute_force():
 
 
 def test_jit_chunked_lax_map(monkeypatch):
+    import importlib
+
     jax = pytest.importorskip("jax")
     import jax.numpy as jnp
-    import importlib
     monkeypatch.setattr(importlib.import_module("avblocks.utility.spatial.queries"),
                         "TRACED_CHUNK", 16)    # 100 rows: 7 chunks through lax.map
     p = np.random.default_rng(7).uniform(0, 6, (100, 2))

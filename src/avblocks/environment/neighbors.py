@@ -12,8 +12,7 @@ from scipy.spatial import cKDTree
 
 from ..core.block import Block
 from ..core.errors import ParameterError
-from ..utility.spatial import Need, NeighborSearch
-from ..utility.spatial import verlet
+from ..utility.spatial import Need, NeighborSearch, verlet
 from ..utility.spatial.queries import _compact
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
@@ -154,7 +153,6 @@ PAD_DISTANCE = -1.0
 DENSE_MAX = 128
 
 
-
 def dense_within(points, radius, width, xp=np):
     """Every other point within ``radius`` (inclusive) of each point by
     comparing every pair: ``(idx (N, width) -1 padded, in index order; the
@@ -269,8 +267,10 @@ class Neighbors(Block):
         the block keeps, as discrete state, a list of the agents within
         ``radius + skin`` of each agent, built by the search above, and
         selects the ``K`` nearest within ``radius`` among them each time it
-        is evaluated; the list is built again whenever some agent moved
-        more than ``skin / 2`` since it was (tested at every evaluation).
+        is evaluated; the list is built again when the agents may have
+        moved by ``skin / 2`` relative to each other since it was (tested
+        at every evaluation; a motion common to all agents -- translation,
+        rotation, contraction -- is discounted: ``verlet.moved``).
         The neighbours are exactly those of a fresh search (same indices,
         same order, same distances). Default ``0``: a fresh search every
         time (measured faster on the flocking benchmarks, whose agents

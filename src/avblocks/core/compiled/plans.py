@@ -9,7 +9,8 @@ engine (:func:`avblocks.compile`):
    :func:`avblocks.core.diagnostics.searches_of`) from the block's input
    values at ``t0`` the first time the block is compiled (or, when the
    search's ``points`` names a parameter such as fixed targets, from that
-   parameter's value), computed by the NumPy engine (one initial evaluation, no step), unless the user fixed
+   parameter's value), computed by the NumPy engine (one initial
+   evaluation, no step), unless the user fixed
    ``capacity=``. The plan is part of the block's structure, so it is part
    of the compile-cache key; it is kept for the block's life and only grows
    (after an overflow, step 3), so a grown plan is not planned away again;

@@ -83,7 +83,9 @@ def test_exactly_at_radius_is_inside_and_n1():
 def test_chunked_rows_equal_unchunked(monkeypatch):
     rng = np.random.default_rng(3)
     p = rng.uniform(0, 5, (120, 2))
-    monkeypatch.setattr(sp, "CHUNK", 7)
+    import importlib
+    monkeypatch.setattr(importlib.import_module("avblocks.utility.spatial.queries"),
+                        "CHUNK", 7)        # the module the queries read it from
     i, _, _ = sp.nearest(sp.CellList(1.0), p, 1.0, 5)
     np.testing.assert_array_equal(i, brute(p, 1.0, 5)[0])
 
@@ -129,9 +131,12 @@ def test_jit_matches_brute_force():
 
 
 def test_jit_chunked_lax_map(monkeypatch):
+    import importlib
+
     jax = pytest.importorskip("jax")
     import jax.numpy as jnp
-    monkeypatch.setattr(sp, "CHUNK", 16)
+    monkeypatch.setattr(importlib.import_module("avblocks.utility.spatial.queries"),
+                        "TRACED_CHUNK", 16)    # 100 rows: 7 chunks through lax.map
     p = np.random.default_rng(7).uniform(0, 6, (100, 2))
     with jax.enable_x64(True):
         plan = sp.plan_cells(p, 1.0)

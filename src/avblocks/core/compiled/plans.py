@@ -9,7 +9,8 @@ engine (:func:`avblocks.compile`):
    :func:`avblocks.core.diagnostics.searches_of`) from the block's input
    values at ``t0`` the first time the block is compiled (or, when the
    search's ``points`` names a parameter such as fixed targets, from that
-   parameter's value), computed by the NumPy engine (one initial evaluation, no step), unless the user fixed
+   parameter's value), computed by the NumPy engine (one initial
+   evaluation, no step), unless the user fixed
    ``capacity=``. The plan is part of the block's structure, so it is part
    of the compile-cache key; it is kept for the block's life and only grows
    (after an overflow, step 3), so a grown plan is not planned away again;
@@ -20,12 +21,18 @@ engine (:func:`avblocks.compile`):
 
    - ``on_overflow="replan"`` (default): a :class:`RuntimeWarning` names
      the block and the sizes, the search is re-planned with the needed size
-     times its ``headroom``, the program is compiled again (once) and the
-     run repeated. A repeated run that overflows again raises;
+     times its ``headroom``, the program is compiled again and the run
+     repeated. A run may be re-planned :data:`REPLANS` (2) times: the hits
+     counted behind an overflowed capacity are an estimate. A run that
+     overflows after that raises;
    - ``on_overflow="raise"``: :class:`~avblocks.core.errors.SimulationError`
      naming the block, "capacity" (or "hits", "radius"), needed vs planned.
 
 An ensemble's need is the largest over its runs.
+
+A block whose state shapes follow its plans (the Verlet list of
+``environment.Neighbors``) defines ``searches_planned()``; it is called after
+every planning and growing, before the program is built.
 """
 
 from __future__ import annotations
@@ -39,6 +46,10 @@ from .. import diagnostics
 from ..errors import ParameterError, SimulationError
 
 MODES = ("replan", "raise")
+
+#: Re-planning rounds one run may take before an overflow raises (a grown
+#: capacity lets more hits through than were counted: a second round)
+REPLANS = 2
 
 
 def check_mode(mode):
@@ -66,6 +77,7 @@ def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
     todo = [(i, s) for i, _, s in owned(cd)
             if not getattr(s, "fixed", False) and getattr(s, "cells", None) is None]
     if not todo:
+        _planned(cd)
         return 0
     from ..simulator import Simulator
     sim = Simulator(cd, dt, "euler", seed=seed, t0=t0, x0=x0, check_finite=False)
@@ -83,7 +95,18 @@ def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
                                  param="points", expected=sorted(u) + sorted(params),
                                  found=s.points)
         s.plan(np.asarray(pts))
+    _planned(cd)
     return len(todo)
+
+
+def _planned(cd):
+    """Tell the blocks that own searches their plans are set (or grew): a
+    block whose state shapes follow a plan (``Neighbors``' Verlet list)
+    re-declares them in its ``searches_planned()``."""
+    for b in cd.blocks:
+        hook = getattr(b, "searches_planned", None)
+        if callable(hook):
+            hook()
 
 
 def overflows(cd):
@@ -112,20 +135,22 @@ def settle(runner, over, rerun):
     mode = getattr(runner, "on_overflow", "replan")
     bad_reach = [n for n, s, need, _ in over
                  if float(need.reach) > s.cells.reach * (1 + 1e-6) or need.span > 1.0]
-    if mode == "raise" or bad_reach or getattr(runner, "_replanned", False):
+    rounds = getattr(runner, "_replanned", 0)
+    if mode == "raise" or bad_reach or rounds >= REPLANS:
         why = "a compiled neighbour search overflowed its static plan"
-        if getattr(runner, "_replanned", False):
+        if rounds:
             why += " again after re-planning"
         raise SimulationError(f"{why}: {names}", block=over[0][0],
                               hint="give the block a larger capacity=, or compile with "
                                    "on_overflow='replan' (the default)")
     for _, s, need, _ in over:
         s.cells = s.cells.grown(need, s.headroom)
+    _planned(runner.compiled)
     warnings.warn(f"compiled run re-planned after a neighbour search overflow: {names}; "
                   "compiling again and repeating the run", RuntimeWarning, stacklevel=3)
     runner._rebuild_program()
-    runner._replanned = True
+    runner._replanned = rounds + 1
     try:
         return rerun()
     finally:
-        runner._replanned = False
+        runner._replanned = rounds

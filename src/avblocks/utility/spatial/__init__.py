@@ -22,10 +22,13 @@ among them when the runs hold at most ``capacity`` points.
 
 :func:`nearest` filters the candidates by radius (inclusive), self and
 field of view, and takes the ``k`` smallest ``(distance, index)`` pairs by
-``k`` passes of a row minimum: exact, ties broken by the smaller index, the
+``k`` passes of a minimum (traced: over one 64-bit key per candidate, the
+candidates along the leading axis, with an exact fallback for near-ties;
+NumPy: ``argpartition``): exact, ties broken by the smaller index, the
 order of a brute-force ``lexsort((index, distance))``. Query rows are
-handled in chunks of :data:`CHUNK` (``lax.map`` when traced), rows in cell
-order for locality, so the temporaries stay ``O(CHUNK * capacity)``. Cost
+handled in chunks of :data:`CHUNK` (NumPy) or ``TRACED_CHUNK`` (1024,
+``lax.map``), rows in cell order for locality, so the temporaries stay
+``O(chunk * capacity)``. Cost
 per call: a sort of N keys, ``2 * 5^(D-1)`` binary searches per query,
 ``O(capacity * (D + k))`` per query. No (N, N) array is ever formed
 (except with ``reach = inf``: every pair).
@@ -34,7 +37,15 @@ Under NumPy, :class:`NeighborSearch` answers radius queries with SciPy's
 k-d tree (:func:`kd_nearest`: faster at every N measured here, see
 ``benchmarks/neighbors.py``), made exact on ties: a row whose ``k``-th
 distance equals the farthest the tree returned is answered again by the
-cell list. Both give the same neighbours in the same order.
+cell list. Both give the same neighbours in the same order. Radius
+queries (:meth:`NeighborSearch.within`) in free space take the tree's
+pairs too (:func:`kd_within`), arranged as the cell list's rows.
+
+Verlet lists (:mod:`.verlet`): a list of the points within ``radius +
+skin`` of each point, kept by its owner (``environment.Neighbors(skin=)``
+holds it as discrete state) and rebuilt only when the points may have moved
+``skin / 2`` relative to each other; each query then selects among a few
+candidates. Same results as a fresh search.
 
 Static shapes and overflow
 --------------------------
@@ -76,10 +87,10 @@ must not exceed half the smallest box edge.
 """
 
 from .cells import CellList, Need
-from .kdtree import kd_nearest
+from .kdtree import kd_nearest, kd_within
 from .layout import _sort, layout  # noqa: F401 (_sort: tests of the traced sort)
 from .queries import CHUNK, candidates, displacement, nearest, plan_cells, within
 from .search import NeighborSearch
 
 __all__ = ["Need", "CellList", "plan_cells", "layout", "candidates", "displacement",
-           "within", "nearest", "kd_nearest", "NeighborSearch", "CHUNK"]
+           "within", "nearest", "kd_nearest", "kd_within", "NeighborSearch", "CHUNK"]

@@ -140,7 +140,10 @@ class CellList:
         if self.hits is not None and hits > self.hits:
             new_hits = int(math.ceil(headroom * hits))
         if new_cap != self.capacity and new_hits is not None:
-            # the hits counted were cut short by the candidates: allow for all
-            new_hits = max(new_hits, new_cap)
+            # the hits were counted among candidates cut short to the plan:
+            # scale the count by the share that was cut (an estimate; a run
+            # that still needs more is re-planned once more)
+            est = int(math.ceil(headroom * hits * cap / max(1, self.capacity)))
+            new_hits = min(new_cap, max(new_hits, est))
         return CellList(self.reach, new_cap, self.table, self.box, self.dim, new_hits,
                         self.split)

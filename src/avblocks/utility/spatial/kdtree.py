@@ -1,11 +1,12 @@
-"""The NumPy engine's k nearest: SciPy's k-d tree with the cell list's exact
-order (ties by index)."""
+"""The NumPy engine's k nearest and radius queries: SciPy's k-d tree with
+the cell list's exact results (same neighbours, same order, same distances)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .cells import CellList
+from .layout import layout
 from .queries import nearest
 
 
@@ -70,3 +71,60 @@ def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
                             ids=amb if exclude_self else None)
         j[amb], d[amb] = ai, ad
     return j.astype(np.int64), d
+
+
+def kd_within(points, radius, queries=None, *, exclude_self=True, reach=None):
+    """:func:`within` in free space by SciPy's k-d tree (NumPy only): the
+    same rows as the cell list's, entry for entry.
+
+    ``(idx (Q, H), dist (Q, H))``: every point within ``radius`` (inclusive)
+    of each query point, ``-1`` / ``inf`` padded, ``H`` the largest count.
+    The tree proposes the pairs within a slightly larger radius; each is
+    kept by the cell list's own test (``d2 = sum_a (p_j,a - q_a)^2 <=
+    radius^2``) and distance (``sqrt(d2)``); a row lists its points in the
+    order the cell list visits them (by cell key, then index: the cell
+    list's sorted order, see :func:`layout`, for cells planned for
+    ``reach``, default ``radius``).
+    """
+    from scipy.spatial import cKDTree
+    pts = np.asarray(points, dtype=float)
+    n = pts.shape[0]
+    self_q = queries is None
+    q = pts if self_q else np.asarray(queries, dtype=float)
+    qn = q.shape[0]
+    r = float(radius)
+    if n == 0 or qn == 0:
+        return np.full((qn, 1), -1, np.int64), np.full((qn, 1), np.inf)
+    loose = r * (1.0 + 1e-9) + 1e-300
+    tree = cKDTree(pts)
+    if self_q:
+        pr = tree.query_pairs(loose, output_type="ndarray")
+        i = np.concatenate([pr[:, 0], pr[:, 1]])
+        j = np.concatenate([pr[:, 1], pr[:, 0]])
+        if not exclude_self:
+            i = np.concatenate([i, np.arange(n)])
+            j = np.concatenate([j, np.arange(n)])
+    else:
+        sm = cKDTree(q).sparse_distance_matrix(tree, loose, output_type="ndarray")
+        i, j = sm["i"].astype(np.int64), sm["j"].astype(np.int64)
+    d2 = 0.0
+    for a in range(pts.shape[1]):
+        da = pts[j, a] - q[i, a]
+        d2 = d2 + da * da
+    keep = d2 <= r * r
+    i, j, d2 = i[keep], j[keep], d2[keep]
+    # the cell list's visiting order: its sorted order of the points
+    lay = layout(CellList(r if reach is None else float(reach), dim=pts.shape[1]), pts, np)
+    rank = np.empty(n, np.int64)
+    rank[lay.order] = np.arange(n)
+    o = np.argsort(i * n + rank[j], kind="stable")
+    i, j, d2 = i[o], j[o], d2[o]
+    count = np.bincount(i, minlength=qn)
+    width = max(1, int(count.max()) if count.size else 1)
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    col = np.arange(i.size) - start[i]
+    idx = np.full((qn, width), -1, np.int64)
+    dist = np.full((qn, width), np.inf)
+    idx[i, col] = j
+    dist[i, col] = np.sqrt(d2)
+    return idx, dist

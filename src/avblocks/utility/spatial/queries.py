@@ -45,6 +45,11 @@ def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=No
 
 CHUNK = 4096
 
+#: Query rows handled together in a traced search: smaller, so a chunk's
+#: (candidates, rows) keys stay in cache over the k selection passes
+#: (measured at N = 1e4, k = 12: 4096 rows 9.9 ms, 1024 rows 6.5-7.1 ms).
+TRACED_CHUNK = 1024
+
 
 class _Query(NamedTuple):
     """Per-query data of a search, rows in processing order."""
@@ -112,7 +117,7 @@ def _rowmap(fn, arrays, xp, size=None):
     """``fn`` over row chunks of ``arrays`` (all with Q leading rows),
     outputs concatenated: a Python loop of a few chunks under NumPy,
     ``lax.map`` when traced."""
-    size = CHUNK if size is None else size
+    size = (CHUNK if xp is np else TRACED_CHUNK) if size is None else size
     qn = arrays[0].shape[0]
     if qn <= size:
         return fn(*arrays)
@@ -260,10 +265,14 @@ def _smallest_keyed(d2, idx, k, n, xp):
     key = (bits & ~low) | idx.astype(np.int64)
     top = np.int64(np.iinfo(np.int64).max)
     got = []
+    # candidates along the leading axis: each pass is an elementwise minimum
+    # of Q-long vectors (vectorised), not Q minima of short rows (measured
+    # 2x faster under XLA on a CPU)
+    key = key.T
     for _ in range(passes):
-        m = xp.min(key, axis=1)
+        m = xp.min(key, axis=0)
         got.append(m)
-        key = xp.where(key == m[:, None], top, key)
+        key = xp.where(key == m[None, :], top, key)
     got = xp.stack(got, axis=1)
     inf_bits = int(np.array(np.inf).view(np.int64)) & ~int(low)
     trunc = got & ~low

@@ -8,7 +8,7 @@ import numpy as np
 
 from ...core.errors import ParameterError
 from .cells import CellList
-from .kdtree import kd_nearest
+from .kdtree import kd_nearest, kd_within
 from .queries import candidates, nearest, plan_cells, within
 
 
@@ -24,7 +24,9 @@ class NeighborSearch:
     - NumPy: no plan is needed; each call sizes itself (exact, any count),
       and a radius above ``reach`` re-plans on the fly. :meth:`nearest` of
       the points among themselves without a field of view uses the k-d
-      tree (:func:`kd_nearest`), the rest the cell list.
+      tree (:func:`kd_nearest`), and so does :meth:`within` in free space
+      (:func:`kd_within`); the rest the cell list. Both give the cell
+      list's results exactly.
     - Traced (JAX): the static :class:`CellList` in ``self.cells`` is used.
       It is planned before tracing from the block's initial inputs by the
       compiled engine (:meth:`plan`), or fixed by the user (``capacity=``).
@@ -102,6 +104,16 @@ class NeighborSearch:
         return cand
 
     def within(self, points, radius, queries=None, xp=np, **kw):
+        if (xp is np and self.box is None and np.ndim(radius) == 0
+                and set(kw) <= {"exclude_self"}):
+            # NumPy engine: the k-d tree proposes the pairs (faster than the
+            # cell list from a few hundred points on, benchmarks/neighbors.py);
+            # the rows are the cell list's, entry for entry
+            r = float(radius)
+            return kd_within(np.asarray(points)[:, : self.dim], r,
+                             None if queries is None else
+                             np.asarray(queries)[:, : self.dim],
+                             reach=max(self.reach, r), **kw)
         cells = self._cells(xp, radius if xp is np else None, points.shape[0])
         idx, dist, need = within(cells, points[:, : self.dim], radius,
                                  None if queries is None else queries[:, : self.dim],

@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..utility.spatial import Need, NeighborSearch, verlet
-from ..utility.spatial.queries import _compact
+from ..utility.spatial.queries import compact
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
 
@@ -166,7 +166,7 @@ def dense_within(points, radius, width, xp=np):
     ids = xp.arange(n)
     r = xp.asarray(radius, dtype=d2.dtype)
     ok = (d2 <= r * r) & (ids[None, :] != ids[:, None])
-    (idx,), most = _compact(ok, [(xp.broadcast_to(ids[None, :], (n, n)), -1)], width, xp)
+    (idx,), most = compact(ok, [(xp.broadcast_to(ids[None, :], (n, n)), -1)], width, xp)
     return idx, most
 
 

@@ -137,6 +137,14 @@ def _rowmap(fn, arrays, xp, size=None):
     return tuple(o.reshape((m * size,) + o.shape[2:])[:qn] for o in outs)
 
 
+def in_view(d, heading, fov, xp):
+    """Which offsets ``d`` (per axis, (Q, C)) lie inside the field of view
+    ``fov`` (full angle, rad) around each query's ``heading`` (Q,)."""
+    rel = xp.arctan2(d[1], d[0]) - heading[:, None]
+    rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
+    return rel <= 0.5 * fov + 1e-12
+
+
 def _chunk_fn(cells, ps, order, cap, radius, xp, *, fov=None):
     """Row function: candidates, squared distances and validity of a chunk."""
     dim = len(ps)
@@ -162,9 +170,7 @@ def _chunk_fn(cells, ps, order, cap, radius, xp, *, fov=None):
             r = xp.asarray(radius, dtype=d2.dtype)
             val = ok & (d2 <= r * r) & (idx != me[:, None])
             if fov is not None:
-                rel = xp.arctan2(d[1], d[0]) - heading[:, None]
-                rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
-                val = val & (rel <= 0.5 * fov + 1e-12)
+                val = val & in_view(d, heading, fov, xp)
         return idx, ok, val, d2, cnt
 
     return hits
@@ -192,7 +198,7 @@ def _args(query, heading, xp):
     return [query.me, h, *query.q, *query.a, *query.b]
 
 
-def _compact(ok, cols, width, xp):
+def compact(ok, cols, width, xp):
     """Move the valid entries of each row to its front: arrays (Q, width)
     of each of ``cols`` (first fill value given with it), and the largest
     count (the width needed)."""
@@ -371,7 +377,7 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
         return idx, val, d2, cnt, xp.sum(val, axis=1)
 
     idx, val, d2, cnt, nh = _rowmap(row, _args(query, None, xp), xp)
-    (ci, cd), _ = _compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
+    (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     dist = xp.sqrt(cd)
     ci, dist = _unsort(query.rows, [ci, dist], xp)
     return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh),

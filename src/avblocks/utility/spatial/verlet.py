@@ -46,6 +46,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .queries import in_view
+
 
 def _wrap(d, box, xp):
     if box is None:
@@ -180,9 +182,7 @@ def select(points, cand, radius, k, xp=np, *, box=None, heading=None, fov=None,
     r = xp.asarray(radius, dtype=d2.dtype)
     val = ok & (d2 <= r * r) & (cand != me[:, None])
     if fov is not None:
-        rel = xp.arctan2(d[1], d[0]) - heading[:, None]
-        rel = xp.abs(xp.mod(rel + np.pi, 2 * np.pi) - np.pi)
-        val = val & (rel <= 0.5 * fov + 1e-12)
+        val = val & in_view(d, heading, fov, xp)
     d2 = xp.where(val, d2, xp.inf)
     if xp is np:
         # a stable sort: equal distances keep the row's (index) order

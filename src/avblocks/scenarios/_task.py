@@ -30,10 +30,10 @@ def others_index(n):
 
 
 def pairwise(p, xp):
-    """(n, n) distances between the rows of p (n, 2); diagonal = +inf."""
-    d = p[:, None, :] - p[None, :, :]
+    """(..., n, n) distances between the rows of p (..., n, 2); diagonal = +inf."""
+    d = p[..., :, None, :] - p[..., None, :, :]
     r = xp.sqrt(xp.sum(d * d, axis=-1) + 1e-12)
-    n = p.shape[0]
+    n = p.shape[-2]
     return xp.where(np.eye(n, dtype=bool), xp.inf, r)
 
 

@@ -111,7 +111,15 @@ class NavigationTask(Block):
     margin : numeric (module docstring).
     rays : int (structural), number of range rays.
     sort_others : bool (structural), other agents nearest first.
+    observe_velocity : bool (structural), also observe the other agents'
+        velocity commands of the last step relative to its own (input
+        ``velocity``, not direct feedthrough).
+
+    The functions broadcast over leading batch axes (``batch_axes``: the
+    NumPy vector environment steps K copies in one call).
     """
+
+    batch_axes = True
 
     def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
                  max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
@@ -157,8 +165,8 @@ class NavigationTask(Block):
         gap_a = pairwise(p, xp) - 2 * r
         near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
         s = self.seg
-        d = point_segment_distance(p[:, 0:1], p[:, 1:2], s[:, 0], s[:, 1], s[:, 2], s[:, 3],
-                                   xp)                                    # (N, E)
+        d = point_segment_distance(p[..., 0:1], p[..., 1:2], s[:, 0], s[:, 1], s[:, 2],
+                                   s[:, 3], xp)                           # (..., N, E)
         gap = xp.min(d, axis=-1) - r
         return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
 
@@ -166,21 +174,21 @@ class NavigationTask(Block):
         p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
         d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
-        rel_o = p[self.idx] - p[:, None, :]                            # (n, n-1, 2)
+        rel_o = p[..., self.idx, :] - p[..., :, None, :]                # (..., n, n-1, 2)
         parts = [rel_o]
         if self.observe_velocity:
             v = x["vel"]
-            parts.append(v[self.idx] - v[:, None, :])
+            parts.append(v[..., self.idx, :] - v[..., :, None, :])
         if self.sort_others and self.n > 2:
             order = xp.argsort(xp.sum(rel_o * rel_o, -1), axis=-1)[..., None]
-            parts = [xp.take_along_axis(q, order, axis=1) for q in parts]
-        others = [xp.reshape(q, (self.n, -1)) for q in parts]
+            parts = [xp.take_along_axis(q, order, axis=-2) for q in parts]
+        others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)
         at = d < self.goal_radius
         reward = (self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
                   - self.proximity * self._closeness(p, xp))
-        return {"obs": obs, "reward": reward, "done": xp.zeros((self.n,), dtype=bool),
+        return {"obs": obs, "reward": reward, "done": xp.zeros(d.shape, dtype=bool),
                 "collision": col, "at_goal": at, "success": at & ~(x["hit"] | col)}
 
     def update(self, t, x, u, xp):

@@ -55,7 +55,13 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
-from ._common import EdgeGridOwner, agent_count, declare_agents_input, maybe_periodic
+from ._common import (
+    EdgeGridOwner,
+    agent_count,
+    all_pairs,
+    declare_agents_input,
+    maybe_periodic,
+)
 from .edges import ray_circle, ray_segment
 from .world import World
 
@@ -269,7 +275,9 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
         out = xp.minimum(out, xp.min(xp.where(c[:, None] >= 0, t, xp.inf), axis=-1))
     if agent_radius is not None and n > 1 and search is not None:
         r = xp.broadcast_to(xp.asarray(agent_radius, dtype=pose.dtype), (n,))
-        idx, _ = search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
+        dense = all_pairs(search, pose[:, :2], xp)     # discs past the range: capped
+        idx, _ = dense if dense is not None else \
+            search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
         ok = idx >= 0
         j = xp.where(ok, idx, 0)
         t = ray_circle(ox, oy, ux, uy, pose[j, 0][:, None], pose[j, 1][:, None],

@@ -54,6 +54,8 @@ class Config:
     log_std0: float = -0.5
     activation: str = "tanh"
     anneal: bool = True        # learning rate linearly to 0 over ``updates``
+    clip_separately: bool = True   # max_grad_norm per network (actor, critic)
+    reward_scale: float = 1.0  # rewards times this in the losses (not in the curve)
 
 
 @dataclass
@@ -159,7 +161,7 @@ def make_update(env, cfg, opt):
         p, opt_state, key = carry
         key, kr, ks = jax.random.split(key, 3)
         tr, last_v = rollout(p, kr)
-        adv, ret = gae(tr, last_v)
+        adv, ret = gae({**tr, "r": tr["r"] * cfg.reward_scale}, last_v)
         flat = {k: tr[k].reshape((T * E * N,) + tr[k].shape[3:])
                 for k in ("obs", "a", "lp", "alive")}
         flat["adv"] = adv.reshape(-1)
@@ -176,6 +178,12 @@ def make_update(env, cfg, opt):
             def mini(c, b):
                 p, opt_state = c
                 g = grad(p, b)
+                if cfg.clip_separately:
+                    # the critic's squared error would otherwise dominate one
+                    # global norm and scale the actor's step down with it
+                    g = {"actor": _clip(g["actor"], cfg.max_grad_norm),
+                         "log_std": g["log_std"],
+                         "critic": _clip(g["critic"], cfg.max_grad_norm)}
                 upd, opt_state = opt.update(g, opt_state, p)
                 p = jax.tree_util.tree_map(lambda a, u: a + u, p, upd)
                 return (p, opt_state), None
@@ -194,6 +202,16 @@ def make_update(env, cfg, opt):
         return (p, opt_state, key), metrics
 
     return jax.jit(update)
+
+
+def _clip(tree, max_norm):
+    """``tree`` scaled to global norm <= ``max_norm`` (optax's rule)."""
+    jax = _engine.jax()
+    jnp = jax.numpy
+    leaves = jax.tree_util.tree_leaves(tree)
+    norm = jnp.sqrt(sum(jnp.sum(x * x) for x in leaves))
+    scale = jnp.minimum(1.0, max_norm / jnp.maximum(norm, 1e-12))
+    return jax.tree_util.tree_map(lambda x: x * scale, tree)
 
 
 def init_params(env, cfg, seed=0):
@@ -217,8 +235,8 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     lr = cfg.lr
     if cfg.anneal:
         lr = optax.linear_schedule(cfg.lr, 0.0, cfg.updates * cfg.epochs * cfg.minibatches)
-    opt = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm),
-                      optax.adam(lr, eps=1e-5))
+    opt = optax.adam(lr, eps=1e-5) if cfg.clip_separately else optax.chain(
+        optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(lr, eps=1e-5))
     p = init_params(env, cfg, seed)
     carry = (p, opt.init(p), jax.random.PRNGKey(seed))
     update = make_update(env, cfg, opt)

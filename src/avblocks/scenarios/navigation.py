@@ -28,9 +28,12 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
 - **observation** (per agent, ``4 + rays + 2(N-1)``): goal relative to
   the agent (m), own position divided by ``half``, the ray ranges divided
   by ``max_range``, the other agents relative to it (m), nearest first
-  with ``sort_others`` (the default), else in index order (``task.obs``).
+  with ``sort_others`` (the default), else in index order (``task.obs``);
+  with ``observe_velocity``, 2(N-1) more: the other agents' velocity
+  commands of the last step relative to its own, in the same order.
 - **reward** (per agent): ``progress * (d_prev - d)`` (``d`` the distance
-  to the goal, over the last control step) ``+ 0.1 * [d < goal_radius]``
+  to the goal, over the last control step) ``+ goal_bonus * [d <
+  goal_radius]`` (``goal_bonus`` 0.1)
   ``- collision * [touching an obstacle, a wall or another agent]``
   ``- proximity * closeness`` where closeness sums ``clip(1 - gap/margin,
   0, 1)`` over the other agents and the nearest obstacle or wall (``gap``:
@@ -108,7 +111,7 @@ class NavigationTask(Block):
     ----------
     world : World, the obstacles and walls (their edges: the closeness term).
     half, radius, goal_radius, max_range, progress, collision, proximity,
-    margin : numeric (module docstring).
+    margin, goal_bonus : numeric (module docstring).
     rays : int (structural), number of range rays.
     sort_others : bool (structural), other agents nearest first.
     observe_velocity : bool (structural), also observe the other agents'
@@ -123,7 +126,7 @@ class NavigationTask(Block):
 
     def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
                  max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
-                 sort_others=True, observe_velocity=False):
+                 goal_bonus=0.1, sort_others=True, observe_velocity=False):
         super().__init__()
         self.n = n
         self.rays = int(rays)
@@ -138,6 +141,7 @@ class NavigationTask(Block):
         self.declare_parameter("collision", collision, bounds=(0, None))
         self.declare_parameter("proximity", proximity, bounds=(0, None))
         self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
+        self.declare_parameter("goal_bonus", goal_bonus, bounds=(0, None))
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_input("ranges", (n, self.rays), unit="m")
@@ -186,10 +190,11 @@ class NavigationTask(Block):
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)
         at = d < self.goal_radius
-        reward = (self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
-                  - self.proximity * self._closeness(p, xp))
+        success = at & ~(x["hit"] | col)
+        reward = (self.progress * (x["prev"] - d) + self.goal_bonus * at
+                  - self.collision * col - self.proximity * self._closeness(p, xp))
         return {"obs": obs, "reward": reward, "done": xp.zeros(d.shape, dtype=bool),
-                "collision": col, "at_goal": at, "success": at & ~(x["hit"] | col)}
+                "collision": col, "at_goal": at, "success": success}
 
     def update(self, t, x, u, xp):
         p, g = u["position"], u["goals"]

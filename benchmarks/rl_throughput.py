@@ -6,9 +6,10 @@ Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each:
   compiled engine's traced step), a jitted ``lax.scan`` of 60 control steps
   of a fixed random policy, ``vmap``-ed over the copies;
 - ``pure JAX``: the same dynamics and task written by hand in this file (a
-  single integrator's Euler step, the same range rays, collision test and
-  reward computed with the same xp kernels): the limit without the block
-  machinery;
+  single integrator's Euler step, range rays, collision test and reward as
+  dense kernels: every ray against every edge, every pair of agents): the
+  limit without the block machinery (the diagram uses the library's
+  ``RangeSensor`` and ``Collision`` blocks, edge-grid method);
 - ``VMAS``: its ``navigation`` scenario on CPU with the same numbers of
   environments and agents, when ``vmas`` is installed (extra ``rl-bench``;
   it pulls torch). Otherwise the column says so.
@@ -64,40 +65,111 @@ def avblocks_runner(E, T):
     return lambda: f(key).block_until_ready()
 
 
+# ---------------------------------------------------------------- pure JAX
+# The navigation task written by hand, dense (every ray against every
+# edge, every pair of agents): what the diagram's blocks (RangeSensor,
+# Collision, the task block) compute, without the block machinery.
+
+def _edges(obstacles, half):
+    """(E, 4) edges of the rectangles (cx, cy, w, h) and of the arena's border."""
+    out = []
+    for cx, cy, w, h in obstacles:
+        x0, x1, y0, y1 = cx - w / 2, cx + w / 2, cy - h / 2, cy + h / 2
+        v = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+        out.append(np.concatenate([v, np.roll(v, -1, axis=0)], axis=1))
+    return np.concatenate(out)
+
+
+def _seg_dist(p, e, jnp):
+    """(n, E) distance from points p (n, 2) to the edges e (E, 4)."""
+    a, ab = e[:, :2], e[:, 2:] - e[:, :2]
+    ap = p[:, None, :] - a
+    s = jnp.clip(jnp.sum(ap * ab, -1) / jnp.sum(ab * ab, -1), 0.0, 1.0)
+    d = ap - s[..., None] * ab
+    return jnp.sqrt(jnp.sum(d * d, -1))
+
+
+def _inside(p, e, jnp):
+    """(n,) inside an obstacle (crossing parity; obstacles do not overlap)."""
+    x, y = p[:, 0:1], p[:, 1:2]
+    x1, y1, x2, y2 = e[:, 0], e[:, 1], e[:, 2], e[:, 3]
+    dy = jnp.where(y2 == y1, 1.0, y2 - y1)
+    cross = ((y1 > y) != (y2 > y)) & (x < x1 + (y - y1) * (x2 - x1) / dy)
+    return jnp.sum(cross, -1) % 2 == 1
+
+
+def _rays(p, d, e, half, r, rmax, jnp):
+    """(n, R) ranges along directions d (R, 2): edges, walls, other discs."""
+    a, ev = e[:, :2], e[:, 2:] - e[:, :2]
+    ao = a[None] - p[:, None]                                          # (n, E, 2)
+    den = d[:, 0:1] * ev[None, :, 1] - d[:, 1:2] * ev[None, :, 0]      # (R, E)
+    sd = jnp.where(jnp.abs(den) < 1e-12, 1e-12, den)
+    t = (ao[:, None, :, 0] * ev[:, 1] - ao[:, None, :, 1] * ev[:, 0]) / sd
+    u = (ao[:, None, :, 0] * d[None, :, None, 1] - ao[:, None, :, 1] * d[None, :, None, 0]) / sd
+    t = jnp.min(jnp.where((t >= 0) & (u >= 0) & (u <= 1), t, jnp.inf), -1)
+    dd = jnp.where(jnp.abs(d) < 1e-12, 1e-12, d)
+    tw = (jnp.where(d > 0, half, -half)[None] - p[:, None, :]) / dd[None]   # (n, R, 2)
+    t = jnp.minimum(t, jnp.min(jnp.maximum(tw, 0.0), -1))
+    oc = p[None, :, :] - p[:, None, :]                                 # (n, m, 2)
+    proj = jnp.einsum("nmk,rk->nrm", oc, d)
+    disc = r * r - (jnp.sum(oc * oc, -1)[:, None, :] - proj * proj)
+    th = proj - jnp.sqrt(jnp.maximum(disc, 0.0))
+    n = p.shape[0]
+    hit = (disc >= 0) & (th >= 0) & ~np.eye(n, dtype=bool)[:, None, :]
+    t = jnp.minimum(t, jnp.min(jnp.where(hit, th, jnp.inf), -1))
+    return jnp.minimum(t, rmax)
+
+
+def _free(key, n, half, e, c, min_sep, jnp, tries=24):
+    import jax
+    q = jax.random.uniform(key, (tries, n, 2), minval=-(half - c), maxval=half - c)
+    ok = ~_inside(q.reshape(-1, 2), e, jnp).reshape(tries, n) & \
+        (jnp.min(_seg_dist(q.reshape(-1, 2), e, jnp), -1).reshape(tries, n) > c)
+    chosen = []
+    for i in range(n):
+        oki = ok[:, i]
+        for z in chosen:
+            oki = oki & (jnp.sum((q[:, i] - z) ** 2, -1) >= min_sep ** 2)
+        chosen.append(q[jnp.argmax(oki), i])
+    return jnp.stack(chosen)
+
+
 def pure_jax_runner(E, T, n=4):
-    """The navigation task written directly in JAX (same kernels)."""
+    """The navigation task written directly in JAX (dense kernels above)."""
     import jax
     import jax.numpy as jnp
 
-    from avblocks.scenarios import _task as K
     from avblocks.scenarios.navigation import OBSTACLES
-    edges = jnp.asarray(K.polygon_edges([K.rectangle(*o) for o in OBSTACLES]), jnp.float32)
     half, r, rmax, dt = 1.5, 0.1, 1.0, 0.1
-    angles = jnp.linspace(-jnp.pi, jnp.pi, 12, endpoint=False)
-    idx = K.others_index(n)
+    edges = jnp.asarray(_edges(OBSTACLES, half), jnp.float32)
+    ang = np.linspace(-np.pi, np.pi, 12, endpoint=False)
+    dirs = jnp.asarray(np.stack([np.cos(ang), np.sin(ang)], -1), jnp.float32)
+    j = np.arange(n - 1)[None, :]
+    idx = j + (j >= np.arange(n)[:, None])
+    eye = np.eye(n, dtype=bool)
 
     def task(p, g, prev, hit):
         rel = g - p
         d = jnp.sqrt(jnp.sum(rel * rel, -1) + 1e-12)
-        ranges = K.ray_ranges(p, angles, edges, half, p, r, rmax, jnp)
-        rel_o = jnp.reshape(p[idx] - p[:, None, :], (n, -1))
+        ranges = _rays(p, dirs, edges, half, r, rmax, jnp)
+        rel_o = p[idx] - p[:, None, :]
+        rel_o = jnp.take_along_axis(rel_o, jnp.argsort(jnp.sum(rel_o ** 2, -1), -1)[..., None],
+                                    axis=1).reshape(n, -1)
         obs = jnp.concatenate([rel, p / half, ranges / rmax, rel_o], -1)
-        col = ((jnp.min(K.segment_distance(p, edges, jnp), -1) < r) | K.inside(p, edges, jnp)
-               | jnp.any(jnp.abs(p) > half - r, -1)
-               | jnp.any(K.pairwise(p, jnp) < 2 * r, -1))
+        pair = jnp.where(eye, jnp.inf, jnp.sqrt(jnp.sum((p[:, None] - p[None]) ** 2, -1)))
+        gap_e = jnp.minimum(jnp.min(_seg_dist(p, edges, jnp), -1),
+                            jnp.min(half - jnp.abs(p), -1)) - r
+        col = (gap_e <= 0) | _inside(p, edges, jnp) | jnp.any(pair <= 2 * r, -1)
         at = d < 0.15
-        gap_a = K.pairwise(p, jnp) - 2 * r
-        near = jnp.sum(jnp.clip(1.0 - gap_a / 0.2, 0.0, 1.0), -1)
-        gap = jnp.minimum(jnp.min(K.segment_distance(p, edges, jnp), -1),
-                          jnp.min(half - jnp.abs(p), -1)) - r
-        close = near + jnp.clip(1.0 - gap / 0.2, 0.0, 1.0)
+        close = jnp.sum(jnp.clip(1.0 - (pair - 2 * r) / 0.2, 0.0, 1.0), -1) + \
+            jnp.clip(1.0 - gap_e / 0.2, 0.0, 1.0)
         reward = 5.0 * (prev - d) + 0.1 * at - 2.5 * col - 0.5 * close
         return obs, reward, d, hit | col
 
     def episode(key):
         k0, k1, k2 = jax.random.split(key, 3)
-        p = K.free_points(k0, n, half, edges, 0.25, jnp, min_sep=0.4)
-        g = K.free_points(k1, n, half, edges, 0.25, jnp, min_sep=0.4)
+        p = _free(k0, n, half, edges, 0.25, 0.5, jnp)
+        g = _free(k1, n, half, edges, 0.25, 0.5, jnp)
         prev = jnp.sqrt(jnp.sum((g - p) ** 2, -1))
         hit = jnp.zeros(n, bool)
 

@@ -8,8 +8,8 @@ runs independent PPO with one shared actor and critic (every agent's
 transition a sample): each update runs 128 episodes of 60 steps in
 lockstep (one vmapped ``lax.scan``), then 4 epochs of 8 minibatches of
 Adam, all in one jitted call; the learning rate decays linearly to zero
-over UPDATES updates (default 2500, about 8.5 minutes here). Training stops after them or
-after MINUTES of wall time (default 10, compile included).
+over UPDATES updates (default 2500) or MINUTES of wall time (default 10,
+compile included), whichever ends first; training stops there.
 
 The trained actor is evaluated on 100 new episodes (mean action, no
 noise): success = the fraction of agents at their goal at the end of the

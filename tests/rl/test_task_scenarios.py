@@ -1,4 +1,4 @@
-"""The task scenarios: their xp geometry against shapely, their scripted
+"""The task scenarios: their sensing against shapely, their scripted
 runs (the outcome a researcher checks), and their task flags."""
 
 import numpy as np
@@ -8,69 +8,116 @@ shapely = pytest.importorskip("shapely")
 from shapely.geometry import LineString, Point, Polygon  # noqa: E402
 
 import avblocks as av  # noqa: E402
-from avblocks.scenarios import _task as T  # noqa: E402
 from avblocks.scenarios import navigation, pursuit, spread  # noqa: E402
 
 
 def _world():
-    rects = [T.rectangle(*o) for o in navigation.OBSTACLES]
-    return rects, T.polygon_edges(rects)
+    """The navigation obstacles as shapely polygons (truth for the tests)."""
+    return [Polygon([(cx - w / 2, cy - h / 2), (cx + w / 2, cy - h / 2),
+                     (cx + w / 2, cy + h / 2), (cx - w / 2, cy + h / 2)])
+            for cx, cy, w, h in navigation.OBSTACLES]
 
 
-def test_segment_distance_and_inside_match_shapely():
-    rects, edges = _world()
-    polys = [Polygon(r) for r in rects]
-    pts = np.random.default_rng(0).uniform(-1.5, 1.5, (300, 2))
-    d = T.segment_distance(pts, edges, np).min(-1)
-    ins = T.inside(pts, edges, np)
-    for p, di, ii in zip(pts, d, ins):
-        truth_in = any(P.contains(Point(p)) for P in polys)
-        truth_d = min(P.exterior.distance(Point(p)) for P in polys)
-        assert ii == truth_in
-        assert abs(di - truth_d) < 1e-9
-
-
-def test_ray_ranges_match_shapely():
-    rects, edges = _world()
-    half, rmax, r = 1.5, 1.0, 0.1
-    polys = [Polygon(x) for x in rects]
-    p = np.array([[-0.8, -0.2], [0.5, 0.5], [0.0, -0.6], [1.2, 1.1]])
-    angles = np.linspace(-np.pi, np.pi, 16, endpoint=False)
-    got = T.ray_ranges(p, angles, edges, half, p, r, rmax, np)
+def _truth_ranges(p, angles, half=1.5, r=0.1, rmax=1.0):
+    """Ranges by shapely (segments: exact intersections) and the analytic
+    ray-disc formula for the other agents (not overlapping)."""
+    polys = _world()
     wall = Polygon([(-half, -half), (half, -half), (half, half), (-half, half)]).exterior
+    out = np.full((len(p), len(angles)), rmax)
     for i, o in enumerate(p):
-        for j, a in enumerate(angles):
-            end = o + 10 * np.array([np.cos(a), np.sin(a)])
-            ray = LineString([o, end])
-            best = rmax
-            for geom in [P.exterior for P in polys] + [wall] + \
-                    [Point(q).buffer(r, 256).exterior for k, q in enumerate(p) if k != i]:
+        for k, a in enumerate(angles):
+            u = np.array([np.cos(a), np.sin(a)])
+            ray = LineString([o, o + 10 * u])
+            for geom in [P.exterior for P in polys] + [wall]:
                 hit = ray.intersection(geom)
                 if not hit.is_empty:
-                    best = min(best, Point(o).distance(hit))
-            assert abs(got[i, j] - best) < 2e-4, (i, j, got[i, j], best)
+                    out[i, k] = min(out[i, k], Point(o).distance(hit))
+            for j, q in enumerate(p):
+                if j == i:
+                    continue
+                f = q - o
+                tca = f @ u
+                d2 = f @ f - tca * tca
+                if d2 <= r * r and tca - np.sqrt(r * r - d2) >= 0:
+                    out[i, k] = min(out[i, k], tca - np.sqrt(r * r - d2))
+    return out
 
 
-def test_ray_ranges_same_on_jax():
-    jnp = pytest.importorskip("jax.numpy")
-    _, edges = _world()
-    p = np.random.default_rng(3).uniform(-1.2, 1.2, (5, 2))
-    angles = np.linspace(-np.pi, np.pi, 8, endpoint=False)
-    a = T.ray_ranges(p, angles, edges, 1.5, p, 0.1, 1.0, np)
-    b = T.ray_ranges(jnp.asarray(p), angles, jnp.asarray(edges), 1.5, jnp.asarray(p), 0.1,
-                     1.0, jnp)
-    np.testing.assert_allclose(np.asarray(b), a, atol=1e-5)
+def _truth_collision(p, half=1.5, r=0.1):
+    polys = _world()
+    d_obs = np.array([min(P.distance(Point(q)) for P in polys) for q in p])
+    pair = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(len(p)) * 9
+    return (d_obs <= r) | (np.abs(p) >= half - r).any(-1) | (pair <= 2 * r).any(-1)
+
+
+def test_navigation_senses_with_the_library_blocks_exactly():
+    """The task's rays come from environment.RangeSensor and its contacts
+    from environment.Collision: equal to shapely truth to 1e-9 m in every
+    state inside the arena without overlapping agents (the states of an
+    episode before a collision: after one, the sensor reads 0 towards an
+    overlapped disc and rays start inside a wall)."""
+    from avblocks import rl
+    from avblocks.core import rng
+    env = rl.functional("navigation", backend="numpy", sort_others=False)
+    assert "RangeSensor" in type(env.cd.blocks[env.cd.index("lidar")]).__name__
+    angles = navigation.ray_angles(12)
+    gen = np.random.default_rng(1)
+    checked = 0
+    for ep in range(4):
+        state, _ = env.reset(rng.key(ep, "t"))
+        for _t in range(12):
+            sig = env._signals(state.Y)
+            obs = np.asarray(sig["task.obs"])
+            p = np.asarray(sig["fleet.position"])
+            col = _truth_collision(p)
+            np.testing.assert_array_equal(sig["task.collision"], col)
+            pair = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(4) * 9
+            if (np.abs(p) < 1.4).all() and (pair > 0.2).all():
+                np.testing.assert_allclose(obs[:, 4:16], _truth_ranges(p, angles),
+                                           rtol=0, atol=1e-9)
+                np.testing.assert_allclose(obs[:, 16:], (p[[[1, 2, 3], [0, 2, 3], [0, 1, 3],
+                                                          [0, 1, 2]]] - p[:, None]).reshape(4, -1),
+                                           atol=1e-12)
+                checked += 1
+            state = env.step_env(state, gen.uniform(-0.6, 0.6, (4, 2)))[0]
+    assert checked >= 20
+
+
+def test_navigation_nearest_first_and_same_on_jax():
+    jax = pytest.importorskip("jax")
+    from avblocks import rl
+    from avblocks.core import rng
+    en = rl.functional("navigation", backend="numpy")
+    ej = rl.functional("navigation")
+    step = jax.jit(ej.step_env)
+    gen = np.random.default_rng(2)
+    k = rng.key(5, "t")
+    sn, on = en.reset(k)
+    sj, oj = jax.jit(ej.reset)(np.asarray(k, np.uint32))
+    for _t in range(30):
+        np.testing.assert_allclose(np.asarray(oj), on, atol=2e-5)
+        p = np.asarray(en._signals(sn.Y)["fleet.position"])
+        rel = on[:, 16:].reshape(4, 3, 2)
+        dist = np.linalg.norm(rel, axis=-1)
+        assert (np.diff(dist, axis=1) >= 0).all()               # nearest first
+        want = np.sort(np.linalg.norm(p[:, None] - p[None], axis=-1) + np.eye(4) * 9, 1)[:, :3]
+        np.testing.assert_allclose(dist, want, atol=1e-6)
+        a = gen.uniform(-0.5, 0.5, (4, 2)).astype(np.float32)
+        sn, on = en.step_env(sn, a)[:2]
+        sj, oj = step(sj, a)[:2]
 
 
 def test_free_points_are_free():
-    _, edges = _world()
     from avblocks.core import rng
+    from avblocks.environment import EdgeGrid
+    from avblocks.scenarios._task import free_points, pairwise
+    grid = EdgeGrid(navigation.arena(), 0.25)
+    polys = _world()
     for s in range(20):
-        p = T.free_points(rng.key(s), 4, 1.5, edges, 0.25, np, min_sep=0.4)
-        assert not T.inside(p, edges, np).any()
-        assert (T.segment_distance(p, edges, np).min(-1) >= 0.25).all()
+        p = free_points(rng.key(s), 4, 1.5, grid, 0.25, np, min_sep=0.4)
+        assert all(min(P.distance(Point(q)) for P in polys) > 0.25 for q in p)
         assert (np.abs(p) <= 1.25).all()
-        assert np.min(T.pairwise(p, np)) >= 0.4
+        assert np.min(pairwise(p, np)) >= 0.4
 
 
 def _run(mod, **kw):
@@ -103,12 +150,8 @@ def test_navigation_scripted_run_and_flags():
     assert nums["agents"] == 4
     p = np.asarray(res["fleet.position"])
     g = np.asarray(res["goals.y"])[0]
-    _, edges = _world()
     # collision flag = touching an obstacle / wall / agent, from positions
-    col = ((T.segment_distance(p, edges, np).min(-1) < 0.1) | T.inside(p, edges, np)
-           | (np.abs(p) > 1.4).any(-1)
-           | (np.linalg.norm(p[:, :, None] - p[:, None], axis=-1)
-              + np.eye(4) * 9 < 0.2).any(-1))
+    col = np.stack([_truth_collision(q) for q in p])
     np.testing.assert_array_equal(res["task.collision"], col)
     at = np.linalg.norm(p[-1] - g, axis=-1) < 0.15
     ok = at & ~col.any(axis=0)
@@ -141,9 +184,25 @@ def test_navigation_env_default_works_as_is():
     # at rest no progress and no collision at a free start: only the
     # closeness warning, recomputed here from the positions
     p = np.stack([o[a][2:4] for a in env.possible_agents]) * 1.5
-    _, edges = _world()
     dd = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag([np.inf] * 4)
     near = np.clip(1 - (dd - 0.2) / 0.2, 0, 1).sum(1)
-    gap = np.minimum(T.segment_distance(p, edges, np).min(-1), (1.5 - np.abs(p)).min(-1)) - 0.1
+    d_obs = np.array([min(P.exterior.distance(Point(q)) for P in _world()) for q in p])
+    gap = np.minimum(d_obs, (1.5 - np.abs(p)).min(-1)) - 0.1
     want = -0.5 * (near + np.clip(1 - gap / 0.2, 0, 1))
     np.testing.assert_allclose([r[a] for a in env.possible_agents], want, atol=1e-5)
+
+
+def test_navigation_grid_rays_equal_shapely_rays_in_float64():
+    """The compiled sensor's method (edge grid; here every edge is tested,
+    the grid keeping more than half of them) run in NumPy float64 against
+    the NumPy engine's shapely method, agents included: 1e-9 m."""
+    from avblocks.environment.range_sensor import _all_edges, cast_rays, cast_rays_grid
+    d, _ = navigation.make_diagram()
+    s = d["lidar"].block
+    assert _all_edges(s.edges)
+    gen = np.random.default_rng(4)
+    for _ in range(20):
+        p = gen.uniform(-1.45, 1.45, (4, 2))
+        a = cast_rays(s.world, p, s.angles, 1.0, 0.1)
+        b = cast_rays_grid(s.edges, s.search, p, s.angles, 1.0, 0.1, np)
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)

@@ -43,6 +43,19 @@ def block(name, obj):
         _CURRENT.reset(tok)
 
 
+@contextlib.contextmanager
+def unreported():
+    """Trace without overflow reports: :func:`report` does nothing inside
+    (for code that ``vmap``-s single steps, where each report would call
+    the host at every step; its searches must then be exact or planned
+    with headroom)."""
+    tok = _CURRENT.set(None)
+    try:
+        yield
+    finally:
+        _CURRENT.reset(tok)
+
+
 def searches_of(b):
     """The neighbour searches block ``b`` owns: ``b.searches()`` when it has
     that method, else every attribute that is a

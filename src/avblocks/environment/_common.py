@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..core.errors import ParameterError
@@ -76,3 +78,20 @@ class EdgeGridOwner:
         if self.method == "shapely":
             return []
         return [s for s in (self.search, self.edges) if s is not None]
+
+
+def all_pairs(search, points, xp):
+    """Every other agent of each agent, ``(idx (N, N-1), dist (N, N-1))``,
+    when ``search`` compares every pair anyway (infinite reach, no periodic
+    box: the blocks' default for N <= SMALL_N); ``None`` for a planned
+    search. The same candidates as ``search.within`` (an (N, N-1) product;
+    callers reduce over them, so the order does not matter) without the
+    cell list's sorting and compaction, which under ``vmap`` cost several
+    times the rest of a small diagram's step (the navigation task: 2.5x)."""
+    if search is None or search.box is not None or math.isfinite(search.reach):
+        return None
+    n = points.shape[0]
+    j = np.arange(n - 1)[None, :]
+    idx = j + (j >= np.arange(n)[:, None])             # row i: every index but i
+    d = points[idx] - points[:, None, :]
+    return idx, xp.sqrt(xp.sum(d * d, axis=-1))

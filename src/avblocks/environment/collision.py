@@ -59,7 +59,13 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
-from ._common import EdgeGridOwner, agent_count, declare_agents_input, maybe_periodic
+from ._common import (
+    EdgeGridOwner,
+    agent_count,
+    all_pairs,
+    declare_agents_input,
+    maybe_periodic,
+)
 from .edges import point_in_ring, segment_segment_dist2
 from .footprint import Disc, Footprint
 from .world import World, _disc_obstacle_hits
@@ -204,7 +210,8 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
         ho, first = grid.polygon_hits(verts, centers, m, xp)
         reach = 2.0 * (float(np.max(footprint.bounding_radius(n))) + m)
     if agents and n > 1 and search is not None:
-        idx, dist = search.within(centers, reach, xp=xp)
+        dense = all_pairs(search, centers, xp)          # far pairs: never a hit
+        idx, dist = dense if dense is not None else search.within(centers, reach, xp=xp)
         ok = idx >= 0
         j = xp.where(ok, idx, 0)
         if isinstance(footprint, Disc):

@@ -55,7 +55,13 @@ from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
-from ._common import EdgeGridOwner, agent_count, declare_agents_input, maybe_periodic
+from ._common import (
+    EdgeGridOwner,
+    agent_count,
+    all_pairs,
+    declare_agents_input,
+    maybe_periodic,
+)
 from .edges import ray_circle, ray_segment
 from .world import World
 
@@ -239,6 +245,15 @@ def cast_rays(world, pose, angles, max_range, agent_radius=None):
     return np.minimum(out, max_range)
 
 
+def _all_edges(grid):
+    """Test every edge rather than the cell's candidates: when a cell keeps
+    more than half of them the per-agent gathers cost more than the tests
+    they save. Exact either way: an edge left out of a cell is farther than
+    the grid's reach (>= ``max_range``) from any point of it, so its hits
+    are capped to ``max_range``."""
+    return 2 * grid.K >= grid.n_edges
+
+
 def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=np):
     """:func:`cast_rays` in ``xp`` code (traceable), (N, R) ranges.
 
@@ -254,7 +269,12 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
     ux, uy = xp.cos(phi)[..., None], xp.sin(phi)[..., None]             # (N, R, 1)
     rmax = xp.asarray(max_range, dtype=pose.dtype)
     out = xp.full(phi.shape, xp.inf, dtype=pose.dtype)
-    if grid is not None and grid.n_edges:
+    if grid is not None and grid.n_edges and _all_edges(grid):
+        seg = xp.asarray(grid.seg[:-1], dtype=pose.dtype)                  # (E, 2, 2)
+        t = ray_segment(ox, oy, ux, uy, seg[:, 0, 0], seg[:, 0, 1], seg[:, 1, 0],
+                        seg[:, 1, 1], xp)                                 # (N, R, E)
+        out = xp.minimum(out, xp.min(t, axis=-1))
+    elif grid is not None and grid.n_edges:
         e, _, _ = grid.candidate_edges(pose[:, :2], xp)
         seg = xp.asarray(grid.seg)[xp.where(e >= 0, e, grid.n_edges)][:, None]  # (N,1,K,2,2)
         t = ray_segment(ox, oy, ux, uy, seg[..., 0, 0], seg[..., 0, 1], seg[..., 1, 0],
@@ -269,7 +289,9 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
         out = xp.minimum(out, xp.min(xp.where(c[:, None] >= 0, t, xp.inf), axis=-1))
     if agent_radius is not None and n > 1 and search is not None:
         r = xp.broadcast_to(xp.asarray(agent_radius, dtype=pose.dtype), (n,))
-        idx, _ = search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
+        dense = all_pairs(search, pose[:, :2], xp)     # discs past the range: capped
+        idx, _ = dense if dense is not None else \
+            search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
         ok = idx >= 0
         j = xp.where(ok, idx, 0)
         t = ray_circle(ox, oy, ux, uy, pose[j, 0][:, None], pose[j, 1][:, None],

@@ -106,7 +106,8 @@ def gym_env(diagram_or_scenario, *, backend="numpy", params=None, **kw):
 def vector_env(diagram_or_scenario, num_envs, *, backend="jax", params=None, **kw):
     """A Gymnasium 1.x ``VectorEnv`` of ``num_envs`` copies, autoreset mode
     ``SAME_STEP`` (see :mod:`avblocks.rl.envs`). JAX: all copies in one
-    jitted ``vmap`` call; NumPy: the copies one after the other."""
+    jitted ``vmap`` call; NumPy: one call on the copies stacked along a
+    leading axis (:mod:`avblocks.rl.batched` states the contract)."""
     from .envs import make_vector
     return make_vector(functional(diagram_or_scenario, backend=backend, **kw), num_envs,
                        params)

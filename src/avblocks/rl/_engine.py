@@ -15,9 +15,29 @@ from ..core.solvers import make_solver
 
 
 def traced_engine(compiled, dt, jnp, canon):
-    """The compiled backend's engine (errors name the block, fixed dtypes)."""
+    """The compiled backend's engine (errors name the block, fixed dtypes),
+    without the run-time overflow reports of static search plans.
+
+    A compiled *run* lets a neighbour search or edge grid report, per call,
+    whether it needed more than its plan (a ``lax.cond`` around a host
+    callback, see :mod:`avblocks.core.diagnostics`). An environment is
+    ``vmap``-ed over its copies, and under ``vmap`` that ``cond`` becomes a
+    select that calls back to the host at every step of every copy (the
+    navigation task ran 100x slower with it). The environments therefore
+    trace blocks outside the reporting context: their searches must be exact
+    (the default for N <= 64 agents: all pairs) or planned with enough
+    headroom, and an edge grid's ``reach`` must cover the ranges asked."""
+    from ..core import diagnostics
     from ..core.compiled.engine import TracedEngine
-    return TracedEngine(compiled, dt, jnp, canon)
+
+    class _EnvEngine(TracedEngine):
+        def _call(self, i, what, fn, *args, **kw):
+            def unreported(*a, **k):
+                with diagnostics.unreported():
+                    return fn(*a, **k)
+            return super()._call(i, what, unreported, *args, **kw)
+
+    return _EnvEngine(compiled, dt, jnp, canon)
 
 
 def jax():
@@ -26,4 +46,22 @@ def jax():
     return require_jax()
 
 
-__all__ = ["Engine", "bound_parameters", "make_solver", "rng", "traced_engine", "jax"]
+def outputs_of(eng, which, t, X, Y, hits):
+    """``eng.major_outputs`` restricted to the blocks ``which`` (a set of
+    indices closed under feedthrough descendants); the others keep ``Y``."""
+    from ..core.engine import select
+    Y = list(Y)
+    for i in eng.with_outputs:
+        if i not in which:
+            continue
+        if eng.periodic[i]:
+            h = hits[i]
+            if h is False:
+                continue
+            Y[i] = select(h, eng._out(i, t, X, Y), Y[i], eng.xp)
+        else:
+            Y[i] = eng._out(i, t, X, Y)
+    return Y
+
+
+__all__ = ["outputs_of", "Engine", "bound_parameters", "make_solver", "rng", "traced_engine", "jax"]

@@ -3,8 +3,10 @@
 - :class:`ParallelEnv` (PettingZoo): one agent id per vehicle, ``agent_0``...
 - :class:`GymEnv` (Gymnasium ``Env``): a single-agent diagram.
 - :class:`VectorEnv` (Gymnasium 1.x ``VectorEnv``): K copies stepped as one
-  ``jax.vmap``-ed, jitted call (``backend="jax"``) or one after the other on
-  the NumPy engine (``backend="numpy"``). Autoreset mode ``SAME_STEP``: an
+  ``jax.vmap``-ed, jitted call (``backend="jax"``) or as one call on
+  ``(K, ...)`` stacked arrays on the NumPy engine (``backend="numpy"``,
+  :mod:`avblocks.rl.batched`: blocks that broadcast over a batch axis run
+  once, the others once per copy). Autoreset mode ``SAME_STEP``: an
   episode that ends is reset within the same ``step`` call; the returned
   observation is the new episode's and ``infos["final_obs"]`` (masked by
   ``infos["_final_obs"]``) holds the last one of the old.
@@ -276,6 +278,10 @@ def _make_vector_class():
                 jax = _engine.jax()
                 self._reset = jax.jit(jax.vmap(fenv.reset, in_axes=(0, None)))
                 self._step = jax.jit(jax.vmap(fenv.step, in_axes=(0, 0, 0, None)))
+            else:
+                from .batched import BatchedEnv
+                batch = BatchedEnv(fenv)
+                self._reset, self._step = batch.reset, batch.step
             self.render_mode = None
 
         def set_param(self, path, value):
@@ -295,13 +301,7 @@ def _make_vector_class():
                 self._key = _engine.rng.key(int(seed), _STREAM)
             params = (options or {}).get("params", self.params)
             keys = self._keys(self.num_envs)
-            fe = self.fenv
-            if fe.backend == "jax":
-                self.state, obs = self._reset(keys, params)
-            else:
-                pairs = [fe.reset(k, params) for k in keys]
-                self.state = [p[0] for p in pairs]
-                obs = np.stack([p[1] for p in pairs])
+            self.state, obs = self._reset(keys, params)
             return self._shape_obs(obs), {}
 
         def step(self, actions):
@@ -310,16 +310,8 @@ def _make_vector_class():
                 self.num_envs, fe.n, fe.act_dim)
             a = np.clip(a, fe.action_low, fe.action_high)
             keys = self._keys(self.num_envs)
-            if fe.backend == "jax":
-                self.state, obs, r, d, info = self._step(keys, self.state, a, self.params)
-                info = {k: np.asarray(v) for k, v in info.items()}
-            else:
-                outs = [fe.step(k, s, ai, self.params)
-                        for k, s, ai in zip(keys, self.state, a)]
-                self.state = [o[0] for o in outs]
-                obs = np.stack([o[1] for o in outs])
-                r = np.stack([o[2] for o in outs])
-                info = {k: np.stack([np.asarray(o[4][k]) for o in outs]) for k in outs[0][4]}
+            self.state, obs, r, d, info = self._step(keys, self.state, a, self.params)
+            info = {k: np.asarray(v) for k, v in info.items()}
             r = np.asarray(r)
             term = np.asarray(info["terminated"], dtype=bool)
             trunc = np.asarray(info["truncated"], dtype=bool)

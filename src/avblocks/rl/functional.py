@@ -176,6 +176,17 @@ class FunctionalEnv:
             raise WiringError("act must name an Action block", block=cd.names[ai],
                               expected="blocks.Action", found=type(blk).__name__)
         self._ai = ai
+        # blocks whose outputs change with the action within a step: the
+        # Action block and its descendants through direct-feedthrough wires
+        # (the rest of the state's outputs are already those at the step's
+        # start; see step_env)
+        down = {ai}
+        for i in range(len(cd.blocks)):          # evaluation order: sources first
+            srcs = cd.sources[i]
+            ft = cd.blocks[i].feedthrough
+            if any(inp in ft and s_ in down for inp, (s_, _o) in srcs.items()):
+                down.add(i)
+        self._after_action = frozenset(down)
         self.n = int(blk._outputs["action"].shape[0])
         self.act_dim = int(blk._outputs["action"].shape[1])
         self.action_low = np.asarray(blk.low, dtype=np.float32).copy()
@@ -326,10 +337,17 @@ class FunctionalEnv:
         X[ai] = {**X[ai], "value": xp.asarray(a, dtype=X[ai]["value"].dtype)}
         Y, k, dt = state.Y, state.k, self.dt
         with self._bind(theta):
-            for _ in range(self.task.substeps):
+            for sub in range(self.task.substeps):
                 t = k * dt
                 hit = eng.hits(k)
-                Y = eng.major_outputs(t, X, Y, hit)
+                if sub == 0:
+                    # the state's outputs are the major outputs at this step
+                    # for the old action: only the action's feedthrough
+                    # descendants change (same values as a full sweep, half
+                    # the work: sensors are not evaluated twice per step)
+                    Y = _engine.outputs_of(eng, self._after_action, t, X, Y, hit)
+                else:
+                    Y = eng.major_outputs(t, X, Y, hit)
                 X = eng.update(t, X, Y, hit)
                 X = solver.step(eng, t, X, Y, dt)
                 k = k + 1

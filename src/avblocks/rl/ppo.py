@@ -11,7 +11,13 @@ continuous control using generalized advantage estimation".
 One update = ``num_envs`` episodes run in lockstep from fresh resets
 (``FunctionalEnv.reset`` and ``step_env`` vmapped over the copies, one
 ``lax.scan`` over the episode), then ``epochs`` passes of ``minibatches``
-Adam steps. Transitions after an episode terminated are masked out. The
+Adam steps. The learning rate decays linearly to zero over the updates or
+the wall-clock budget, whichever ends first (set before each update, so a
+loaded machine still ends the schedule within the budget). Options: the
+gradient norm clipped per network instead of jointly (``clip_separately``),
+the critic given the episode's elapsed fraction (``time_feature``; the
+actor never sees it), a reward scale for the losses. Transitions after an
+episode terminated are masked out. The
 policy is a Gaussian around an MLP mean (state-independent log std); the
 deployed :class:`~avblocks.controllers.Policy` uses the mean, clipped to the
 action box (``output="clip"``).
@@ -53,7 +59,11 @@ class Config:
     max_grad_norm: float = 0.5
     log_std0: float = -0.5
     activation: str = "tanh"
-    anneal: bool = True        # learning rate linearly to 0 over ``updates``
+    anneal: bool = True        # learning rate linearly to 0 over ``updates`` (or the
+    #                            time budget, whichever ends first)
+    clip_separately: bool = False  # max_grad_norm per network (actor, critic)
+    reward_scale: float = 1.0  # rewards times this in the losses (not in the curve)
+    time_feature: bool = False  # the critic also sees the episode's elapsed fraction
 
 
 @dataclass
@@ -89,8 +99,13 @@ def make_update(env, cfg, opt):
     def policy(p, obs):
         return mlp(p["actor"], obs, jnp, act), p["log_std"]
 
-    def value(p, obs):
-        return mlp(p["critic"], obs, jnp, act)[..., 0]
+    def value(p, obs, tf):
+        # a fixed horizon: what is left to earn depends on the time left, which
+        # the agents' observation does not say (Pardo et al. 2018, "Time limits
+        # in reinforcement learning"); the critic alone sees it (the actor, the
+        # deployed Policy, does not)
+        x = jnp.concatenate([obs, tf], axis=-1) if cfg.time_feature else obs
+        return mlp(p["critic"], x, jnp, act)[..., 0]
 
     def logprob(mean, log_std, a):
         z = (a - mean) / jnp.exp(log_std)
@@ -105,11 +120,13 @@ def make_update(env, cfg, opt):
             mean, log_std = policy(p, obs)
             a = mean + jnp.exp(log_std) * jax.random.normal(k, mean.shape)
             lp = logprob(mean, log_std, a)
-            v = value(p, obs)
+            tf = jnp.broadcast_to((state.steps / T).astype(jnp.float32)[:, None, None],
+                                  (E, N, 1))
+            v = value(p, obs, tf)
             state, obs2, r, d, info = step(state, jnp.clip(a, lo, hi), None)
             term = info["terminated"][:, None] & alive
             succ = info.get("success", jnp.zeros((E, N), bool)).reshape(E, -1)
-            out = dict(obs=obs, a=a, lp=lp, v=v, r=r * alive, alive=alive,
+            out = dict(obs=obs, tf=tf, a=a, lp=lp, v=v, r=r * alive, alive=alive,
                        term=jnp.broadcast_to(term, (E, N)),
                        succ=jnp.broadcast_to(succ, (E, N)))
             return (state, obs2, alive & ~term), out
@@ -118,7 +135,7 @@ def make_update(env, cfg, opt):
         (state, obs, alive), tr = jax.lax.scan(body, (state, obs, alive0),
                                                jax.random.split(k1, T))
         tr["alive"] = jnp.broadcast_to(tr["alive"], tr["r"].shape)
-        return tr, value(p, obs)
+        return tr, value(p, obs, jnp.ones(obs.shape[:-1] + (1,), jnp.float32))
 
     def gae(tr, last_v):
         # episodes end at T (truncation treated as the end: fixed horizon)
@@ -147,7 +164,7 @@ def make_update(env, cfg, opt):
         sd = jnp.sqrt(jnp.sum(w * (adv - mu) ** 2) / wsum)
         adv = (adv - mu) / (sd + 1e-8)
         pg = -jnp.minimum(ratio * adv, jnp.clip(ratio, 1 - cfg.clip, 1 + cfg.clip) * adv)
-        v = value(p, b["obs"])
+        v = value(p, b["obs"], b["tf"])
         vl = 0.5 * (v - b["ret"]) ** 2
         ent = jnp.sum(log_std + 0.5 * jnp.log(2 * jnp.pi * jnp.e))
         total = jnp.sum((pg + cfg.vf_coef * vl) * w) / wsum - cfg.ent_coef * ent
@@ -159,9 +176,9 @@ def make_update(env, cfg, opt):
         p, opt_state, key = carry
         key, kr, ks = jax.random.split(key, 3)
         tr, last_v = rollout(p, kr)
-        adv, ret = gae(tr, last_v)
+        adv, ret = gae({**tr, "r": tr["r"] * cfg.reward_scale}, last_v)
         flat = {k: tr[k].reshape((T * E * N,) + tr[k].shape[3:])
-                for k in ("obs", "a", "lp", "alive")}
+                for k in ("obs", "tf", "a", "lp", "alive")}
         flat["adv"] = adv.reshape(-1)
         flat["ret"] = ret.reshape(-1)
         size = T * E * N
@@ -176,6 +193,12 @@ def make_update(env, cfg, opt):
             def mini(c, b):
                 p, opt_state = c
                 g = grad(p, b)
+                if cfg.clip_separately:
+                    # the critic's squared error would otherwise dominate one
+                    # global norm and scale the actor's step down with it
+                    g = {"actor": _clip(g["actor"], cfg.max_grad_norm),
+                         "log_std": g["log_std"],
+                         "critic": _clip(g["critic"], cfg.max_grad_norm)}
                 upd, opt_state = opt.update(g, opt_state, p)
                 p = jax.tree_util.tree_map(lambda a, u: a + u, p, upd)
                 return (p, opt_state), None
@@ -196,12 +219,33 @@ def make_update(env, cfg, opt):
     return jax.jit(update)
 
 
+def _set_lr(carry, lr, plain):
+    p, opt_state, key = carry
+    inner = opt_state if plain else opt_state[1]
+    hp = dict(inner.hyperparams)
+    hp["learning_rate"] = np.asarray(lr, np.float32)
+    inner = inner._replace(hyperparams=hp)
+    opt_state = inner if plain else (opt_state[0], inner)
+    return p, opt_state, key
+
+
+def _clip(tree, max_norm):
+    """``tree`` scaled to global norm <= ``max_norm`` (optax's rule)."""
+    jax = _engine.jax()
+    jnp = jax.numpy
+    leaves = jax.tree_util.tree_leaves(tree)
+    norm = jnp.sqrt(sum(jnp.sum(x * x) for x in leaves))
+    scale = jnp.minimum(1.0, max_norm / jnp.maximum(norm, 1e-12))
+    return jax.tree_util.tree_map(lambda x: x * scale, tree)
+
+
 def init_params(env, cfg, seed=0):
     """Initial actor, critic and log std (NumPy)."""
     jnp = _engine.jax().numpy
     sizes = [env.obs_dim, *cfg.hidden]
     actor = mlp_init(sizes + [env.act_dim], seed=seed, gain_last=0.01)
-    critic = mlp_init(sizes + [1], seed=seed + 1, gain_last=1.0)
+    csizes = [env.obs_dim + (1 if cfg.time_feature else 0), *cfg.hidden, 1]
+    critic = mlp_init(csizes, seed=seed + 1, gain_last=1.0)
     return {"actor": {k: jnp.asarray(v, jnp.float32) for k, v in actor.items()},
             "critic": {k: jnp.asarray(v, jnp.float32) for k, v in critic.items()},
             "log_std": jnp.full((env.act_dim,), cfg.log_std0, jnp.float32)}
@@ -214,17 +258,23 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     import optax
     jax = _engine.jax()
     t0 = time.perf_counter()
-    lr = cfg.lr
-    if cfg.anneal:
-        lr = optax.linear_schedule(cfg.lr, 0.0, cfg.updates * cfg.epochs * cfg.minibatches)
-    opt = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm),
-                      optax.adam(lr, eps=1e-5))
+    # the learning rate is set before each update (annealed over the updates
+    # or the wall-clock budget, whichever runs out first: on a loaded
+    # machine the schedule still ends at zero within the budget)
+    adam = optax.inject_hyperparams(optax.adam)(learning_rate=cfg.lr, eps=1e-5)
+    opt = adam if cfg.clip_separately else optax.chain(
+        optax.clip_by_global_norm(cfg.max_grad_norm), adam)
     p = init_params(env, cfg, seed)
     carry = (p, opt.init(p), jax.random.PRNGKey(seed))
     update = make_update(env, cfg, opt)
     curve = {"return": [], "success": [], "env_steps": [], "wall_s": []}
     per = cfg.num_envs * env.max_steps
     for u in range(cfg.updates):
+        if cfg.anneal:
+            frac = 1.0 - u / cfg.updates
+            if time_budget_s is not None:
+                frac = min(frac, 1.0 - (time.perf_counter() - t0) / time_budget_s)
+            carry = _set_lr(carry, cfg.lr * max(frac, 0.0), cfg.clip_separately)
         carry, m = update(carry)
         m = {k: float(v) for k, v in m.items()}
         curve["return"].append(m["return"])

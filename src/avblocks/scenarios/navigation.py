@@ -5,12 +5,21 @@ Set-up
 ------
 ``agents`` single integrators (``vehicles.SingleIntegrator``, speed
 ``speed`` per unit of command) in the square arena ``[-half, half]^2``
-with rectangular obstacles (``obstacles``: a list of ``(cx, cy, w, h)``).
-Each agent has a goal (``goals.value``, a ``blocks.Constant``). Each agent
-carries ``rays`` range rays, evenly spread in the world frame, reading the
-distance to the first obstacle edge, arena wall or other agent (disc of
-``radius``) up to ``max_range`` (written with ``xp`` in the task block;
-checked against shapely in the tests).
+with rectangular obstacles (``obstacles``: a list of ``(cx, cy, w, h)``),
+an :class:`~avblocks.environment.World` with walls at the arena's border
+(:func:`arena`). Each agent has a goal (``goals.value``, a
+``blocks.Constant``). The library's own sensing blocks do the geometry:
+
+- ``lidar``, an :class:`~avblocks.environment.RangeSensor` with ``rays``
+  rays evenly spread in the world frame (from ``-pi``), reading the distance
+  to the first obstacle edge, wall or other agent (a disc of ``radius``) up
+  to ``max_range``;
+- ``contact``, a :class:`~avblocks.environment.Collision` of the agents'
+  discs (``radius``) with the obstacles, the walls and each other (touching
+  counts).
+
+Both are traceable (the compiled engine uses their edge-grid method, the
+NumPy engine their shapely method; they agree to 1e-9 m).
 
 Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
 ------------------------------------------------------------------------
@@ -18,9 +27,13 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
   ``speed`` [m/s].
 - **observation** (per agent, ``4 + rays + 2(N-1)``): goal relative to
   the agent (m), own position divided by ``half``, the ray ranges divided
-  by ``max_range``, the other agents relative to it (m) (``task.obs``).
+  by ``max_range``, the other agents relative to it (m), nearest first
+  with ``sort_others`` (the default), else in index order (``task.obs``);
+  with ``observe_velocity``, 2(N-1) more: the other agents' velocity
+  commands of the last step relative to its own, in the same order.
 - **reward** (per agent): ``progress * (d_prev - d)`` (``d`` the distance
-  to the goal, over the last control step) ``+ 0.1 * [d < goal_radius]``
+  to the goal, over the last control step) ``+ goal_bonus * [d <
+  goal_radius]`` (``goal_bonus`` 0.1)
   ``- collision * [touching an obstacle, a wall or another agent]``
   ``- proximity * closeness`` where closeness sums ``clip(1 - gap/margin,
   0, 1)`` over the other agents and the nearest obstacle or wall (``gap``:
@@ -34,10 +47,11 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
   step, over evaluation episodes.
 
 Starts and goals are drawn anew at every reset, at least ``clearance`` from
-obstacles and walls and ``4 * radius`` apart. ``avblocks run navigation``
-runs the scripted controller (goal attraction plus repulsion from the
-nearest obstacle points and agents); ``controller="policy.npz"`` runs a
-trained :class:`~avblocks.controllers.Policy` instead.
+obstacles and walls (an :class:`~avblocks.environment.EdgeGrid` disc test)
+and ``5 * radius`` apart. ``avblocks run navigation`` runs the scripted
+controller (goal attraction plus repulsion from the nearest obstacle points
+and agents); ``controller="policy.npz"`` runs a trained
+:class:`~avblocks.controllers.Policy` instead.
 """
 
 from __future__ import annotations
@@ -47,33 +61,40 @@ import numpy as np
 from avblocks.blocks import Constant, Function
 from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
+from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
+from avblocks.environment.edges import point_segment_distance
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import (
-    command_source,
-    drive_at_speed,
-    free_points,
-    inside,
-    others_index,
-    pairwise,
-    polygon_edges,
-    ray_ranges,
-    rectangle,
-    segment_distance,
-)
+from ._task import command_source, drive_at_speed, free_points, others_index, pairwise
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 
 OBSTACLES = ((0.0, 0.0, 0.8, 0.5), (-0.9, 0.8, 0.5, 0.3), (0.9, -0.8, 0.3, 0.6))
 
 
+def arena(half=1.5, obstacles=OBSTACLES):
+    """The navigation world: rectangles ``(cx, cy, w, h)`` and walls
+    bounding ``[-half, half]^2`` (an :class:`~avblocks.environment.World`)."""
+    h = float(half)
+    rects = [rectangle(cx - w / 2, cy - hh / 2, cx + w / 2, cy + hh / 2)
+             for cx, cy, w, hh in obstacles]
+    return World(rects, bounds=(-h, -h, h, h), walls=True)
+
+
+def ray_angles(rays):
+    """World-frame ray directions: ``rays`` evenly spread from ``-pi``."""
+    return np.linspace(-np.pi, np.pi, int(rays), endpoint=False)
+
+
 class NavigationTask(Block):
-    """Observation, reward, collisions and success of the navigation task.
+    """Observation, reward and success of the navigation task.
 
     Ports
     -----
     position : in, (N, 2) [m]
     goals : in, (N, 2) [m]
+    ranges : in, (N, rays) [m], the range sensor's readings
+    contact : in, (N,) bool, the collision block's ``collision``
     obs : out, (N, 4 + rays + 2(N-1))
     reward : out, (N,)
     done : out, (N,) bool (always false)
@@ -88,19 +109,30 @@ class NavigationTask(Block):
 
     Parameters
     ----------
-    edges : (E, 4) numeric parameter, the obstacles' edges.
+    world : World, the obstacles and walls (their edges: the closeness term).
     half, radius, goal_radius, max_range, progress, collision, proximity,
-    margin : numeric (module docstring).
+    margin, goal_bonus : numeric (module docstring).
     rays : int (structural), number of range rays.
+    sort_others : bool (structural), other agents nearest first.
+    observe_velocity : bool (structural), also observe the other agents'
+        velocity commands of the last step relative to its own (input
+        ``velocity``, not direct feedthrough).
+
+    The functions broadcast over leading batch axes (``batch_axes``: the
+    NumPy vector environment steps K copies in one call).
     """
 
-    def __init__(self, n, edges, *, rays=8, half=1.5, radius=0.1, goal_radius=0.15,
-                 max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2):
+    batch_axes = True
+
+    def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
+                 max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
+                 goal_bonus=0.1, sort_others=True, observe_velocity=False):
         super().__init__()
         self.n = n
         self.rays = int(rays)
-        self.angles = np.linspace(-np.pi, np.pi, self.rays, endpoint=False)
-        self.declare_parameter("edges", np.asarray(edges, float).reshape(-1, 4), unit="m")
+        self.sort_others = bool(sort_others)
+        self.observe_velocity = bool(observe_velocity)
+        self.seg = np.asarray(world.segments, float).reshape(-1, 4)   # walls included
         self.declare_parameter("half", half, bounds=(0, None), unit="m")
         self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
         self.declare_parameter("goal_radius", goal_radius, bounds=(0, None), unit="m")
@@ -109,25 +141,25 @@ class NavigationTask(Block):
         self.declare_parameter("collision", collision, bounds=(0, None))
         self.declare_parameter("proximity", proximity, bounds=(0, None))
         self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
+        self.declare_parameter("goal_bonus", goal_bonus, bounds=(0, None))
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
+        self.declare_input("ranges", (n, self.rays), unit="m")
+        self.declare_input("contact", (n,), "bool")
         self.declare_discrete_state("prev", np.zeros(n), dtype="float64")
         self.declare_discrete_state("hit", np.zeros(n, dtype=bool))
+        if self.observe_velocity:
+            # the commands of the last step (not feedthrough: read from state)
+            self.declare_input("velocity", (n, 2), unit="m/s", feedthrough=False)
+            self.declare_discrete_state("vel", np.zeros((n, 2)), dtype="float64")
         self.idx = others_index(n)
-        self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)))
+        self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)
+                                    * (2 if self.observe_velocity else 1)))
         self.declare_output("reward", (n,))
         self.declare_output("done", (n,), "bool")
         self.declare_output("collision", (n,), "bool")
         self.declare_output("at_goal", (n,), "bool")
         self.declare_output("success", (n,), "bool")
-
-    def _collision(self, p, xp):
-        edges = self.edges
-        r = self.radius
-        near_edge = xp.min(segment_distance(p, edges, xp), axis=-1) < r
-        wall = xp.any(xp.abs(p) > self.half - r, axis=-1)
-        agents = xp.any(pairwise(p, xp) < 2 * r, axis=-1)
-        return near_edge | inside(p, edges, xp) | wall | agents
 
     def _closeness(self, p, xp):
         """Sum over the other agents and the nearest obstacle or wall of
@@ -136,31 +168,42 @@ class NavigationTask(Block):
         r, m = self.radius, self.margin
         gap_a = pairwise(p, xp) - 2 * r
         near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
-        gap_o = xp.min(segment_distance(p, self.edges, xp), axis=-1) - r
-        gap_w = xp.min(self.half - xp.abs(p), axis=-1) - r
-        gap = xp.minimum(gap_o, gap_w)
+        s = self.seg
+        d = point_segment_distance(p[..., 0:1], p[..., 1:2], s[:, 0], s[:, 1], s[:, 2],
+                                   s[:, 3], xp)                           # (..., N, E)
+        gap = xp.min(d, axis=-1) - r
         return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
 
     def output(self, t, x, u, xp):
-        p, g = u["position"], u["goals"]
+        p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
         d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
-        ranges = ray_ranges(p, self.angles, self.edges, self.half, p, self.radius,
-                            self.max_range, xp)
-        rel_o = xp.reshape(p[self.idx] - p[:, None, :], (self.n, -1))
-        obs = xp.concatenate([rel, p / self.half, ranges / self.max_range, rel_o], axis=-1)
-        col = self._collision(p, xp)
+        rel_o = p[..., self.idx, :] - p[..., :, None, :]                # (..., n, n-1, 2)
+        parts = [rel_o]
+        if self.observe_velocity:
+            v = x["vel"]
+            parts.append(v[..., self.idx, :] - v[..., :, None, :])
+        if self.sort_others and self.n > 2:
+            order = xp.argsort(xp.sum(rel_o * rel_o, -1), axis=-1)[..., None]
+            parts = [xp.take_along_axis(q, order, axis=-2) for q in parts]
+        others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
+        obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
+                             axis=-1)
         at = d < self.goal_radius
-        reward = (self.progress * (x["prev"] - d) + 0.1 * at - self.collision * col
-                  - self.proximity * self._closeness(p, xp))
-        return {"obs": obs, "reward": reward, "done": xp.zeros((self.n,), dtype=bool),
-                "collision": col, "at_goal": at, "success": at & ~(x["hit"] | col)}
+        success = at & ~(x["hit"] | col)
+        reward = (self.progress * (x["prev"] - d) + self.goal_bonus * at
+                  - self.collision * col - self.proximity * self._closeness(p, xp))
+        return {"obs": obs, "reward": reward, "done": xp.zeros(d.shape, dtype=bool),
+                "collision": col, "at_goal": at, "success": success}
 
     def update(self, t, x, u, xp):
         p, g = u["position"], u["goals"]
         rel = g - p
-        return {"prev": xp.sqrt(xp.sum(rel * rel, -1) + 1e-12),
-                "hit": x["hit"] | self._collision(p, xp)}
+        new = {"prev": xp.sqrt(xp.sum(rel * rel, -1) + 1e-12),
+               "hit": x["hit"] | u["contact"]}
+        if self.observe_velocity:
+            new["vel"] = u["velocity"]
+        return new
 
 
 def scripted_law(edges, half, speed, radius):
@@ -208,63 +251,92 @@ def scripted_law(edges, half, speed, radius):
     return law
 
 
-def _draw(n, half, edges, seed, clearance):
+def _obstacle_edges(world):
+    """(E, 4) edges of the obstacles (walls excluded): the scripted law's."""
+    keep = np.asarray(world.segment_owner) < world.n_user
+    return np.asarray(world.segments, float)[keep]
+
+
+def _draw(n, half, grid, seed, clearance):
     rng = np.random.default_rng([int(seed), 57])
     from avblocks.core import rng as avrng
     k = avrng.key(int(rng.integers(2**31)), "navigation")
     k1, k2 = avrng.split(k, np, 2)
-    p0 = free_points(k1, n, half, edges, clearance, np, min_sep=0.4)
-    g = free_points(k2, n, half, edges, clearance, np, min_sep=0.4)
+    p0 = free_points(k1, n, half, grid, clearance, np, min_sep=0.4)
+    g = free_points(k2, n, half, grid, clearance, np, min_sep=0.4)
     return p0, g
 
 
 def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
                  max_range=1.0, clearance=0.25, obstacles=OBSTACLES, controller="scripted",
-                 seed=1, t_final=6.0, dt=0.1):
-    """The navigation diagram and its simulation settings (module docstring)."""
-    n, h = int(agents), float(half)
-    edges = polygon_edges([rectangle(*o) for o in obstacles])
-    p0, goals = _draw(n, h, edges, seed, float(clearance))
+                 seed=1, t_final=6.0, dt=0.1, sort_others=True, observe_velocity=False,
+                 vehicles=None):
+    """The navigation diagram and its simulation settings (module docstring).
+
+    ``vehicles``: optional ``vehicles(diagram, p0) -> (position, velocity)``
+    adding other vehicles than the single integrators (``"fleet"``): the
+    output port giving the (N, 2) positions the task senses from and the
+    input port taking the (N, 2) velocity commands [m/s] (e.g. MuJoCo ground
+    robots behind an off-axis point map). Everything else is unchanged."""
+    n, h, r = int(agents), float(half), float(radius)
+    world = arena(h, obstacles)
+    p0, goals = _draw(n, h, EdgeGrid(world, float(clearance)), seed, float(clearance))
     d = Diagram("navigation")
-    fleet = d.add(SingleIntegrator(p0, v_max=float(speed) * np.sqrt(2)), name="fleet")
+    if vehicles is None:
+        fleet = d.add(SingleIntegrator(p0, v_max=float(speed) * np.sqrt(2)), name="fleet")
+        position, velocity = fleet.position, fleet.velocity
+    else:
+        position, velocity = vehicles(d, p0)
     gl = d.add(Constant(goals), name="goals")
-    task = d.add(NavigationTask(n, edges, rays=int(rays), half=h, radius=float(radius),
+    lidar = d.add(RangeSensor(world, n, angles=ray_angles(rays), max_range=float(max_range),
+                              agent_radius=r, input="position"), name="lidar")
+    contact = d.add(Collision(world, n, footprint=Disc(r), input="position"), name="contact")
+    task = d.add(NavigationTask(n, world, rays=int(rays), half=h, radius=r,
                                 goal_radius=float(goal_radius),
-                                max_range=float(max_range)), name="task")
+                                max_range=float(max_range),
+                                sort_others=bool(sort_others),
+                                observe_velocity=bool(observe_velocity)), name="task")
     task.block.set_initial("prev", np.linalg.norm(goals - p0, axis=1))
-    d.connect(fleet.position, task.position)
+    for b in (lidar, contact, task):
+        d.connect(position, b.position)
     d.connect(gl.y, task.goals)
+    d.connect(lidar.ranges, task.ranges)
+    d.connect(contact.collision, task.contact)
     if controller == "scripted":
-        law = scripted_law(edges, h, float(speed), float(radius))
+        law = scripted_law(_obstacle_edges(world), h, float(speed), r)
         src = d.add(Function(law, inputs={"position": (n, 2), "goals": (n, 2)},
                              outputs={"cmd": (n, 2)}), name="drive")
-        d.connect(fleet.position, src.position)
+        d.connect(position, src.position)
         d.connect(gl.y, src.goals)
         cmd = src.cmd
     else:
         src, port = command_source(d, controller, n, task.obs)
         cmd = getattr(src, port)
-    drive_at_speed(d, cmd, fleet.velocity, speed)
+    gain = drive_at_speed(d, cmd, velocity, speed)
+    if observe_velocity:
+        d.connect(gain.y, task.velocity)
     sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4", "seed": int(seed),
-           "log": [fleet.position, gl.y, task.success, task.collision, task.reward]}
+           "log": [position, gl.y, task.success, task.collision, task.reward]}
     return d, sim
 
 
 def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
-            max_range=1.0, clearance=0.25, obstacles=OBSTACLES):
+            max_range=1.0, clearance=0.25, obstacles=OBSTACLES, sort_others=True,
+            observe_velocity=False):
     """The learning task (module docstring): settings for :class:`avblocks.rl.Task`."""
     n, h = int(agents), float(half)
     d, sim = make_diagram(agents=n, half=h, speed=speed, radius=radius,
                           goal_radius=goal_radius, rays=rays, max_range=max_range,
-                          clearance=clearance, obstacles=obstacles, controller="action")
-    edges = polygon_edges([rectangle(*o) for o in obstacles])
+                          clearance=clearance, obstacles=obstacles, controller="action",
+                          sort_others=sort_others, observe_velocity=observe_velocity)
     c = float(clearance)
+    grid = EdgeGrid(arena(h, obstacles), c)
 
     def reset(key, xp):
         from avblocks.core import rng
         k1, k2 = rng.split(key, xp, 2)
-        p0 = free_points(k1, n, h, edges, c, xp, min_sep=5 * float(radius))
-        g = free_points(k2, n, h, edges, c, xp, min_sep=5 * float(radius))
+        p0 = free_points(k1, n, h, grid, c, xp, min_sep=5 * float(radius))
+        g = free_points(k2, n, h, grid, c, xp, min_sep=5 * float(radius))
         return {"fleet.position": p0, "goals.value": g,
                 "task.prev": xp.sqrt(xp.sum((g - p0) ** 2, -1) + 1e-12)}
 

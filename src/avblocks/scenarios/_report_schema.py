@@ -206,7 +206,7 @@ REQUIRED = {"all_true": ("signal",), "min_distance": ("signal",),
 def _targets():
     """The Python functions the scenario arguments end in (for their signatures)."""
     from ..viz import plot_signals, plot_trajectories
-    from . import metrics
+    from . import _metrics as metrics
     return {"all_true": metrics.all_true, "min_distance": metrics.min_distance,
             "final_mean": metrics.final_mean, "trajectories": plot_trajectories,
             "signals": plot_signals, "fraction": metrics.plot_fraction}

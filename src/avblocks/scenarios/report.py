@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import AvError, ScenarioError
-from .metrics import METRICS, first_time_all, min_pairwise_distance, plot_fraction  # noqa: F401
+from ._metrics import METRICS, first_time_all, min_pairwise_distance, plot_fraction  # noqa: F401
 
 
 def _block_waypoints(diagram, name, entry="figures", source=None):

@@ -64,4 +64,25 @@ def outputs_of(eng, which, t, X, Y, hits):
     return Y
 
 
-__all__ = ["outputs_of", "Engine", "bound_parameters", "make_solver", "rng", "traced_engine", "jax"]
+def advance(eng, solver, after_action, X, Y, k, dt, substeps):
+    """One control step of ``substeps`` major steps from step ``k`` after a
+    new action was written into ``X``: ``(X, Y, k)`` with ``Y`` the major
+    outputs at the new step. ``Y`` on entry holds the outputs at ``k`` for
+    the old action, so only the action's feedthrough descendants
+    (``after_action``) are recomputed first (the same values as a full
+    sweep, half the work: sensors are not evaluated twice per step)."""
+    for sub in range(substeps):
+        t = k * dt
+        hit = eng.hits(k)
+        if sub == 0:
+            Y = outputs_of(eng, after_action, t, X, Y, hit)
+        else:
+            Y = eng.major_outputs(t, X, Y, hit)
+        X = eng.update(t, X, Y, hit)
+        X = solver.step(eng, t, X, Y, dt)
+        k = k + 1
+    return X, eng.major_outputs(k * dt, X, Y, eng.hits(k)), k
+
+
+__all__ = ["advance", "outputs_of", "Engine", "bound_parameters", "make_solver", "rng",
+           "traced_engine", "jax"]

@@ -238,17 +238,8 @@ class BatchedEnv:
                  .reshape(K, fe.n, fe.act_dim)}
         Y, k, dt = state.Y, int(state.k[0]), fe.dt
         solver = fe._solver
-        for sub in range(fe.task.substeps):
-            t = k * dt
-            hit = eng.hits(k)
-            if sub == 0:
-                Y = _engine.outputs_of(eng, fe._after_action, t, X, Y, hit)
-            else:
-                Y = eng.major_outputs(t, X, Y, hit)
-            X = eng.update(t, X, Y, hit)
-            X = solver.step(eng, t, X, Y, dt)
-            k = k + 1
-        Y = eng.major_outputs(k * dt, X, Y, eng.hits(k))
+        X, Y, k = _engine.advance(eng, solver, fe._after_action, X, Y, k, dt,
+                                  fe.task.substeps)
         sig = self._signals(Y)
         obs = self._observe(sig, K)
         act = sig[f"{fe.cd.names[ai]}.action"]

@@ -337,21 +337,8 @@ class FunctionalEnv:
         X[ai] = {**X[ai], "value": xp.asarray(a, dtype=X[ai]["value"].dtype)}
         Y, k, dt = state.Y, state.k, self.dt
         with self._bind(theta):
-            for sub in range(self.task.substeps):
-                t = k * dt
-                hit = eng.hits(k)
-                if sub == 0:
-                    # the state's outputs are the major outputs at this step
-                    # for the old action: only the action's feedthrough
-                    # descendants change (same values as a full sweep, half
-                    # the work: sensors are not evaluated twice per step)
-                    Y = _engine.outputs_of(eng, self._after_action, t, X, Y, hit)
-                else:
-                    Y = eng.major_outputs(t, X, Y, hit)
-                X = eng.update(t, X, Y, hit)
-                X = solver.step(eng, t, X, Y, dt)
-                k = k + 1
-            Y = eng.major_outputs(k * dt, X, Y, eng.hits(k))
+            X, Y, k = _engine.advance(eng, solver, self._after_action, X, Y, k, dt,
+                                      self.task.substeps)
             sig = self._signals(Y)
             obs = self._observe(sig)
             act = sig[f"{self.cd.names[ai]}.action"]

@@ -80,6 +80,12 @@ class EdgeGridOwner:
         return [s for s in (self.search, self.edges) if s is not None]
 
 
+#: Agent counts up to which the agent-agent searches of Collision and
+#: RangeSensor compare all pairs by default (an (N, N) product: exact, no
+#: capacity to plan) when no capacity is given.
+SMALL_N = 64
+
+
 def all_pairs(search, points, xp):
     """Every other agent of each agent, ``(idx (N, N-1), dist (N, N-1))``,
     when ``search`` compares every pair anyway (infinite reach, no periodic

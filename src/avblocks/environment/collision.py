@@ -60,6 +60,7 @@ from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
 from ._common import (
+    SMALL_N,
     EdgeGridOwner,
     agent_count,
     all_pairs,
@@ -69,11 +70,6 @@ from ._common import (
 from .edges import point_in_ring, segment_segment_dist2
 from .footprint import Disc, Footprint
 from .world import World, _disc_obstacle_hits
-
-#: Agent counts up to which the agent-agent search compares all pairs by
-#: default (an (N, N) product: exact, no capacity to plan) when no capacity
-#: is given.
-SMALL_N = 64
 
 
 def _poly_obstacle_hits(world, polys, margin):

@@ -56,6 +56,7 @@ from ..core.errors import ParameterError
 from ..core.params import positive_scalar
 from ..utility.spatial import Need, NeighborSearch
 from ._common import (
+    SMALL_N,
     EdgeGridOwner,
     agent_count,
     all_pairs,
@@ -64,10 +65,6 @@ from ._common import (
 )
 from .edges import ray_circle, ray_segment
 from .world import World
-
-#: Agent counts up to which the agent search compares all pairs by default
-#: (an (N, N) product: exact, no capacity to plan) when no capacity is given.
-SMALL_N = 64
 
 _EPS = 1e-12
 

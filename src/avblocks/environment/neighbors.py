@@ -13,7 +13,7 @@ from scipy.spatial import cKDTree
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..utility.spatial import Need, NeighborSearch, verlet
-from ..utility.spatial.queries import compact
+from ..utility.spatial.queries import compact, k_smallest
 from ._common import agent_count, declare_agents_input, maybe_periodic
 
 
@@ -170,26 +170,6 @@ def dense_within(points, radius, width, xp=np):
     return idx, most
 
 
-def _k_smallest_columns(d2, ids, k, xp):
-    """:func:`k_smallest` of each column of ``d2`` (candidates ``ids`` along
-    axis 0): ``(d2 (N, k), index (N, k))`` per column, sorted, ties by the
-    smaller index."""
-    kk = min(int(k), d2.shape[0])
-    big = np.iinfo(np.int64).max if np.dtype(ids.dtype).itemsize == 8 else \
-        np.iinfo(np.int32).max
-    od, oi = [], []
-    for _ in range(kk):
-        m = xp.min(d2, axis=0)
-        j = xp.min(xp.where(d2 == m[None, :], ids[:, None], big), axis=0)
-        od.append(m)
-        oi.append(j)
-        d2 = xp.where(ids[:, None] == j[None, :], xp.inf, d2)
-    if kk == 0:
-        n = d2.shape[1]
-        return xp.zeros((n, 0), dtype=d2.dtype), xp.zeros((n, 0), dtype=ids.dtype)
-    return xp.stack(od, axis=1), xp.stack(oi, axis=1)
-
-
 def dense_nearest(points, radius, k, xp=np):
     """The ``k`` nearest other points within ``radius`` (inclusive) of each
     point by comparing every pair: ``(idx (N, k) -1 padded, dist (N, k) inf
@@ -213,7 +193,7 @@ def dense_nearest(points, radius, k, xp=np):
     # same squares either way), so the candidates of point q are column q
     # and each pass takes elementwise minima of rows (measured 25 % faster
     # than minima of each row in a vmapped ensemble)
-    m2, j = _k_smallest_columns(d2, ids, k, xp)
+    m2, j = k_smallest(d2, ids[:, None], k, xp, axis=0)
     pad = int(k) - m2.shape[1]
     if pad:
         m2 = xp.concatenate([m2, xp.full((n, pad), xp.inf, dtype=m2.dtype)], axis=1)

@@ -229,22 +229,29 @@ def compact(ok, cols, width, xp):
     return outs, need
 
 
-def k_smallest(d2, idx, k, xp):
-    """The ``k`` smallest ``(d2, idx)`` pairs of each row, sorted: ``k``
-    passes of a row minimum (distance first, then the smaller index among
-    equal distances), each removing what it took. Exact; O(k M) per row.
-    ``idx`` entries must be unique per row where ``d2`` is finite."""
-    qn, w = d2.shape
+def k_smallest(d2, idx, k, xp, axis=1):
+    """The ``k`` smallest ``(d2, idx)`` pairs of each query, sorted: ``k``
+    passes of a minimum (distance first, then the smaller index among
+    equal distances), each removing what it took. Exact; O(k M) per query.
+    ``idx`` (broadcast to ``d2``) must be unique per query where ``d2`` is
+    finite. ``axis`` holds each query's candidates: 1 (a row per query,
+    the default) or 0 (a column per query: each pass is then an elementwise
+    minimum of query-long vectors, faster under XLA on a CPU). Returns
+    ``(d2 (Q, k), idx (Q, k))``."""
+    qn, w = (d2.shape[0], d2.shape[1]) if axis == 1 else (d2.shape[1], d2.shape[0])
     kk = min(int(k), w)
     big = np.iinfo(np.int64).max if np.dtype(idx.dtype).itemsize == 8 else \
         np.iinfo(np.int32).max
+
+    def spread(v):                      # a per-query vector against d2
+        return v[:, None] if axis == 1 else v[None, :]
     od, oi = [], []
     for _ in range(kk):
-        m = xp.min(d2, axis=1)
-        j = xp.min(xp.where(d2 == m[:, None], idx, big), axis=1)
+        m = xp.min(d2, axis=axis)
+        j = xp.min(xp.where(d2 == spread(m), idx, big), axis=axis)
         od.append(m)
         oi.append(j)
-        d2 = xp.where(idx == j[:, None], xp.inf, d2)
+        d2 = xp.where(idx == spread(j), xp.inf, d2)
     if kk == 0:
         return xp.zeros((qn, 0), dtype=d2.dtype), xp.zeros((qn, 0), dtype=idx.dtype)
     return xp.stack(od, axis=1), xp.stack(oi, axis=1)

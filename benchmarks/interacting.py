@@ -24,6 +24,13 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py                  # N = 1e2 .. 1e5, plot
     python benchmarks/interacting.py --quick          # N = 1e2 .. 1e4
     python benchmarks/interacting.py --ensemble       # 256 flocking seeds
+    python benchmarks/interacting.py --n 1000000 --engines jax,numba \
+        --steps-scale 10 --rounds 1                   # on a GPU machine
+
+On an accelerator the ``jax`` column runs there (JAX's default device,
+printed first); ``numpy`` and ``numba`` always run on the host's CPU.
+``--steps-scale`` multiplies the steps timed at each N (a GPU step at
+N = 1e6 is short enough that 3 steps would mostly time the call itself).
 
 ``--ensemble``: the ``flocking`` scenario (50 agents, 30 s, dt 0.02, RK4) for
 256 seeds in one ``runner.ensemble`` call (second call) against sequential
@@ -246,7 +253,11 @@ def child(engine, n, steps):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def scaling(ns, engines, rounds, plot):
+def scaling(ns, engines, rounds, plot, scale=1.0):
+    if "jax" in engines:
+        out = subprocess.run([sys.executable, "-c", "import jax; print(jax.devices()[0])"],
+                             capture_output=True, text=True)
+        print(f"jax default device: {out.stdout.strip() or out.stderr.strip()[-200:]}")
     err = check_numba()
     print(f"numba twin vs NumPy engine, N = 100, 100 steps: max |dq| = {err:.2e} m")
     assert err < 1e-9, err
@@ -254,7 +265,7 @@ def scaling(ns, engines, rounds, plot):
     for _ in range(rounds):
         for n in ns:
             for e in engines:
-                r = child(e, n, STEPS.get(n, 3))
+                r = child(e, n, max(1, round(STEPS.get(n, 3) * scale)))
                 rows.setdefault((e, n), []).append(r)
     print(f"\n{'N':>8} " + " ".join(f"{e + ' s/step':>14}" for e in engines)
           + "   " + " ".join(f"{e + '/numba':>12}" for e in engines if e != "numba")
@@ -339,6 +350,8 @@ def main(argv=None):
     ap.add_argument("--ensemble", action="store_true")
     ap.add_argument("--runs", type=int, default=256)
     ap.add_argument("--numpy-runs", type=int, default=16, dest="numpy_runs")
+    ap.add_argument("--steps-scale", type=float, default=1.0, dest="scale",
+                    help="multiply the steps timed at each N")
     ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
                     help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -349,7 +362,7 @@ def main(argv=None):
         ensemble(a.runs, a.numpy_runs)
         return
     ns = a.n or ([100, 1000, 10000] + ([] if a.quick else [100000]))
-    scaling(ns, a.engines.split(","), a.rounds, a.out)
+    scaling(ns, a.engines.split(","), a.rounds, a.out, a.scale)
 
 
 if __name__ == "__main__":

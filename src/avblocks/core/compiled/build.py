@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import weakref
 
-import numpy as np
-
 from ..diagram import CompiledDiagram, Diagram, PortRef
 from ..errors import CompileError, ParameterError
 from ..runguard import finite_number, whole_steps
@@ -226,8 +224,7 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
         if settings is not None and isinstance(diagram, Diagram):
             _LAST[diagram] = (settings, diagram._stamp, runner.struct, runner)
     p = runner.program
-    item = 8 if p.x64 else 4
-    need = sum(p.nlog * int(np.prod(s.shape)) * item for s in runner.specs)
+    need = runner.log_bytes
     if need > max_log_bytes:
         raise ParameterError(f"the log would take {need / 1e9:.2f} GB", param="log",
                              expected=f"<= {max_log_bytes / 1e9:.2f} GB",

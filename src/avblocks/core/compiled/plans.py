@@ -115,6 +115,8 @@ def overflows(cd, needs):
     [capacity, hits, reach, span]}`` (a run's tally, see
     :meth:`~avblocks.core.compiled.program.Program.needs`)."""
     out = []
+    if not needs:
+        return out
     for i, j, s in owned(cd):
         v = needs.get((cd.names[i], j))
         if v is None or s.cells is None:

@@ -58,6 +58,13 @@ class Runner:
             self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
 
     @property
+    def log_bytes(self) -> int:
+        """Bytes of the log of one run."""
+        p = self.program
+        item = 8 if p.x64 else 4
+        return sum(p.nlog * math.prod(s.shape) * item for s in self.specs)
+
+    @property
     def compilations(self) -> int:
         return self.program.traces
 

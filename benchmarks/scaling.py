@@ -205,7 +205,8 @@ def jax_loop():
 def percall_main(args):
     """Per-call cost at small N: a second ``simulate(backend="jax")``, a
     ``Runner`` call, the hand-written JAX scan and the fused Numba loop,
-    timed alternately (25 rounds; min and median)."""
+    timed alternately (25 rounds, each starting with the next call; min and
+    median)."""
     import os
     import statistics
     n, steps = 10, STEPS
@@ -220,14 +221,18 @@ def percall_main(args):
     times = {k: [] for k in cases}
     for f in cases.values():
         f()                                          # compile outside the timings
-    for _ in range(25):
-        for k, f in cases.items():
+    order = list(cases)
+    for r in range(25):
+        # each round starts with another call: the first call of a round pays
+        # more (a Runner call after the Numba loop measured 0.04 ms more than
+        # after another JAX call), and a fixed order charged it to simulate
+        for k in order[r % len(order):] + order[:r % len(order)]:
             t = time.perf_counter()
-            f()
+            cases[k]()
             times[k].append(time.perf_counter() - t)
     base = min(times["fused Numba loop"])
     print(f"\nPer-call cost, W1, N = {n}, Euler, {steps} steps, log every 100; 25 "
-          f"alternating rounds; load average {os.getloadavg()[0]:.1f}\n")
+          f"alternating rounds (rotating order); load average {os.getloadavg()[0]:.1f}\n")
     print("| call | min ms | median ms | min / Numba |")
     print("|---|---:|---:|---:|")
     for k, v in times.items():

@@ -6,31 +6,34 @@ evaluation *needed* to :func:`report`. Outside the compiled engine
 :func:`report` does nothing (NumPy searches size themselves).
 
 While the compiled engine traces a block's function it names the block
-(:func:`block`); :func:`report` then adds to the trace a test ``need >
-plan`` and, only where it holds, a host callback (``jax.debug.callback``)
-that records the need. A run that never overflows pays for one comparison
-per search call and never calls back. After a run the engine reads what
-was recorded (:func:`recorded`) and decides (see
+(:func:`block`), and while it traces a step it keeps a *tally*
+(:func:`tally`): one row ``[capacity, hits, reach, span]`` per search of
+the diagram, a traced array. :func:`report` takes the running maximum of
+the row of the search that reported. The engine carries the tally through
+its scans (the carry holds it), returns it with the run's results and
+compares it with the plans once, after the run (see
 :mod:`avblocks.core.compiled.plans`): re-plan, recompile once and rerun, or
-raise. Records are keyed by ``(block name, search number)`` (the order of
-the block's ``searches()``), so programs shared by diagrams of the same
-structure record under the same keys. Records are process-wide: runs of
-the same diagram in several threads at once share them.
+raise. Nothing calls back to the host during a run, so a run costs the same
+under ``vmap`` (ensembles, vectorised environments) as alone. Rows are
+keyed by ``(block name, search number)`` (the order of the block's
+``searches()``), so programs shared by diagrams of the same structure keep
+the same rows.
+
+A block that calls a search inside its own ``lax.cond``/``while_loop``
+body carries the tally through it as well: :func:`held` before, the body
+traced under :func:`resumed`, :func:`absorb` of what comes out (the
+Verlet list rebuild of :mod:`avblocks.utility.spatial.verlet` does).
+Code that traces blocks without a tally (the reinforcement-learning
+environments step the engine themselves) gets no reports and no cost.
 """
 
 from __future__ import annotations
 
 import contextlib
 import contextvars
-import functools
-import threading
-
-import numpy as np
 
 _CURRENT: contextvars.ContextVar = contextvars.ContextVar("avblocks_block", default=None)
-_LOCK = threading.Lock()
-#: {(block name, search number): array [capacity, hits, reach, span]} running maxima
-_RECORDS: dict = {}
+_TALLY: contextvars.ContextVar = contextvars.ContextVar("avblocks_tally", default=None)
 
 
 @contextlib.contextmanager
@@ -46,14 +49,63 @@ def block(name, obj):
 @contextlib.contextmanager
 def unreported():
     """Trace without overflow reports: :func:`report` does nothing inside
-    (for code that ``vmap``-s single steps, where each report would call
-    the host at every step; its searches must then be exact or planned
-    with headroom)."""
+    (its searches must then be exact or planned with headroom)."""
     tok = _CURRENT.set(None)
     try:
         yield
     finally:
         _CURRENT.reset(tok)
+
+
+class Tally:
+    """The needs reported while one traced body runs: ``rows`` maps
+    ``(block name, search number)`` to a row of ``value`` (a traced
+    ``(len(rows), 4)`` array of running maxima)."""
+
+    __slots__ = ("rows", "value")
+
+    def __init__(self, rows, value):
+        self.rows = rows
+        self.value = value
+
+
+@contextlib.contextmanager
+def tally(rows, value):
+    """Reports made inside go to a new :class:`Tally` (yielded) with these
+    rows, starting from ``value``; read its ``value`` afterwards."""
+    tok = _TALLY.set(Tally(rows, value) if rows else None)
+    try:
+        yield _TALLY.get()
+    finally:
+        _TALLY.reset(tok)
+
+
+def held():
+    """The current tally's value (to carry into a control-flow body), or
+    None when no tally is kept."""
+    t = _TALLY.get()
+    return None if t is None else t.value
+
+
+@contextlib.contextmanager
+def resumed(value):
+    """Inside a control-flow body: a tally with the current one's rows
+    starting from ``value`` (what :func:`held` gave, carried in); yields it
+    (None when no tally is kept)."""
+    outer = _TALLY.get()
+    if outer is None or value is None:
+        yield None
+        return
+    with tally(outer.rows, value) as t:
+        yield t
+
+
+def absorb(value):
+    """After a control-flow body: its tally's value (which started from
+    :func:`held`) becomes the current tally's."""
+    t = _TALLY.get()
+    if t is not None and value is not None:
+        t.value = value
 
 
 def searches_of(b):
@@ -69,46 +121,29 @@ def searches_of(b):
             if getattr(type(v), "neighbor_search", False)]
 
 
-def _record(key, vec):
-    v = np.asarray(vec, dtype=float).reshape(-1, 4).max(axis=0)
-    with _LOCK:
-        old = _RECORDS.get(key)
-        _RECORDS[key] = v if old is None else np.maximum(old, v)
-
-
 def report(owner, need, plan):
-    """Record that ``owner`` (a search object) needed ``need`` under ``plan``."""
+    """Record that ``owner`` (a search object) needed ``need`` under ``plan``
+    (a running maximum in the current tally; nothing without one)."""
     cur = _CURRENT.get()
-    if cur is None or plan is None:
+    t = _TALLY.get()
+    if cur is None or plan is None or t is None:
         return
     name, b = cur
     num = next((j for j, s in enumerate(searches_of(b)) if s is owner), None)
-    if num is None:
+    row = t.rows.get((name, num))
+    if row is None:
         return
     import jax
     import jax.numpy as jnp
-    vec = jnp.stack([jnp.asarray(need.capacity).astype(float).reshape(()),
-                     jnp.asarray(need.hits).astype(float).reshape(()),
-                     jnp.max(jnp.asarray(need.reach)).astype(float).reshape(()),
-                     jnp.asarray(getattr(need, "span", 0.0)).astype(float).reshape(())])
-    inf = float("inf")
-    cap = inf if (plan.capacity is None or plan.brute) else float(plan.capacity)
-    hits = inf if plan.hits is None else float(plan.hits)
-    # a radius rounded to float32 (relative 6e-8) is not an overflow
-    limit = jnp.asarray([cap, hits, plan.reach * (1 + 1e-6), 1.0], dtype=vec.dtype)
-    over = jnp.any(vec > limit)
-    rec = functools.partial(_record, (name, num))
-    jax.lax.cond(over, lambda v: jax.debug.callback(rec, v), lambda v: None, vec)
+    dt = t.value.dtype
+    vec = jnp.stack([jnp.asarray(need.capacity).astype(dt).reshape(()),
+                     jnp.asarray(need.hits).astype(dt).reshape(()),
+                     jnp.max(jnp.asarray(need.reach)).astype(dt).reshape(()),
+                     jnp.asarray(getattr(need, "span", 0.0)).astype(dt).reshape(())])
+    t.value = t.value.at[row].max(jax.lax.stop_gradient(vec))
 
 
-def clear():
-    """Forget every record (the compiled engine calls it before a run)."""
-    with _LOCK:
-        _RECORDS.clear()
-
-
-def recorded():
-    """``{(block name, search number): (capacity, hits, reach, span)}`` needed
-    beyond the plans since :func:`clear`."""
-    with _LOCK:
-        return {k: tuple(v) for k, v in _RECORDS.items()}
+def rows_of(blocks, names):
+    """``{(block name, search number): row}`` of every search the blocks own."""
+    keys = [(n, j) for n, b in zip(names, blocks) for j, _ in enumerate(searches_of(b))]
+    return {k: r for r, k in enumerate(keys)}

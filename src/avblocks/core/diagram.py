@@ -120,6 +120,16 @@ class Diagram:
         self._ex_in: dict[str, list[PortRef]] = {}
         self._ex_out: dict[str, PortRef] = {}
         self._parent_handle: BlockHandle | None = None
+        self._stamp = 0           # wiring changes of this diagram and its subsystems
+
+    def _touch(self):
+        """Count a wiring change here and in every diagram holding this one
+        (an engine that keeps a run of this diagram compares the count)."""
+        d = self
+        while d is not None:
+            d._stamp += 1
+            h = d._parent_handle
+            d = h.diagram if h is not None else None
 
     # --------------------------------------------------------------- building
     def _path_prefix(self) -> str:
@@ -166,6 +176,7 @@ class Diagram:
                                   "diagram", block=name)
             block._parent_handle = h
         self._handles[name] = h
+        self._touch()
         return h
 
     def __getitem__(self, name) -> BlockHandle:
@@ -221,6 +232,7 @@ class Diagram:
         if name in self._ex_in or name in self._ex_out:
             raise WiringError("port exported twice", block=self.name, port=name)
         self._ex_in[name] = list(dsts)
+        self._touch()
 
     def export_output(self, name: str, src: PortRef) -> None:
         """Make ``name`` an output of this diagram, driven by ``src``."""
@@ -231,6 +243,7 @@ class Diagram:
         if name in self._ex_in or name in self._ex_out:
             raise WiringError("port exported twice", block=self.name, port=name)
         self._ex_out[name] = src
+        self._touch()
 
     # Diagram as a block: the specs of its exported ports.
     @property

@@ -15,29 +15,17 @@ from ..core.solvers import make_solver
 
 
 def traced_engine(compiled, dt, jnp, canon):
-    """The compiled backend's engine (errors name the block, fixed dtypes),
-    without the run-time overflow reports of static search plans.
+    """The compiled backend's engine (errors name the block, fixed dtypes).
 
-    A compiled *run* lets a neighbour search or edge grid report, per call,
-    whether it needed more than its plan (a ``lax.cond`` around a host
-    callback, see :mod:`avblocks.core.diagnostics`). An environment is
-    ``vmap``-ed over its copies, and under ``vmap`` that ``cond`` becomes a
-    select that calls back to the host at every step of every copy (the
-    navigation task ran 100x slower with it). The environments therefore
-    trace blocks outside the reporting context: their searches must be exact
-    (the default for N <= 64 agents: all pairs) or planned with enough
-    headroom, and an edge grid's ``reach`` must cover the ranges asked."""
-    from ..core import diagnostics
+    A compiled *run* keeps a tally of what its neighbour searches needed
+    (:mod:`avblocks.core.diagnostics`) and checks it after the run. An
+    environment steps the engine itself and keeps no tally, so its blocks'
+    reports do nothing and cost nothing (no host callback, under ``vmap``
+    too): its searches must be exact (the default for N <= 64 agents: all
+    pairs) or planned with enough headroom, and an edge grid's ``reach``
+    must cover the ranges asked."""
     from ..core.compiled.engine import TracedEngine
-
-    class _EnvEngine(TracedEngine):
-        def _call(self, i, what, fn, *args, **kw):
-            def unreported(*a, **k):
-                with diagnostics.unreported():
-                    return fn(*a, **k)
-            return super()._call(i, what, unreported, *args, **kw)
-
-    return _EnvEngine(compiled, dt, jnp, canon)
+    return TracedEngine(compiled, dt, jnp, canon)
 
 
 def jax():

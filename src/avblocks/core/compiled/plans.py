@@ -14,9 +14,9 @@ engine (:func:`avblocks.compile`):
    ``capacity=``. The plan is part of the block's structure, so it is part
    of the compile-cache key; it is kept for the block's life and only grows
    (after an overflow, step 3), so a grown plan is not planned away again;
-2. during the run, each search call tests ``need > plan`` and records an
-   excess (:mod:`avblocks.core.diagnostics`; nothing is called back while
-   the plan suffices);
+2. during the run, each search call adds what it needed to a running
+   maximum the run carries and returns (:mod:`avblocks.core.diagnostics`;
+   nothing is called back to the host);
 3. after the run, where a search needed more than its plan:
 
    - ``on_overflow="replan"`` (default): a :class:`RuntimeWarning` names
@@ -109,14 +109,16 @@ def _planned(cd):
             hook()
 
 
-def overflows(cd):
-    """``[(block name, search, need, message)]`` of the searches whose
-    recorded need exceeds their plan since the last
-    :func:`avblocks.core.diagnostics.clear`."""
-    rec = diagnostics.recorded()
+def overflows(cd, needs):
+    """``[(block name, search, need, message)]`` of the searches whose need
+    exceeds their plan; ``needs`` is ``{(block name, search number):
+    [capacity, hits, reach, span]}`` (a run's tally, see
+    :meth:`~avblocks.core.compiled.program.Program.needs`)."""
     out = []
+    if not needs:
+        return out
     for i, j, s in owned(cd):
-        v = rec.get((cd.names[i], j))
+        v = needs.get((cd.names[i], j))
         if v is None or s.cells is None:
             continue
         need = SimpleNamespace(capacity=int(v[0]), reach=float(v[2]), hits=int(v[1]),

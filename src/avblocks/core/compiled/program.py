@@ -31,6 +31,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from .. import diagnostics as _diagnostics
 from .. import memo as _memo
 from ..params import bound_parameters
 from . import _jax
@@ -123,13 +124,17 @@ class Program:
                       enumerate(zip(compiled.names, compiled.blocks)) for k in b._params]
         from .structure import diagram_key
         self.struct = diagram_key(compiled)
+        #: the rows of the needs tally the run returns (core.diagnostics)
+        self.need_rows = _diagnostics.rows_of(compiled.blocks, compiled.names)
         self.traces = 0
         self._exe = {}
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------ the run
     def run(self, theta, X0, remat=False):
-        """Pure: ``(logs, X_T)`` for parameters ``theta`` and states ``X0``.
+        """Pure: ``(logs, X_T, needs)`` for parameters ``theta`` and states
+        ``X0``; ``needs`` is the tally of what the neighbour searches needed
+        (rows :attr:`need_rows`, see :mod:`avblocks.core.diagnostics`).
         Must be called under a JAX transformation (it traces)."""
         jax = _jax.jax()
         jnp, lax = jax.numpy, jax.lax
@@ -140,23 +145,29 @@ class Program:
             per_block.setdefault(i, (self.cd.blocks[i], {}))[1][k] = theta[path]
         eng, dt, t0 = self.eng, self.dt, self.t0
         le, nlog, idx = self.log_every, self.nlog, self.log_idx
+        rows = self.need_rows
+        tally = _diagnostics.tally
         with bound_parameters(list(per_block.values())), _memo.active(_memo.Memo()):
-            Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
+            fdt = jnp.asarray(0.0).dtype
+            with tally(rows, jnp.zeros((len(rows), 4), fdt)) as tl:
+                Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
+            N0 = tl.value if rows else None
 
-            # The carry is (X_k, Y_k-1): each step first computes its outputs
-            # at t_k (periodic blocks hold Y_k-1 between hits), then the
-            # updates and the solver step. Outputs and derivatives of one
+            # The carry is (X_k, Y_k-1, needs): each step first computes its
+            # outputs at t_k (periodic blocks hold Y_k-1 between hits), then
+            # the updates and the solver step. Outputs and derivatives of one
             # state are so traced in one body, where values blocks share
             # through core.memo (the heading trig of a unicycle and its
             # controller) become one operation.
             def step(carry, k):
-                X, Yp = carry
+                X, Yp, N = carry
                 t = t0 + k * dt
                 hit = eng.hits(k)
-                Y = eng.major_outputs(t, X, Yp, hit)
-                X = eng.update(t, X, Y, hit)
-                X = self._integrate(t, X, Y)
-                return (X, Y), None
+                with tally(rows, N) as tl:
+                    Y = eng.major_outputs(t, X, Yp, hit)
+                    X = eng.update(t, X, Y, hit)
+                    X = self._integrate(t, X, Y)
+                return (X, Y, tl.value if rows else None), None
 
             def advance(carry, k0, count):
                 carry, _ = lax.scan(step, carry, k0 + jnp.arange(count))
@@ -170,17 +181,28 @@ class Program:
 
             def outer(carry, i):
                 k = i * le
-                Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
+                with tally(rows, carry[2]) as tl:
+                    Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
+                carry = (carry[0], carry[1], tl.value if rows else None)
                 row = [Y[j][o] for j, o in idx]
                 carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, i * le),
                                  lambda c: c, carry)
                 return carry, row
 
-            carry, logs = lax.scan(outer, (X0, Y0), jnp.arange(nlog))
+            carry, logs = lax.scan(outer, (X0, Y0, N0), jnp.arange(nlog))
             rem = self.nsteps - (nlog - 1) * le
             if rem:
                 carry = advance(carry, (nlog - 1) * le, rem)
-        return logs, carry[0]
+        needs = carry[2] if rows else jnp.zeros((0, 4), fdt)
+        return logs, carry[0], needs
+
+    def needs(self, value):
+        """``{(block name, search number): [capacity, hits, reach, span]}``
+        from a run's (or an ensemble's, max over runs) needs tally."""
+        v = np.asarray(value)
+        if v.ndim == 3:
+            v = v.max(axis=0)
+        return {k: v[r] for k, r in self.need_rows.items()}
 
     def _integrate(self, t, X, Y):
         """The solver step from t to t + dt; a switch time of a source (a
@@ -220,8 +242,20 @@ class Program:
                 cur = jnp.where(inside[j], left, cur)
             return solver.step(eng, cur, X, Yc, t1 - cur)
 
-        return jax.lax.cond(jnp.any(inside), split,
-                            lambda X: solver.step(eng, t, X, Y, dt), X)
+        def threaded(fn):
+            # the branches' searches report to the step's tally: carried in and out
+            def branch(op):
+                X, N = op
+                with _diagnostics.resumed(N) as tl:
+                    X = fn(X)
+                return X, (N if tl is None else tl.value)
+            return branch
+
+        X, N = jax.lax.cond(jnp.any(inside), threaded(split),
+                            threaded(lambda X: solver.step(eng, t, X, Y, dt)),
+                            (X, _diagnostics.held()))
+        _diagnostics.absorb(N)
+        return X
 
     # ------------------------------------------------------- executables
     def executable(self, mode, build, args, compiled=None):

@@ -10,7 +10,6 @@ import time
 
 import numpy as np
 
-from .. import diagnostics as _diagnostics
 from .. import rng as _rng
 from ..errors import ParameterError, SimulationError
 from ..results import Results
@@ -57,6 +56,13 @@ class Runner:
         n = _devices.agents_of(compiled)
         self._single = _devices.Placement(
             self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
+
+    @property
+    def log_bytes(self) -> int:
+        """Bytes of the log of one run."""
+        p = self.program
+        item = 8 if p.x64 else 4
+        return sum(p.nlog * math.prod(s.shape) * item for s in self.specs)
 
     @property
     def compilations(self) -> int:
@@ -190,7 +196,6 @@ class Runner:
 
     def __call__(self, params=None, x0=None, seed=None):
         jax = _jax.jax()
-        _diagnostics.clear()
         seed = self.seed if seed is None else int(seed)
         theta, _ = self._theta(params)
         x0vals, _ = self._x0_values(x0)
@@ -211,13 +216,13 @@ class Runner:
             self._run_exe = (place, exe)
         t = time.perf_counter()
         with _jax.x64(prog.x64):
-            logs, XF = exe(*args)
+            logs, XF, needs = exe(*args)
             jax.block_until_ready((logs, XF))
         wall = time.perf_counter() - t
         logs = [np.asarray(a) for a in logs]
         XF = jax.tree_util.tree_map(np.asarray, XF)
         res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
-        over = _plans.overflows(self.compiled)
+        over = _plans.overflows(self.compiled, prog.needs(needs))
         if over:
             return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
@@ -254,7 +259,6 @@ class Runner:
             values ``(runs, ...)``; ``res.to_xarray()`` has a ``run`` dim.
         """
         jax = _jax.jax()
-        _diagnostics.clear()
         R = _count_runs(seeds, params, x0, runs)
         seeds = [self.seed] * R if seeds is None else [int(s) for s in seeds]
         if len(seeds) != R:
@@ -297,7 +301,7 @@ class Runner:
         def build():
             return jax.vmap(prog.run, in_axes=(t_axes, x_axes), axis_size=chunk)
 
-        exe, compile_s, wall = None, 0.0, 0.0
+        exe, compile_s, wall, needs = None, 0.0, 0.0, None
         for c in range(nchunks):
             lo, hi = c * chunk, min(R, (c + 1) * chunk)
             th = {k: take(v, t_axes[k], lo, hi) for k, v in theta.items()}
@@ -312,9 +316,11 @@ class Runner:
                     th, xs = place((th, xs))
             t = time.perf_counter()
             with _jax.x64(prog.x64):
-                logs, XF = exe(th, xs)
+                logs, XF, most = exe(th, xs)
                 jax.block_until_ready((logs, XF))
             wall += time.perf_counter() - t
+            most = np.asarray(most).max(axis=0)          # the largest over the runs
+            needs = most if needs is None else np.maximum(needs, most)
             for o, a in zip(out, logs):
                 o[lo:hi] = np.asarray(a)[:hi - lo]
             XF = jax.tree_util.tree_map(np.asarray, XF)
@@ -329,7 +335,7 @@ class Runner:
                     per_run_params=sorted(tb))
         meta["realtime_factor"] = (R * prog.nsteps * prog.dt / wall) if wall > 0 else math.inf
         res = self._results(out, finals, meta, runs=R)
-        over = _plans.overflows(self.compiled)
+        over = _plans.overflows(self.compiled, prog.needs(needs))
         if over:
             return _plans.settle(self, over, lambda: self.ensemble(
                 seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes))
@@ -380,7 +386,6 @@ class Runner:
         function (not a new ``lambda`` each call) to avoid recompiling.
         """
         jax = _jax.jax()
-        _diagnostics.clear()
         seed = self.seed if seed is None else int(seed)
         pw, sw = self._split_wrt(wrt)
         theta, _ = self._theta(params)
@@ -397,23 +402,23 @@ class Runner:
                 X = [dict(x) for x in X0]
                 for w, i, nm in sw:
                     X[i][nm] = diff[1][w]
-                logs, XF = prog.run(th, X, remat=checkpoint)
+                logs, XF, needs = prog.run(th, X, remat=checkpoint)
                 res = runner._results(list(logs), XF, {"backend": "jax", "traced": True})
                 val = cost(res)
                 if np.shape(val) != ():
                     raise ParameterError("the cost must return a scalar", param="cost",
                                          found=f"shape {np.shape(val)}")
-                return val
-            return jax.value_and_grad(f)
+                return val, needs
+            return jax.value_and_grad(f, has_aux=True)
 
         exe, _ = prog.executable(("grad", cost, tuple(pw), tuple(w for w, *_ in sw),
                                   bool(checkpoint)), build, (diff, theta, X0),
                                  self.compiled)
         with _jax.x64(prog.x64):
-            val, g = exe(diff, theta, X0)
+            (val, needs), g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}
         grads.update({w: np.asarray(g[1][w]) for w, *_ in sw})
-        over = _plans.overflows(self.compiled)
+        over = _plans.overflows(self.compiled, prog.needs(needs))
         if over:
             return _plans.settle(self, over, lambda: self.value_and_grad(
                 cost, wrt, params, x0, seed, checkpoint=checkpoint))

@@ -26,49 +26,76 @@ import numpy as np
 
 _MAX_DEPTH = 6
 _PLAIN = (type(None), bool, int, float, complex, str, bytes)
-
-#: fingerprints of frozen dataclasses whose fields are plain values (ports):
-#: they can never change, so each is worked out once (keyed by value)
-_FROZEN: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
+_PLAIN_TYPES = frozenset(_PLAIN)
 
 def _plain(v):
     """True for a value that can never change in place (plain scalars and
     tuples of them), whose equality is its structure."""
-    if isinstance(v, _PLAIN):
+    if type(v) in _PLAIN_TYPES:
         return True
     return type(v) is tuple and all(_plain(x) for x in v)
 
 
+#: id -> (weak reference, fingerprint) of frozen dataclasses of plain values
+#: (ports, sample times): they never change, so each is looked at once
+_FROZEN: dict = {}
+#: type -> whether it is a frozen dataclass
+_IS_FROZEN: dict = {}
+
+
 def _frozen_fp(obj, depth):
-    try:
-        fp = _FROZEN.get(obj)
-    except TypeError:               # unhashable field: not a plain record
-        fp = None
-    if fp is not None:
-        return fp
+    """A frozen dataclass of plain values (a port, a sample time) is its own
+    fingerprint: it compares by value and can never change. Others are
+    fingerprinted field by field."""
+    hit = _FROZEN.get(id(obj))
+    if hit is not None and hit[0]() is obj:
+        return hit[1]
     fields = dataclasses.fields(obj)
     values = [getattr(obj, f.name) for f in fields]
-    fp = (type(obj).__qualname__,
-          tuple((f.name, fingerprint(v, depth + 1)) for f, v in zip(fields, values)))
-    if all(_plain(v) for v in values):
-        try:
-            _FROZEN[obj] = fp
-        except TypeError:
-            pass
+    if not all(_plain(v) for v in values):
+        return (type(obj).__qualname__,
+                tuple((f.name, fingerprint(v, depth + 1)) for f, v in zip(fields, values)))
+    fp = ("frozen", obj)
+    key = id(obj)
+    try:
+        ref = weakref.ref(obj, lambda _r, key=key: _FROZEN.pop(key, None))
+    except TypeError:               # not weakly referable: not remembered
+        return fp
+    _FROZEN[key] = (ref, fp)
     return fp
+
+
+#: arrays up to this size are fingerprinted by their bytes (cheaper than a hash)
+_SMALL_ARRAY = 512
 
 
 def _array_fp(a):
     a = np.ascontiguousarray(a)
     if a.dtype == object:
         return ("objarray", a.shape, tuple(fingerprint(v, 1) for v in a.ravel()))
+    if a.nbytes <= _SMALL_ARRAY:
+        return ("nd", a.dtype.str, a.shape, a.tobytes())
     h = hashlib.blake2b(memoryview(a).cast("B"), digest_size=16).hexdigest()
     return ("nd", a.dtype.str, a.shape, h)
 
 
 def fingerprint(obj, depth=0):
     """A hashable value that changes whenever ``obj``'s structure does."""
+    t = type(obj)
+    if t in _PLAIN_TYPES:
+        return (t.__name__, obj)
+    if t is np.ndarray:
+        return _array_fp(obj)
+    if t is dict:
+        return _dict_fp(obj, depth)
+    frozen = _IS_FROZEN.get(t)
+    if frozen is None:
+        frozen = _IS_FROZEN[t] = (dataclasses.is_dataclass(t) and not isinstance(obj, type)
+                                  and t.__dataclass_params__.frozen)
+    if frozen:
+        return _frozen_fp(obj, depth)
+    if (t is set or t is frozenset) and all(type(v) is str for v in obj):
+        return ("set", tuple(sorted(obj)))
     if obj is None or isinstance(obj, (bool, int, float, complex, str, bytes)):
         return (type(obj).__name__, obj)
     if isinstance(obj, np.ndarray):
@@ -80,11 +107,7 @@ def fingerprint(obj, depth=0):
     if isinstance(obj, (list, tuple)):
         return (type(obj).__name__, tuple(fingerprint(v, depth + 1) for v in obj))
     if isinstance(obj, dict):
-        if all(type(k) is str for k in obj):
-            return ("dict", tuple(sorted((k, fingerprint(v, depth + 1))
-                                         for k, v in obj.items())))
-        return ("dict", tuple(sorted(((repr(k), fingerprint(v, depth + 1))
-                                      for k, v in obj.items()), key=lambda kv: kv[0])))
+        return _dict_fp(obj, depth)
     if isinstance(obj, (set, frozenset)):
         return ("set", tuple(sorted(repr(fingerprint(v, depth + 1)) for v in obj)))
     if isinstance(obj, (types.FunctionType, types.BuiltinFunctionType, types.MethodType,
@@ -109,6 +132,14 @@ def fingerprint(obj, depth=0):
         return ("obj", obj)
     except TypeError:
         return ("id", id(obj), type(obj).__qualname__)
+
+
+def _dict_fp(obj, depth):
+    if all(type(k) is str for k in obj):
+        return ("dict", tuple(sorted((k, fingerprint(v, depth + 1))
+                                     for k, v in obj.items())))
+    return ("dict", tuple(sorted(((repr(k), fingerprint(v, depth + 1))
+                                  for k, v in obj.items()), key=lambda kv: kv[0])))
 
 
 def block_fingerprint(b):

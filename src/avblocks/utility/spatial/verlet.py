@@ -22,7 +22,9 @@ Functions (all written with ``xp``; trace under ``jit``, ``vmap``, ``grad``):
   in a ``lax.while_loop`` of zero or one turns, not a ``lax.cond``: under
   ``vmap`` a ``cond`` on a per-run predicate evaluates both branches every
   step, a ``while_loop`` runs its body only when some run needs it (then
-  for all runs at once, keeping the others' values). Positions enter it
+  for all runs at once, keeping the others' values); what its search
+  needed leaves the loop in its carry (the compiled engine's tally,
+  :mod:`avblocks.core.diagnostics`). Positions enter it
   through ``stop_gradient`` (a list is integers; the distances are
   computed outside from the live positions, so gradients are unchanged);
 - :func:`select`: the ``k`` nearest of each point's candidates within
@@ -132,14 +134,23 @@ def refresh(points, anchor, cand, built, radius, skin, build, xp=np, box=None,
             return cand, anchor
         return build(points), points
     import jax
+
+    from ...core import diagnostics
     sg = jax.lax.stop_gradient
     p = sg(points)
     stale = ~(built != 0) | moved(p, anchor, sg(radius), skin, xp, box, sg(margin))
 
     def body(c):
-        return build(p).astype(cand.dtype), p.astype(anchor.dtype), xp.zeros_like(c[2])
+        # what the build's search needed is carried out of the loop (the
+        # compiled engine's needs tally, core.diagnostics), not called back
+        with diagnostics.resumed(c[3]) as tl:
+            new = build(p).astype(cand.dtype)
+        return new, p.astype(anchor.dtype), xp.zeros_like(c[2]), \
+            (c[3] if tl is None else tl.value)
 
-    cand, anchor, _ = jax.lax.while_loop(lambda c: c[2], body, (cand, anchor, stale))
+    cand, anchor, _, needs = jax.lax.while_loop(
+        lambda c: c[2], body, (cand, anchor, stale, diagnostics.held()))
+    diagnostics.absorb(needs)
     return cand, anchor
 
 

@@ -168,16 +168,77 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
     k = dict(ie=ie, c0=ie * ie, lo=ie + h * r_a, hi=ie + r_a,
              gain=0.5 * np.pi / ((1.0 - h) * r_a), shift=ie + d_a - c,
              ae=0.25 * (a + b) * ie, be=0.25 * (a - b) * ie, c1=c1, c2=0.5 * c2)
-    nb = _memo.shared(_self_padded, idx, xp)                        # (N, K)
-    qt, pt = position.T, velocity.T                                 # (D, N)
     if xp is np:
-        qt, pt = np.ascontiguousarray(qt), np.ascontiguousarray(pt)
-    n = position.shape[0]
-    if xp is np and n > NUMPY_BLOCK:
-        return np.concatenate([_alpha_block(qt, pt, nb[i:i + NUMPY_BLOCK],
-                                            slice(i, i + NUMPY_BLOCK), k, xp)
-                               for i in range(0, n, NUMPY_BLOCK)], axis=0)
-    return _alpha_block(qt, pt, nb, slice(None), k, xp)
+        return _alpha_pairs(position, velocity, _memo.shared(_flat_pairs, idx, np), k)
+    nb = _memo.shared(_self_padded, idx, xp)                        # (N, K)
+    return _alpha_block(position.T, velocity.T, nb, slice(None), k, xp)
+
+
+def _flat_pairs(idx, xp=np):
+    """The listed pairs of ``idx`` (N, K) as flat arrays (NumPy), grouped in
+    blocks of :data:`NUMPY_BLOCK` agents: a list of ``(a, b, i - a, j)``,
+    the agents ``a:b``, and for each listed pair ``j = idx[i, k] >= 0`` of
+    them (row by row), its row relative to ``a`` and ``j``. A function of
+    ``idx`` alone (:func:`~avblocks.core.memo.shared`: once per neighbour
+    array, not once per RK4 stage)."""
+    idx = np.asarray(idx)
+    n = idx.shape[0]
+    ok = idx >= 0
+    jj = idx[ok]
+    ii = np.repeat(np.arange(n), np.count_nonzero(ok, axis=1))
+    out = []
+    for a in range(0, n, NUMPY_BLOCK):
+        b = min(a + NUMPY_BLOCK, n)
+        s, e = np.searchsorted(ii, (a, b))
+        out.append((a, b, ii[s:e] - a, jj[s:e]))
+    return out
+
+
+def _alpha_pairs(position, velocity, pairs, k):
+    """u^alpha under NumPy over the listed pairs only (``pairs`` from
+    :func:`_flat_pairs`): the expressions of :func:`_alpha_block` on flat
+    (P,) arrays, the neighbour sums by ``np.bincount`` -- no work for the
+    padded slots (about a third of them on the flocking benchmarks).
+    ``c1`` is folded into ``f``, ``c2 / 2`` into the velocities;
+    temporaries are reused (``out=``), never the inputs."""
+    n, dim = position.shape
+    qt = np.ascontiguousarray(position.T)                          # (D, N)
+    pt = np.ascontiguousarray(velocity.T) * k["c2"]                # c2 / 2 p
+    ae, be = k["c1"] * k["ae"], k["c1"] * k["be"]
+    out = np.empty((n, dim))
+    for a, b, il, j in pairs:
+        m = b - a
+        if j.size == 0:
+            out[a:b] = 0.0
+            continue
+        i = il + a
+        dq = [np.take(qt[c], j) - np.take(qt[c], i) for c in range(dim)]   # (P,)
+        t = dq[0] * dq[0]
+        for c in range(1, dim):
+            t += dq[c] * dq[c]
+        t *= k["ie"]
+        t += k["c0"]
+        big_r = np.sqrt(t, out=t)                  # sqrt(1 + eps |dq|^2) / eps
+        z = big_r - k["shift"]
+        f = z * z
+        f += 1.0
+        np.sqrt(f, out=f)
+        np.divide(z, f, out=f)
+        f *= ae
+        f += be
+        f /= big_r                                 # c1 phi / (2 root), folded
+        g = np.clip(big_r, k["lo"], k["hi"], out=z)
+        np.subtract(k["hi"], g, out=g)
+        g *= 2.0 * k["gain"]
+        np.cos(g, out=g)
+        np.subtract(1.0, g, out=g)                 # 2 rho (exactly 0 beyond r)
+        gsum = np.bincount(il, g, minlength=m)
+        for c in range(dim):
+            w = np.multiply(f, dq[c], out=dq[c])
+            w += np.take(pt[c], j)
+            w *= g
+            out[a:b, c] = np.bincount(il, w, minlength=m) - pt[c, a:b] * gsum
+    return out
 
 
 def _alpha_block(qt, pt, nb, own, k, xp):

@@ -202,9 +202,10 @@ def _alpha_pairs(position, velocity, pairs, k):
     ``c1`` is folded into ``f``, ``c2 / 2`` into the velocities;
     temporaries are reused (``out=``), never the inputs."""
     n, dim = position.shape
-    qt = np.ascontiguousarray(position.T)                          # (D, N)
-    pt = np.ascontiguousarray(velocity.T) * k["c2"]                # c2 / 2 p
+    qt = position.T.copy()                                         # (D, N)
+    pt = velocity.T * k["c2"]                                      # c2 / 2 p
     ae, be = k["c1"] * k["ae"], k["c1"] * k["be"]
+    shift, lo, hi, gain2 = k["shift"], k["lo"], k["hi"], 2.0 * k["gain"]
     out = np.empty((n, dim))
     for a, b, il, j in pairs:
         m = b - a
@@ -212,30 +213,35 @@ def _alpha_pairs(position, velocity, pairs, k):
             out[a:b] = 0.0
             continue
         i = il + a
-        dq = [np.take(qt[c], j) - np.take(qt[c], i) for c in range(dim)]   # (P,)
+        dq = []
+        for c in range(dim):
+            x = qt[c].take(j)
+            x -= qt[c].take(i)
+            dq.append(x)
         t = dq[0] * dq[0]
         for c in range(1, dim):
             t += dq[c] * dq[c]
         t *= k["ie"]
         t += k["c0"]
         big_r = np.sqrt(t, out=t)                  # sqrt(1 + eps |dq|^2) / eps
-        z = big_r - k["shift"]
+        z = big_r - shift
         f = z * z
         f += 1.0
         np.sqrt(f, out=f)
         np.divide(z, f, out=f)
         f *= ae
-        f += be
+        if be:
+            f += be
         f /= big_r                                 # c1 phi / (2 root), folded
-        g = np.clip(big_r, k["lo"], k["hi"], out=z)
-        np.subtract(k["hi"], g, out=g)
-        g *= 2.0 * k["gain"]
+        g = big_r.clip(lo, hi, out=z)
+        np.subtract(hi, g, out=g)
+        g *= gain2
         np.cos(g, out=g)
         np.subtract(1.0, g, out=g)                 # 2 rho (exactly 0 beyond r)
         gsum = np.bincount(il, g, minlength=m)
         for c in range(dim):
             w = np.multiply(f, dq[c], out=dq[c])
-            w += np.take(pt[c], j)
+            w += pt[c].take(j)
             w *= g
             out[a:b, c] = np.bincount(il, w, minlength=m) - pt[c, a:b] * gsum
     return out

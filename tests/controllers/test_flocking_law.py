@@ -153,3 +153,23 @@ def test_flocking_law_agents_without_neighbours_get_zero(block, monkeypatch):
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
     none = F.flocking_law(q, p, np.full_like(idx, -1), 2.0, 2.6)
     assert none.shape == q.shape and np.all(none == 0.0)
+
+
+@pytest.mark.parametrize("block", [None, 5])
+def test_flocking_law_pairs_listed_once_twice_or_repeated(block, monkeypatch):
+    # NumPy evaluates a pair listed both ways once for both agents; a pair
+    # listed one way, or twice in one row, counts as listed (as pair by pair)
+    if block is not None:
+        monkeypatch.setattr(F, "NUMPY_BLOCK", block)
+    rng = np.random.default_rng(5)
+    q, p, idx = _cloud(rng, 16, 2, 2.0, 2.6)
+    pairs = F._flat_pairs(idx)
+    assert sum(b[-1] for b in pairs) > 0                    # some mirrored
+    want = _reference(q, p, idx, 2.0, 2.6, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
+    np.testing.assert_allclose(F.flocking_law(q, p, idx, 2.0, 2.6), want,
+                               rtol=1e-12, atol=1e-12)
+    idx[3, -1] = idx[3, 0]                                  # j twice in row 3
+    assert idx[3, 0] >= 0
+    want = _reference(q, p, idx, 2.0, 2.6, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
+    np.testing.assert_allclose(F.flocking_law(q, p, idx, 2.0, 2.6), want,
+                               rtol=1e-12, atol=1e-12)

@@ -175,44 +175,82 @@ def flocking_law(position, velocity, idx, d, r, *, eps=0.1, a=5.0, b=5.0, h=0.2,
 
 
 def _flat_pairs(idx, xp=np):
-    """The listed pairs of ``idx`` (N, K) as flat arrays (NumPy), grouped in
-    blocks of :data:`NUMPY_BLOCK` agents: a list of ``(a, b, i - a, j)``,
-    the agents ``a:b``, and for each listed pair ``j = idx[i, k] >= 0`` of
-    them (row by row), its row relative to ``a`` and ``j``. A function of
-    ``idx`` alone (:func:`~avblocks.core.memo.shared`: once per neighbour
-    array, not once per RK4 stage)."""
+    """The listed pairs of ``idx`` (N, K) as flat arrays for
+    :func:`_alpha_pairs` (NumPy), in blocks of :data:`NUMPY_BLOCK` agents.
+
+    A pair listed both ways (``j`` in row ``i`` and ``i`` in row ``j``: most
+    pairs) is kept once, as ``i < j``, and evaluated once for both agents
+    (its sigma-distance, bump and action are symmetric); the others once
+    each. Found by sorting packed integer keys (a value sort, no argsort):
+    ``((min(i, j) N + max(i, j)) 2 + (i > j))``, so the two listings of a
+    pair are neighbours. Each block is ``(a, top, il, i, j, jl, m)``: the
+    pairs whose ``i`` is one of the agents ``a:a + NUMPY_BLOCK``, the ``m``
+    mirrored ones first (``j`` may lie beyond the block: ``top`` is one
+    past the largest agent touched); ``il = i - a``, ``jl = j - a`` of the
+    mirrored ones. A function of ``idx`` alone
+    (:func:`~avblocks.core.memo.shared`: once per neighbour array, not once
+    per RK4 stage)."""
     idx = np.asarray(idx)
     n = idx.shape[0]
     ok = idx >= 0
-    jj = idx[ok]
-    ii = np.repeat(np.arange(n), np.count_nonzero(ok, axis=1))
+    jj = idx[ok].astype(np.int64)
+    ii = np.repeat(np.arange(n, dtype=np.int64), np.count_nonzero(ok, axis=1))
+    lo, hi = np.minimum(ii, jj), np.maximum(ii, jj)
+    key = lo * n
+    key += hi
+    key <<= 1
+    key += ii > jj
+    key.sort()
+    dup = key[1:] == key[:-1]
+    twin = ((key[1:] ^ key[:-1]) == 1) & ~(key[:-1] & 1).astype(bool)
+    if dup.any():                      # a pair listed twice in one row:
+        twin[:] = False                # no mirroring (plain, exact sums)
+    first = np.zeros(key.size, bool)
+    first[:-1] = twin
+    paired = first.copy()
+    paired[1:] |= twin
+    u = key[first] >> 1
+    mi, mj = u // n, u % n             # mirrored: i < j, sorted by i
+    s = key[~paired]
+    us, flip = s >> 1, (s & 1).astype(bool)
+    slo, shi = us // n, us % n
+    si = np.where(flip, shi, slo)
+    sj = np.where(flip, slo, shi)
+    sk = si * n
+    sk += sj
+    sk.sort()
+    si, sj = sk // n, sk % n           # singles sorted by i
     out = []
     for a in range(0, n, NUMPY_BLOCK):
         b = min(a + NUMPY_BLOCK, n)
-        s, e = np.searchsorted(ii, (a, b))
-        out.append((a, b, ii[s:e] - a, jj[s:e]))
+        m0, m1 = np.searchsorted(mi, (a, b))
+        s0, s1 = np.searchsorted(si, (a, b))
+        i = np.concatenate([mi[m0:m1], si[s0:s1]])
+        j = np.concatenate([mj[m0:m1], sj[s0:s1]])
+        top = max(b, int(mj[m0:m1].max()) + 1) if m1 > m0 else b
+        out.append((a, top, i - a, i, j, mj[m0:m1] - a, int(m1 - m0)))
     return out
 
 
 def _alpha_pairs(position, velocity, pairs, k):
     """u^alpha under NumPy over the listed pairs only (``pairs`` from
     :func:`_flat_pairs`): the expressions of :func:`_alpha_block` on flat
-    (P,) arrays, the neighbour sums by ``np.bincount`` -- no work for the
-    padded slots (about a third of them on the flocking benchmarks).
-    ``c1`` is folded into ``f``, ``c2 / 2`` into the velocities;
-    temporaries are reused (``out=``), never the inputs."""
+    (P,) arrays, each pair listed both ways evaluated once for both agents,
+    the neighbour sums by ``np.bincount`` -- no work for the padded slots
+    (about a third of them on the flocking benchmarks). ``c1`` is folded
+    into ``f``, ``c2 / 2`` into the velocities; temporaries are reused
+    (``out=``), never the inputs."""
     n, dim = position.shape
     qt = position.T.copy()                                         # (D, N)
     pt = velocity.T * k["c2"]                                      # c2 / 2 p
     ae, be = k["c1"] * k["ae"], k["c1"] * k["be"]
     shift, lo, hi, gain2 = k["shift"], k["lo"], k["hi"], 2.0 * k["gain"]
-    out = np.empty((n, dim))
-    for a, b, il, j in pairs:
-        m = b - a
+    acc = np.zeros((dim, n))
+    gsum = np.zeros(n)
+    for a, top, il, i, j, jl, mm in pairs:
         if j.size == 0:
-            out[a:b] = 0.0
             continue
-        i = il + a
+        m = top - a
         dq = []
         for c in range(dim):
             x = qt[c].take(j)
@@ -238,13 +276,23 @@ def _alpha_pairs(position, velocity, pairs, k):
         g *= gain2
         np.cos(g, out=g)
         np.subtract(1.0, g, out=g)                 # 2 rho (exactly 0 beyond r)
-        gsum = np.bincount(il, g, minlength=m)
+        gm = g[:mm]
+        gsum[a:top] += np.bincount(il, g, minlength=m)
+        if mm:
+            gsum[a:top] += np.bincount(jl, gm, minlength=m)
         for c in range(dim):
-            w = np.multiply(f, dq[c], out=dq[c])
-            w += pt[c].take(j)
-            w *= g
-            out[a:b, c] = np.bincount(il, w, minlength=m) - pt[c, a:b] * gsum
-    return out
+            fd = np.multiply(f, dq[c], out=dq[c])  # c1 phi sigma_eps(q_j - q_i) / 2
+            if mm:                                 # the mirror: j's term, q_i - q_j
+                wj = pt[c].take(i[:mm])
+                wj -= fd[:mm]
+                wj *= gm
+            fd += pt[c].take(j)
+            fd *= g
+            acc[c, a:top] += np.bincount(il, fd, minlength=m)
+            if mm:
+                acc[c, a:top] += np.bincount(jl, wj, minlength=m)
+    acc -= pt * gsum
+    return np.ascontiguousarray(acc.T)
 
 
 def _alpha_block(qt, pt, nb, own, k, xp):

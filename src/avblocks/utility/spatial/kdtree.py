@@ -9,7 +9,6 @@ from .cells import CellList
 from .layout import layout
 from .queries import nearest
 
-
 #: cKDTree built by sliding midpoints, node boxes not shrunk to the points:
 #: built 2.4x faster at 10^4 points than SciPy's default and queried as fast
 #: on the flocking benchmark's lattice (the answers do not depend on the

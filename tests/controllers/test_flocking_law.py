@@ -94,7 +94,7 @@ def test_flocking_block_with_gamma_equals_algorithm_2_and_reuses_the_padded_inde
             got = blk.output(t, {}, {"position": q, "velocity": p, "neighbors": idx},
                              np)["accel"]
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
-    assert m.misses == 1 and m.hits == 2          # padded index made once
+    assert m.misses == 1 and m.hits == 2          # flat pair list made once
 
 
 def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite():
@@ -135,3 +135,41 @@ def test_bump_polynomial_and_library_forms_agree():
         poly = np.asarray(F._two_sin_sq(jnp.asarray(w), jnp))
     np.testing.assert_allclose(poly, want, rtol=0, atol=2e-15)
     assert poly[0] == 0.0 and F._two_sin_sq(np.zeros(1), np)[0] == 0.0   # beyond r: exactly 0
+
+
+@pytest.mark.parametrize("block", [None, 4])
+def test_flocking_law_agents_without_neighbours_get_zero(block, monkeypatch):
+    # NumPy sums over the listed pairs only: empty rows and a block with no
+    # pair at all (agents 4..7) give exactly 0; the rest as pair by pair
+    if block is not None:
+        monkeypatch.setattr(F, "NUMPY_BLOCK", block)
+    rng = np.random.default_rng(21)
+    q, p, idx = _cloud(rng, 12, 2, 2.0, 2.6)
+    idx[4:8] = -1
+    idx[1] = -1
+    want = _reference(q, p, idx, 2.0, 2.6, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
+    got = F.flocking_law(q, p, idx, 2.0, 2.6)
+    assert np.all(got[4:8] == 0.0) and np.all(got[1] == 0.0)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    none = F.flocking_law(q, p, np.full_like(idx, -1), 2.0, 2.6)
+    assert none.shape == q.shape and np.all(none == 0.0)
+
+
+@pytest.mark.parametrize("block", [None, 5])
+def test_flocking_law_pairs_listed_once_twice_or_repeated(block, monkeypatch):
+    # NumPy evaluates a pair listed both ways once for both agents; a pair
+    # listed one way, or twice in one row, counts as listed (as pair by pair)
+    if block is not None:
+        monkeypatch.setattr(F, "NUMPY_BLOCK", block)
+    rng = np.random.default_rng(5)
+    q, p, idx = _cloud(rng, 16, 2, 2.0, 2.6)
+    pairs = F._flat_pairs(idx)
+    assert sum(b[-1] for b in pairs) > 0                    # some mirrored
+    want = _reference(q, p, idx, 2.0, 2.6, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
+    np.testing.assert_allclose(F.flocking_law(q, p, idx, 2.0, 2.6), want,
+                               rtol=1e-12, atol=1e-12)
+    idx[3, -1] = idx[3, 0]                                  # j twice in row 3
+    assert idx[3, 0] >= 0
+    want = _reference(q, p, idx, 2.0, 2.6, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
+    np.testing.assert_allclose(F.flocking_law(q, p, idx, 2.0, 2.6), want,
+                               rtol=1e-12, atol=1e-12)

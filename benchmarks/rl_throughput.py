@@ -1,22 +1,53 @@
 """Environment throughput of the navigation task: env-steps/s and agent-steps/s.
 
-Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each:
+Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each,
+60 control steps of uniform random actions per rollout:
 
 - ``avblocks``: ``rl.functional("navigation")`` (the diagram stepped by the
-  compiled engine's traced step), a jitted ``lax.scan`` of 60 control steps
-  of a fixed random policy, ``vmap``-ed over the copies;
-- ``pure JAX``: the same dynamics and task written by hand in this file (a
-  single integrator's Euler step, range rays, collision test and reward as
-  dense kernels: every ray against every edge, every pair of agents): the
-  limit without the block machinery (the diagram uses the library's
-  ``RangeSensor`` and ``Collision`` blocks, edge-grid method);
-- ``VMAS``: its ``navigation`` scenario on CPU with the same numbers of
-  environments and agents, when ``vmas`` is installed (extra ``rl-bench``;
-  it pulls torch). Otherwise the column says so.
+  compiled engine's traced step), a jitted ``lax.scan`` of the control
+  steps, ``vmap``-ed over the copies;
+- ``pure JAX``: the same dynamics and task written by hand in this file
+  (:func:`navigation_task`: a single integrator's Euler step, range rays,
+  collision test and reward as dense kernels: every ray against every
+  edge, every pair of agents): the limit without the block machinery (the
+  diagram uses the library's ``RangeSensor`` and ``Collision`` blocks,
+  edge-grid method). ``tests/benchmarks`` checks that it computes the
+  diagram's numbers;
+- ``VMAS`` (``benchmarks/rl_vmas.py``, when ``vmas`` and torch are
+  installed: extra ``rl-bench``; otherwise the columns say "not
+  installed"): its stock ``navigation`` scenario with our sizes (4 agents
+  of radius 0.1 in ``[-1.5, 1.5]^2``, 12 lidar rays of range 1.0), and the
+  same scenario with our rectangles and the arena's walls added as
+  colliding landmarks seen by the lidar (the closest like-for-like), each
+  with torch on 1 and on 2 threads (``torch.set_num_threads``).
+
+What differs between the simulations (the work per step is comparable, not
+identical):
+
+- dynamics: VMAS integrates forces (mass 1, drag 0.25, 2 physics
+  substeps per 0.1 s step) and resolves contacts with penalty forces
+  between every pair of colliding entities; ours is kinematic (a velocity
+  command, one Euler step of 0.1 s) with contact *detection* (the
+  ``Collision`` block flags a touch, nothing pushes back);
+- observation: VMAS's agent sees its position, velocity, goal offset and
+  12 lidar readings (18 numbers); ours its goal offset, scaled position,
+  12 ranges and the other agents' offsets nearest first (22 numbers);
+- reward: VMAS's shaped distance plus an agent-agent collision penalty;
+  ours progress, goal bonus, contact and closeness penalties (the
+  closeness term measures every agent against every edge);
+- stock VMAS has no obstacles and its lidar sees only agents; its arena is
+  a clamp on the positions (``enforce_bounds``), not walls;
+- VMAS steps in Python over agents and entity pairs (torch eager, float32,
+  one call per operation); ours is one compiled XLA program per rollout.
 
 Each figure: the best of ``--repeats`` timed runs after one warm-up (the
-compile excluded). Each step's observation is summed into the result
-(as a policy would read it), so XLA cannot drop the sensing.
+compile excluded), the columns timed in turn within each repeat; the
+ratio of the medians is printed too, and the load average before and
+after (the machine may be shared). Each step's observation is summed into
+the result (as a policy would read it), so XLA cannot drop the sensing;
+VMAS computes every agent's observation, reward and info in ``env.step``.
+``--xla-threads ROUNDS`` instead runs our two columns in subprocesses with
+XLA's default threads and with one thread (``XLA_FLAGS``), alternated.
 
 Run: ``python benchmarks/rl_throughput.py [--quick]``; prints a markdown
 table and writes rl_throughput.png.

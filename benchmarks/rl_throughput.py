@@ -241,7 +241,7 @@ def pure_jax_runner(E, T, n=4):
     return lambda: f(key).block_until_ready()
 
 
-def vmas_runner(variant, threads):
+def vmas_runner(variant, threads, device="cpu"):
     """A runner factory for VMAS (``benchmarks/rl_vmas.py``), or None
     without ``vmas``/torch."""
     def make(E, T, n=4):
@@ -256,22 +256,30 @@ def vmas_runner(variant, threads):
             "rl_vmas", Path(__file__).with_name("rl_vmas.py"))
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
-        return mod.runner(variant, E, T, n, threads)
+        return mod.runner(variant, E, T, n, threads, device)
     return make
 
 
-COLUMNS = (("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner),
-           ("VMAS stock, 1 thread", vmas_runner("stock", 1)),
-           ("VMAS stock, 2 threads", vmas_runner("stock", 2)),
-           ("VMAS obstacles, 1 thread", vmas_runner("obstacles", 1)),
-           ("VMAS obstacles, 2 threads", vmas_runner("obstacles", 2)))
+def columns(vmas_device="cpu"):
+    """(name, runner factory) of each column; on a GPU (``vmas_device``
+    ``"cuda"``) VMAS has one column per scenario (torch's threads do not
+    matter there)."""
+    cols = [("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner)]
+    for variant in ("stock", "obstacles"):
+        if vmas_device == "cpu":
+            cols += [(f"VMAS {variant}, {k} thread{'s' * (k > 1)}", vmas_runner(variant, k))
+                     for k in (1, 2)]
+        else:
+            cols.append((f"VMAS {variant}, {vmas_device}",
+                         vmas_runner(variant, 1, vmas_device)))
+    return cols
 
 
-def measure(E, T, repeats, columns):
+def measure(E, T, repeats, cols):
     """``{name: [seconds per run, ...]}``: one warm-up each (the compile),
     then ``repeats`` rounds, each timing every column once in turn."""
     fns = {}
-    for name, make in columns:
+    for name, make in cols:
         fn = make(E, T)
         if fn is not None:
             fn()
@@ -290,17 +298,19 @@ def _fmt(v):
 
 
 def table(rows, n):
-    vm = [c for c, _ in COLUMNS if c.startswith("VMAS")]
+    vm = [c for c in rows[0] if c.startswith("VMAS")]
     print("| num_envs | avblocks env-steps/s | agent-steps/s | pure JAX env-steps/s "
           "| avblocks / pure JAX | " + " | ".join(f"{c} env-steps/s" for c in vm) +
-          " | avblocks / best VMAS obstacles |")
-    print("|---:" * (6 + len(vm)) + "|")
+          " | avblocks / best VMAS stock | avblocks / best VMAS obstacles |")
+    print("|---:" * (7 + len(vm)) + "|")
     for r in rows:
-        obst = [r[c] for c in vm if "obstacles" in c and r[c] is not None]
-        ratio = f"{r['avblocks'] / max(obst):.1f}" if obst else "-"
+        ratios = []
+        for kind in ("stock", "obstacles"):
+            v = [r[c] for c in vm if kind in c and r[c] is not None]
+            ratios.append(f"{r['avblocks'] / max(v):.1f}" if v else "-")
         print(f"| {r['num_envs']} | {r['avblocks']:,.0f} | {r['avblocks'] * n:,.0f} | "
               f"{r['pure JAX']:,.0f} | {r['avblocks'] / r['pure JAX']:.2f} | " +
-              " | ".join(_fmt(r[c]) for c in vm) + f" | {ratio} |")
+              " | ".join(_fmt(r[c]) for c in vm) + f" | {' | '.join(ratios)} |")
 
 
 def xla_threads(argv, rounds):
@@ -346,6 +356,7 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--plot", default="rl_throughput.png")
     ap.add_argument("--jax-only", action="store_true", help="no VMAS columns")
+    ap.add_argument("--vmas-device", default="cpu", help="torch device of VMAS (cpu, cuda)")
     ap.add_argument("--json", default="", help="also write the rows here")
     ap.add_argument("--xla-threads", type=int, default=0, metavar="ROUNDS",
                     help="compare XLA on its default threads and on one (subprocesses)")
@@ -357,13 +368,13 @@ def main(argv=None):
         return xla_threads(rest, a.xla_threads)
     T, n = a.steps, 4
     sizes = a.sizes or ([1, 64] if a.quick else [1, 64, 1024])
-    columns = COLUMNS[:2] if a.jax_only else COLUMNS
+    cols = columns(a.vmas_device)[:2 if a.jax_only else None]
     print(f"load average before: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")
     rows, medians = [], []
     for E in sizes:
-        times = measure(E, T, a.repeats, columns)
+        times = measure(E, T, a.repeats, cols)
         rows.append({"num_envs": E, **{c: E * T / min(times[c]) if c in times else None
-                                       for c, _ in COLUMNS}})
+                                       for c, _ in cols}})
         medians.append({c: E * T / np.median(times[c]) for c in times})
     print(f"load average after: {os.getloadavg()[0]:.2f}")
     print(f"best of {a.repeats} alternated runs after a warm-up, {T} steps, {n} agents per env:")
@@ -380,7 +391,7 @@ def main(argv=None):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         fig, ax = plt.subplots(figsize=(6.5, 4.2))
-        for (name, _), style in zip(COLUMNS, ("o-", "s--", "^:", "v:", "D-.", "x-.")):
+        for (name, _), style in zip(cols, ("o-", "s--", "^:", "v:", "D-.", "x-.")):
             ys = [r[name] for r in rows]
             if all(y is not None for y in ys):
                 ax.loglog(sizes, ys, style, label=name)

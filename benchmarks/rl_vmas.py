@@ -1,6 +1,6 @@
 """VMAS columns of ``rl_throughput.py`` (needs ``vmas`` and torch: extra ``rl-bench``).
 
-Two VMAS set-ups of the navigation task, both on CPU, both stepped with
+Two VMAS set-ups of the navigation task (on CPU unless told), both stepped with
 uniform random forces in ``[-1, 1]^2`` per agent:
 
 - ``stock``: VMAS's own ``navigation`` scenario with our sizes: 4 agents
@@ -71,7 +71,7 @@ class NavigationWithObstacles(_Navigation):
         if occupied.shape[1]:
             ok &= torch.cdist(q, occupied).min(-1).values >= self.min_distance_between_entities
         pick = ok.float().argmax(-1)
-        return q[torch.arange(batch), pick].unsqueeze(1)
+        return q[torch.arange(batch, device=q.device), pick].unsqueeze(1)
 
     def reset_world_at(self, env_index=None):
         batch = self.world.batch_dim if env_index is None else 1
@@ -108,7 +108,7 @@ class NavigationWithObstacles(_Navigation):
             place(wall, xy, rot)
 
 
-def make(variant, num_envs, n=4, seed=0):
+def make(variant, num_envs, n=4, seed=0, device="cpu"):
     """A VMAS environment of ``num_envs`` copies, reset: ``variant``
     ``"stock"`` or ``"obstacles"`` (module docstring)."""
     kw = dict(STOCK, n_agents=n)
@@ -119,21 +119,23 @@ def make(variant, num_envs, n=4, seed=0):
         kw["enforce_bounds"] = False              # the walls bound the arena
     else:
         raise ValueError(f"VMAS variant: expected 'stock' or 'obstacles', found {variant!r}")
-    env = make_env(scenario, num_envs=num_envs, device="cpu", continuous_actions=True,
+    env = make_env(scenario, num_envs=num_envs, device=device, continuous_actions=True,
                    seed=seed, **kw)
     env.reset()
     return env
 
 
-def runner(variant, E, T, n=4, threads=1):
+def runner(variant, E, T, n=4, threads=1, device="cpu"):
     """``run()`` stepping ``T`` random actions on ``E`` copies with
-    ``threads`` torch threads (set before each run)."""
-    env = make(variant, E, n)
+    ``threads`` torch threads (set before each run) on ``device``."""
+    env = make(variant, E, n, device=device)
 
     def run():
         torch.set_num_threads(threads)
         for _ in range(T):
-            env.step([torch.rand(E, 2) * 2 - 1 for _ in range(n)])
+            env.step([torch.rand(E, 2, device=device) * 2 - 1 for _ in range(n)])
+        if device != "cpu":
+            torch.cuda.synchronize()
 
     return run
 

@@ -1,22 +1,53 @@
 """Environment throughput of the navigation task: env-steps/s and agent-steps/s.
 
-Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each:
+Side by side in one process, at num_envs 1, 64 and 1024 with 4 agents each,
+60 control steps of uniform random actions per rollout:
 
 - ``avblocks``: ``rl.functional("navigation")`` (the diagram stepped by the
-  compiled engine's traced step), a jitted ``lax.scan`` of 60 control steps
-  of a fixed random policy, ``vmap``-ed over the copies;
-- ``pure JAX``: the same dynamics and task written by hand in this file (a
-  single integrator's Euler step, range rays, collision test and reward as
-  dense kernels: every ray against every edge, every pair of agents): the
-  limit without the block machinery (the diagram uses the library's
-  ``RangeSensor`` and ``Collision`` blocks, edge-grid method);
-- ``VMAS``: its ``navigation`` scenario on CPU with the same numbers of
-  environments and agents, when ``vmas`` is installed (extra ``rl-bench``;
-  it pulls torch). Otherwise the column says so.
+  compiled engine's traced step), a jitted ``lax.scan`` of the control
+  steps, ``vmap``-ed over the copies;
+- ``pure JAX``: the same dynamics and task written by hand in this file
+  (:func:`navigation_task`: a single integrator's Euler step, range rays,
+  collision test and reward as dense kernels: every ray against every
+  edge, every pair of agents): the limit without the block machinery (the
+  diagram uses the library's ``RangeSensor`` and ``Collision`` blocks,
+  edge-grid method). ``tests/benchmarks`` checks that it computes the
+  diagram's numbers;
+- ``VMAS`` (``benchmarks/rl_vmas.py``, when ``vmas`` and torch are
+  installed: extra ``rl-bench``; otherwise the columns say "not
+  installed"): its stock ``navigation`` scenario with our sizes (4 agents
+  of radius 0.1 in ``[-1.5, 1.5]^2``, 12 lidar rays of range 1.0), and the
+  same scenario with our rectangles and the arena's walls added as
+  colliding landmarks seen by the lidar (the closest like-for-like), each
+  with torch on 1 and on 2 threads (``torch.set_num_threads``).
+
+What differs between the simulations (the work per step is comparable, not
+identical):
+
+- dynamics: VMAS integrates forces (mass 1, drag 0.25, 2 physics
+  substeps per 0.1 s step) and resolves contacts with penalty forces
+  between every pair of colliding entities; ours is kinematic (a velocity
+  command, one Euler step of 0.1 s) with contact *detection* (the
+  ``Collision`` block flags a touch, nothing pushes back);
+- observation: VMAS's agent sees its position, velocity, goal offset and
+  12 lidar readings (18 numbers); ours its goal offset, scaled position,
+  12 ranges and the other agents' offsets nearest first (22 numbers);
+- reward: VMAS's shaped distance plus an agent-agent collision penalty;
+  ours progress, goal bonus, contact and closeness penalties (the
+  closeness term measures every agent against every edge);
+- stock VMAS has no obstacles and its lidar sees only agents; its arena is
+  a clamp on the positions (``enforce_bounds``), not walls;
+- VMAS steps in Python over agents and entity pairs (torch eager, float32,
+  one call per operation); ours is one compiled XLA program per rollout.
 
 Each figure: the best of ``--repeats`` timed runs after one warm-up (the
-compile excluded). Each step's observation is summed into the result
-(as a policy would read it), so XLA cannot drop the sensing.
+compile excluded), the columns timed in turn within each repeat; the
+ratio of the medians is printed too, and the load average before and
+after (the machine may be shared). Each step's observation is summed into
+the result (as a policy would read it), so XLA cannot drop the sensing;
+VMAS computes every agent's observation, reward and info in ``env.step``.
+``--xla-threads ROUNDS`` instead runs our two columns in subprocesses with
+XLA's default threads and with one thread (``XLA_FLAGS``), alternated.
 
 Run: ``python benchmarks/rl_throughput.py [--quick]``; prints a markdown
 table and writes rl_throughput.png.
@@ -107,8 +138,10 @@ def _rays(p, d, e, half, r, rmax, jnp):
     t = (ao[:, None, :, 0] * ev[:, 1] - ao[:, None, :, 1] * ev[:, 0]) / sd
     u = (ao[:, None, :, 0] * d[None, :, None, 1] - ao[:, None, :, 1] * d[None, :, None, 0]) / sd
     t = jnp.min(jnp.where((t >= 0) & (u >= 0) & (u <= 1), t, jnp.inf), -1)
-    dd = jnp.where(jnp.abs(d) < 1e-12, 1e-12, d)
-    tw = (jnp.where(d > 0, half, -half)[None] - p[:, None, :]) / dd[None]   # (n, R, 2)
+    flat = jnp.abs(d) < 1e-12                              # parallel to a wall
+    dd = jnp.where(flat, 1.0, d)
+    tw = jnp.where(flat[None], jnp.inf,
+                   (jnp.where(d > 0, half, -half)[None] - p[:, None, :]) / dd[None])
     t = jnp.minimum(t, jnp.min(jnp.maximum(tw, 0.0), -1))
     oc = p[None, :, :] - p[:, None, :]                                 # (n, m, 2)
     proj = jnp.einsum("nmk,rk->nrm", oc, d)
@@ -134,50 +167,70 @@ def _free(key, n, half, e, c, min_sep, jnp, tries=24):
     return jnp.stack(chosen)
 
 
-def pure_jax_runner(E, T, n=4):
-    """The navigation task written directly in JAX (dense kernels above)."""
-    import jax
-    import jax.numpy as jnp
-
+def navigation_task(n=4, xp=None):
+    """The navigation task written by hand: ``(step, start)`` with
+    ``step(p, g, prev, hit, a) -> (p, obs, reward, d, hit)`` (one control
+    step of 0.1 s: the single integrator's Euler step, then the task's
+    observation and reward at the new positions; ``prev`` is the distance
+    to the goal before the step, ``hit`` the episode's collision flags) and
+    ``start(key) -> (p, g)`` (JAX only). ``xp``: ``jax.numpy`` (default) or
+    NumPy; the same numbers as the diagram's step (tests/rl)."""
+    if xp is None:
+        import jax.numpy as xp
     from avblocks.scenarios.navigation import OBSTACLES
     half, r, rmax, dt = 1.5, 0.1, 1.0, 0.1
-    edges = jnp.asarray(_edges(OBSTACLES, half), jnp.float32)
+    f32 = xp.float32 if xp is not np else np.float64
+    edges = xp.asarray(_edges(OBSTACLES, half), f32)
     ang = np.linspace(-np.pi, np.pi, 12, endpoint=False)
-    dirs = jnp.asarray(np.stack([np.cos(ang), np.sin(ang)], -1), jnp.float32)
+    dirs = xp.asarray(np.stack([np.cos(ang), np.sin(ang)], -1), f32)
     j = np.arange(n - 1)[None, :]
     idx = j + (j >= np.arange(n)[:, None])
     eye = np.eye(n, dtype=bool)
 
-    def task(p, g, prev, hit):
+    def step(p, g, prev, hit, a):
+        p = p + dt * a                       # single integrator, Euler (exact here)
         rel = g - p
-        d = jnp.sqrt(jnp.sum(rel * rel, -1) + 1e-12)
-        ranges = _rays(p, dirs, edges, half, r, rmax, jnp)
+        d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
+        ranges = _rays(p, dirs, edges, half, r, rmax, xp)
         rel_o = p[idx] - p[:, None, :]
-        rel_o = jnp.take_along_axis(rel_o, jnp.argsort(jnp.sum(rel_o ** 2, -1), -1)[..., None],
-                                    axis=1).reshape(n, -1)
-        obs = jnp.concatenate([rel, p / half, ranges / rmax, rel_o], -1)
-        pair = jnp.where(eye, jnp.inf, jnp.sqrt(jnp.sum((p[:, None] - p[None]) ** 2, -1)))
-        gap_e = jnp.minimum(jnp.min(_seg_dist(p, edges, jnp), -1),
-                            jnp.min(half - jnp.abs(p), -1)) - r
-        col = (gap_e <= 0) | _inside(p, edges, jnp) | jnp.any(pair <= 2 * r, -1)
+        rel_o = xp.take_along_axis(rel_o, xp.argsort(xp.sum(rel_o ** 2, -1), -1)[..., None],
+                                   axis=1).reshape(n, -1)
+        obs = xp.concatenate([rel, p / half, ranges / rmax, rel_o], -1)
+        pair = xp.where(eye, xp.inf, xp.sqrt(xp.sum((p[:, None] - p[None]) ** 2, -1)))
+        gap_e = xp.minimum(xp.min(_seg_dist(p, edges, xp), -1),
+                           xp.min(half - xp.abs(p), -1)) - r
+        col = (gap_e <= 0) | _inside(p, edges, xp) | xp.any(pair <= 2 * r, -1)
         at = d < 0.15
-        close = jnp.sum(jnp.clip(1.0 - (pair - 2 * r) / 0.2, 0.0, 1.0), -1) + \
-            jnp.clip(1.0 - gap_e / 0.2, 0.0, 1.0)
+        close = xp.sum(xp.clip(1.0 - (pair - 2 * r) / 0.2, 0.0, 1.0), -1) + \
+            xp.clip(1.0 - gap_e / 0.2, 0.0, 1.0)
         reward = 5.0 * (prev - d) + 0.1 * at - 2.5 * col - 0.5 * close
-        return obs, reward, d, hit | col
+        return p, obs, reward, d, hit | col
+
+    def start(key):
+        import jax
+        k0, k1 = jax.random.split(key)
+        return (_free(k0, n, half, edges, 0.25, 0.5, xp),
+                _free(k1, n, half, edges, 0.25, 0.5, xp))
+
+    return step, start
+
+
+def pure_jax_runner(E, T, n=4):
+    """The navigation task written directly in JAX (:func:`navigation_task`)."""
+    import jax
+    import jax.numpy as jnp
+    step, start = navigation_task(n)
 
     def episode(key):
-        k0, k1, k2 = jax.random.split(key, 3)
-        p = _free(k0, n, half, edges, 0.25, 0.5, jnp)
-        g = _free(k1, n, half, edges, 0.25, 0.5, jnp)
+        k0, k2 = jax.random.split(key)
+        p, g = start(k0)
         prev = jnp.sqrt(jnp.sum((g - p) ** 2, -1))
         hit = jnp.zeros(n, bool)
 
         def body(c, k):
             p, prev, hit = c
             a = jax.random.uniform(k, (n, 2), minval=-1.0, maxval=1.0)
-            p = p + dt * a                       # single integrator, Euler (exact here)
-            obs, rew, d, hit = task(p, g, prev, hit)
+            p, obs, rew, d, hit = step(p, g, prev, hit, a)
             return (p, d, hit), rew.sum() + 1e-3 * obs.sum()
 
         _, rs = jax.lax.scan(body, (p, prev, hit), jax.random.split(k2, T))
@@ -188,65 +241,165 @@ def pure_jax_runner(E, T, n=4):
     return lambda: f(key).block_until_ready()
 
 
-def vmas_runner(E, T, n=4):
-    try:
-        import torch
-        import vmas
-    except ImportError:
-        return None
-    env = vmas.make_env("navigation", num_envs=E, device="cpu", continuous_actions=True,
-                        n_agents=n, seed=0)
-    env.reset()
+def vmas_runner(variant, threads, device="cpu"):
+    """A runner factory for VMAS (``benchmarks/rl_vmas.py``), or None
+    without ``vmas``/torch."""
+    def make(E, T, n=4):
+        try:
+            import torch  # noqa: F401
+            import vmas  # noqa: F401
+        except ImportError:
+            return None
+        import importlib.util
+        from pathlib import Path
+        spec = importlib.util.spec_from_file_location(
+            "rl_vmas", Path(__file__).with_name("rl_vmas.py"))
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod.runner(variant, E, T, n, threads, device)
+    return make
 
-    def run():
-        for _ in range(T):
-            acts = [torch.rand(E, 2) * 2 - 1 for _ in range(n)]
-            env.step(acts)
 
-    return run
+def columns(vmas_device="cpu"):
+    """(name, runner factory) of each column; on a GPU (``vmas_device``
+    ``"cuda"``) VMAS has one column per scenario (torch's threads do not
+    matter there)."""
+    cols = [("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner)]
+    for variant in ("stock", "obstacles"):
+        if vmas_device == "cpu":
+            cols += [(f"VMAS {variant}, {k} thread{'s' * (k > 1)}", vmas_runner(variant, k))
+                     for k in (1, 2)]
+        else:
+            cols.append((f"VMAS {variant}, {vmas_device}",
+                         vmas_runner(variant, 1, vmas_device)))
+    return cols
+
+
+def measure(E, T, repeats, cols):
+    """``{name: [seconds per run, ...]}``: one warm-up each (the compile),
+    then ``repeats`` rounds, each timing every column once in turn."""
+    fns = {}
+    for name, make in cols:
+        fn = make(E, T)
+        if fn is not None:
+            fn()
+            fns[name] = fn
+    times = {name: [] for name in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t)
+    return times
+
+
+def _fmt(v):
+    return "not installed" if v is None else f"{v:,.0f}"
+
+
+def table(rows, n):
+    vm = [c for c in rows[0] if c.startswith("VMAS")]
+    print("| num_envs | avblocks env-steps/s | agent-steps/s | pure JAX env-steps/s "
+          "| avblocks / pure JAX | " + " | ".join(f"{c} env-steps/s" for c in vm) +
+          " | avblocks / best VMAS stock | avblocks / best VMAS obstacles |")
+    print("|---:" * (7 + len(vm)) + "|")
+    for r in rows:
+        ratios = []
+        for kind in ("stock", "obstacles"):
+            v = [r[c] for c in vm if kind in c and r[c] is not None]
+            ratios.append(f"{r['avblocks'] / max(v):.1f}" if v else "-")
+        print(f"| {r['num_envs']} | {r['avblocks']:,.0f} | {r['avblocks'] * n:,.0f} | "
+              f"{r['pure JAX']:,.0f} | {r['avblocks'] / r['pure JAX']:.2f} | " +
+              " | ".join(_fmt(r[c]) for c in vm) + f" | {' | '.join(ratios)} |")
+
+
+def xla_threads(argv, rounds):
+    """Our two columns with XLA's default threads and with one thread
+    (``XLA_FLAGS``, set before jax starts: one subprocess each), alternated
+    ``rounds`` times; prints the medians of each process's best."""
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+    flag = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1"
+    res = {"default": [], "1 thread": []}
+    for _ in range(rounds):
+        for name in res:
+            env = dict(os.environ)
+            if name == "1 thread":
+                env["XLA_FLAGS"] = (env.get("XLA_FLAGS", "") + " " + flag).strip()
+            with tempfile.NamedTemporaryFile(suffix=".json") as f:
+                subprocess.run([sys.executable, __file__, *argv, "--jax-only", "--plot", "",
+                                "--json", f.name], env=env, check=True,
+                               stdout=subprocess.DEVNULL)
+                with open(f.name) as g:
+                    res[name].append(json.load(g))
+    print(f"XLA threads ({rounds} alternated processes each, medians of their best):")
+    print("| num_envs | column | default env-steps/s | 1 thread env-steps/s | 1 thread / default |")
+    print("|---:|---|---:|---:|---:|")
+    for i, row in enumerate(res["default"][0]):
+        for col in ("avblocks", "pure JAX"):
+            a = np.median([r[i][col] for r in res["default"]])
+            b = np.median([r[i][col] for r in res["1 thread"]])
+            print(f"| {row['num_envs']} | {col} | {a:,.0f} | {b:,.0f} | {b / a:.2f} |")
+    return res
 
 
 def main(argv=None):
+    import os
+    import sys
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="num_envs 1 and 64 only")
+    ap.add_argument("--sizes", type=int, nargs="+", default=None, help="num_envs values")
+    ap.add_argument("--steps", type=int, default=60, help="control steps per rollout")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--plot", default="rl_throughput.png")
+    ap.add_argument("--jax-only", action="store_true", help="no VMAS columns")
+    ap.add_argument("--vmas-device", default="cpu", help="torch device of VMAS (cpu, cuda)")
+    ap.add_argument("--json", default="", help="also write the rows here")
+    ap.add_argument("--xla-threads", type=int, default=0, metavar="ROUNDS",
+                    help="compare XLA on its default threads and on one (subprocesses)")
+    argv = sys.argv[1:] if argv is None else list(argv)
     a = ap.parse_args(argv)
-    T, n = 60, 4
-    sizes = [1, 64] if a.quick else [1, 64, 1024]
-    rows = []
+    if a.xla_threads:
+        rest = ["--sizes", *map(str, a.sizes or [1, 64, 1024]), "--steps", str(a.steps),
+                "--repeats", str(a.repeats)]
+        return xla_threads(rest, a.xla_threads)
+    T, n = a.steps, 4
+    sizes = a.sizes or ([1, 64] if a.quick else [1, 64, 1024])
+    cols = columns(a.vmas_device)[:2 if a.jax_only else None]
+    print(f"load average before: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")
+    rows, medians = [], []
     for E in sizes:
-        row = {"num_envs": E}
-        for name, make in (("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner),
-                           ("VMAS", vmas_runner)):
-            fn = make(E, T)
-            if fn is None:
-                row[name] = None
-                continue
-            s = best_of(fn, a.repeats)
-            row[name] = E * T / s
-        rows.append(row)
-    print("| num_envs | avblocks env-steps/s | agent-steps/s | pure JAX env-steps/s "
-          "| avblocks / pure JAX | VMAS env-steps/s |")
-    print("|---:|---:|---:|---:|---:|---:|")
-    for r in rows:
-        v = "not installed" if r["VMAS"] is None else f"{r['VMAS']:,.0f}"
-        print(f"| {r['num_envs']} | {r['avblocks']:,.0f} | {r['avblocks'] * n:,.0f} | "
-              f"{r['pure JAX']:,.0f} | {r['avblocks'] / r['pure JAX']:.2f} | {v} |")
+        times = measure(E, T, a.repeats, cols)
+        rows.append({"num_envs": E, **{c: E * T / min(times[c]) if c in times else None
+                                       for c, _ in cols}})
+        medians.append({c: E * T / np.median(times[c]) for c in times})
+    print(f"load average after: {os.getloadavg()[0]:.2f}")
+    print(f"best of {a.repeats} alternated runs after a warm-up, {T} steps, {n} agents per env:")
+    table(rows, n)
+    print("avblocks / pure JAX, ratio of the medians: " + ", ".join(
+        f"{m['avblocks'] / m['pure JAX']:.2f} at {r['num_envs']}"
+        for r, m in zip(rows, medians)))
+    if a.json:
+        import json
+        with open(a.json, "w") as f:
+            json.dump(rows, f)
     if a.plot:
         import matplotlib
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-        fig, ax = plt.subplots(figsize=(6, 4))
-        for name, style in (("avblocks", "o-"), ("pure JAX", "s--"), ("VMAS", "^:")):
+        fig, ax = plt.subplots(figsize=(6.5, 4.2))
+        for (name, _), style in zip(cols, ("o-", "s--", "^:", "v:", "D-.", "x-.")):
             ys = [r[name] for r in rows]
             if all(y is not None for y in ys):
                 ax.loglog(sizes, ys, style, label=name)
-        ax.set_xlabel("num_envs (4 agents each)")
+        ax.set_xlabel(f"num_envs ({n} agents each)")
         ax.set_ylabel("env-steps / s")
-        ax.set_title("navigation task throughput, CPU")
+        ax.set_title("navigation task throughput, CPU (2 cores)")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize=8)
         fig.tight_layout()
         fig.savefig(a.plot, dpi=110)
         print(f"wrote {a.plot}")

@@ -206,3 +206,28 @@ def test_navigation_grid_rays_equal_shapely_rays_in_float64():
         a = cast_rays(s.world, p, s.angles, 1.0, 0.1)
         b = cast_rays_grid(s.edges, s.search, p, s.angles, 1.0, 0.1, np)
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-9)
+
+
+def test_navigation_reward_weights_first_hit_and_success_bonus():
+    """``first_hit`` costs once, at the first contact of an episode;
+    ``success_bonus`` pays every step an agent is at its goal with no
+    contact so far. Other terms switched off, so each is seen alone."""
+    from avblocks.core.errors import ParameterError
+    task = navigation.NavigationTask(3, navigation.arena(), first_hit=3.0, success_bonus=0.7,
+                                     progress=0.0, collision=0.0, proximity=0.0,
+                                     goal_bonus=0.0)
+    p = np.array([[-1.0, 1.2], [0.6, 0.6], [1.0, 0.2]])
+    g = p + np.array([[0.05, 0.0], [0.5, 0.0], [0.1, 0.0]])    # agents 0, 2 at their goal
+    u = {"position": p, "goals": g, "ranges": np.ones((3, 12)),
+         "contact": np.array([False, True, False])}
+    x = {"prev": np.zeros(3), "hit": np.array([False, False, True])}
+    out = task.output(0.0, x, u, np)
+    # 0: at goal, clean -> bonus; 1: first contact -> penalty; 2: at goal but hit before
+    np.testing.assert_allclose(out["reward"], [0.7, -3.0, 0.0])
+    x2 = task.update(0.0, x, u, np)
+    out2 = task.output(0.1, x2, u, np)
+    np.testing.assert_allclose(out2["reward"], [0.7, 0.0, 0.0])   # the contact goes on
+    d, _ = navigation.make_diagram(weights={"first_hit": 4.0})
+    assert float(d.build().blocks[d.build().index("task")].first_hit) == 4.0
+    with pytest.raises(ParameterError, match="first_hitt"):
+        navigation.make_diagram(weights={"first_hitt": 1.0})

@@ -64,3 +64,32 @@ def test_gradient_through_a_stopped_agent_is_finite():
     v = jnp.array([[3.0, 4.0]])
     np.testing.assert_allclose(np.asarray(clip_norm(v, jnp.array([1.0]), jnp)), [[0.6, 0.8]],
                                rtol=1e-6)
+
+
+def test_observation_standardization_folds_into_the_first_layer():
+    """Running statistics merge like the statistics of the concatenated
+    batches, and the folded weights on raw observations give what the
+    trained network gives on standardized ones (so the saved Policy needs
+    no extra block)."""
+    import jax.numpy as jnp
+
+    from avblocks.controllers.policy import mlp, mlp_init
+    rng = np.random.default_rng(0)
+    a = rng.normal(2.0, 3.0, size=(50, 5))
+    b = rng.normal(-1.0, 0.5, size=(70, 5))
+    nrm = {"mean": jnp.asarray(a.mean(0)), "var": jnp.asarray(a.var(0)),
+           "count": jnp.asarray(50.0)}
+    m = ppo._merge_stats(nrm, jnp.asarray(b), jnp)
+    both = np.concatenate([a, b])
+    np.testing.assert_allclose(np.asarray(m["mean"]), both.mean(0), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(m["var"]), both.var(0), rtol=1e-4)
+    assert float(m["count"]) == 120.0
+    w = mlp_init([5, 8, 2], seed=3, gain_last=1.0)
+    st = {"mean": both.mean(0), "var": both.var(0)}
+    z = (both - st["mean"]) / np.sqrt(st["var"] + 1e-8)
+    np.testing.assert_allclose(mlp(ppo.fold_stats(w, st), both), mlp(w, z), atol=1e-10)
+    # a critic with one more input (the time feature) keeps that row
+    wc = mlp_init([6, 8, 1], seed=4, gain_last=1.0)
+    x6 = np.concatenate([both, rng.uniform(size=(120, 1))], axis=1)
+    z6 = np.concatenate([z, x6[:, 5:]], axis=1)
+    np.testing.assert_allclose(mlp(ppo.fold_stats(wc, st, 5), x6), mlp(wc, z6), atol=1e-10)

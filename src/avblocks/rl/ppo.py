@@ -64,6 +64,8 @@ class Config:
     clip_separately: bool = False  # max_grad_norm per network (actor, critic)
     reward_scale: float = 1.0  # rewards times this in the losses (not in the curve)
     time_feature: bool = False  # the critic also sees the episode's elapsed fraction
+    normalize_obs: bool = False  # standardize observations by running mean/var
+    #                              (folded into the first layer of the result)
 
 
 @dataclass
@@ -96,14 +98,15 @@ def make_update(env, cfg, opt):
     step = jax.vmap(env.step_env, in_axes=(0, 0, None))
     act = cfg.activation
 
-    def policy(p, obs):
-        return mlp(p["actor"], obs, jnp, act), p["log_std"]
+    def policy(p, obs, nrm):
+        return mlp(p["actor"], _standardize(obs, nrm, jnp), jnp, act), p["log_std"]
 
-    def value(p, obs, tf):
+    def value(p, obs, tf, nrm):
         # a fixed horizon: what is left to earn depends on the time left, which
         # the agents' observation does not say (Pardo et al. 2018, "Time limits
         # in reinforcement learning"); the critic alone sees it (the actor, the
         # deployed Policy, does not)
+        obs = _standardize(obs, nrm, jnp)
         x = jnp.concatenate([obs, tf], axis=-1) if cfg.time_feature else obs
         return mlp(p["critic"], x, jnp, act)[..., 0]
 
@@ -111,18 +114,18 @@ def make_update(env, cfg, opt):
         z = (a - mean) / jnp.exp(log_std)
         return jnp.sum(-0.5 * z * z - log_std - 0.5 * jnp.log(2 * jnp.pi), axis=-1)
 
-    def rollout(p, key):
+    def rollout(p, key, nrm):
         k0, k1 = jax.random.split(key)
         state, obs = reset(jax.random.split(k0, E), None)
 
         def body(carry, k):
             state, obs, alive = carry
-            mean, log_std = policy(p, obs)
+            mean, log_std = policy(p, obs, nrm)
             a = mean + jnp.exp(log_std) * jax.random.normal(k, mean.shape)
             lp = logprob(mean, log_std, a)
             tf = jnp.broadcast_to((state.steps / T).astype(jnp.float32)[:, None, None],
                                   (E, N, 1))
-            v = value(p, obs, tf)
+            v = value(p, obs, tf, nrm)
             state, obs2, r, d, info = step(state, jnp.clip(a, lo, hi), None)
             term = info["terminated"][:, None] & alive
             succ = info.get("success", jnp.zeros((E, N), bool)).reshape(E, -1)
@@ -135,7 +138,7 @@ def make_update(env, cfg, opt):
         (state, obs, alive), tr = jax.lax.scan(body, (state, obs, alive0),
                                                jax.random.split(k1, T))
         tr["alive"] = jnp.broadcast_to(tr["alive"], tr["r"].shape)
-        return tr, value(p, obs, jnp.ones(obs.shape[:-1] + (1,), jnp.float32))
+        return tr, value(p, obs, jnp.ones(obs.shape[:-1] + (1,), jnp.float32), nrm)
 
     def gae(tr, last_v):
         # episodes end at T (truncation treated as the end: fixed horizon)
@@ -153,8 +156,8 @@ def make_update(env, cfg, opt):
                               (tr["r"], tr["v"], tr["term"], tr["alive"]), reverse=True)
         return adv, adv + tr["v"]
 
-    def loss(p, b):
-        mean, log_std = policy(p, b["obs"])
+    def loss(p, b, nrm):
+        mean, log_std = policy(p, b["obs"], nrm)
         lp = logprob(mean, log_std, b["a"])
         ratio = jnp.exp(lp - b["lp"])
         adv = b["adv"]
@@ -164,7 +167,7 @@ def make_update(env, cfg, opt):
         sd = jnp.sqrt(jnp.sum(w * (adv - mu) ** 2) / wsum)
         adv = (adv - mu) / (sd + 1e-8)
         pg = -jnp.minimum(ratio * adv, jnp.clip(ratio, 1 - cfg.clip, 1 + cfg.clip) * adv)
-        v = value(p, b["obs"], b["tf"])
+        v = value(p, b["obs"], b["tf"], nrm)
         vl = 0.5 * (v - b["ret"]) ** 2
         ent = jnp.sum(log_std + 0.5 * jnp.log(2 * jnp.pi * jnp.e))
         total = jnp.sum((pg + cfg.vf_coef * vl) * w) / wsum - cfg.ent_coef * ent
@@ -173,9 +176,9 @@ def make_update(env, cfg, opt):
     grad = jax.grad(loss)
 
     def update(carry):
-        p, opt_state, key = carry
+        p, opt_state, key, nrm = carry
         key, kr, ks = jax.random.split(key, 3)
-        tr, last_v = rollout(p, kr)
+        tr, last_v = rollout(p, kr, nrm)
         adv, ret = gae({**tr, "r": tr["r"] * cfg.reward_scale}, last_v)
         flat = {k: tr[k].reshape((T * E * N,) + tr[k].shape[3:])
                 for k in ("obs", "tf", "a", "lp", "alive")}
@@ -192,7 +195,7 @@ def make_update(env, cfg, opt):
 
             def mini(c, b):
                 p, opt_state = c
-                g = grad(p, b)
+                g = grad(p, b, nrm)
                 if cfg.clip_separately:
                     # the critic's squared error would otherwise dominate one
                     # global norm and scale the actor's step down with it
@@ -214,19 +217,70 @@ def make_update(env, cfg, opt):
         last = tr["succ"][-1]
         metrics = {"return": ep_ret, "success": jnp.mean(last.astype(jnp.float32)),
                    "alive": alive.mean()}
-        return (p, opt_state, key), metrics
+        if cfg.normalize_obs:
+            nrm = _merge_stats(nrm, flat["obs"], jnp)
+        return (p, opt_state, key, nrm), metrics
 
     return jax.jit(update)
 
 
+def _standardize(obs, nrm, xp):
+    if nrm is None:
+        return obs
+    return (obs - nrm["mean"]) / xp.sqrt(nrm["var"] + 1e-8)
+
+
+def _merge_stats(nrm, x, xp):
+    """Running mean/variance (count-weighted merge of the batch ``x``;
+    Chan et al. 1979, "Updating formulae and a pairwise algorithm for
+    computing sample variances")."""
+    n = xp.asarray(x.shape[0], xp.float32)
+    m, v = xp.mean(x, axis=0), xp.var(x, axis=0)
+    c = nrm["count"]
+    tot = c + n
+    delta = m - nrm["mean"]
+    mean = nrm["mean"] + delta * n / tot
+    var = (nrm["var"] * c + v * n + delta * delta * c * n / tot) / tot
+    return {"mean": mean, "var": var, "count": tot}
+
+
+def init_stats(env, num_envs, seed=0):
+    """Observation statistics of ``num_envs`` fresh resets (the first
+    update's standardization)."""
+    jax = _engine.jax()
+    jnp = jax.numpy
+    keys = jax.random.split(jax.random.PRNGKey(seed + 7), num_envs)
+    _, obs = jax.vmap(env.reset, in_axes=(0, None))(keys, None)
+    x = obs.reshape(-1, obs.shape[-1])
+    return {"mean": jnp.mean(x, 0), "var": jnp.var(x, 0),
+            "count": jnp.asarray(x.shape[0], jnp.float32)}
+
+
+def fold_stats(w, nrm, rows=None):
+    """MLP weights ``w`` that take raw observations: the standardization
+    ``(obs - mean) / std`` folded into the first layer (``rows``: how many
+    input rows are observations; the rest, e.g. a time feature, unchanged)."""
+    w = {k: np.asarray(v, np.float64) for k, v in w.items()}
+    if nrm is None:
+        return w
+    mean = np.asarray(nrm["mean"], np.float64)
+    std = np.sqrt(np.asarray(nrm["var"], np.float64) + 1e-8)
+    k = mean.size if rows is None else rows
+    w0 = w["w0"].copy()
+    w0[:k] = w0[:k] / std[:, None]
+    w["b0"] = w["b0"] - (mean / std) @ w["w0"][:k]
+    w["w0"] = w0
+    return w
+
+
 def _set_lr(carry, lr, plain):
-    p, opt_state, key = carry
+    p, opt_state, key, nrm = carry
     inner = opt_state if plain else opt_state[1]
     hp = dict(inner.hyperparams)
     hp["learning_rate"] = np.asarray(lr, np.float32)
     inner = inner._replace(hyperparams=hp)
     opt_state = inner if plain else (opt_state[0], inner)
-    return p, opt_state, key
+    return p, opt_state, key, nrm
 
 
 def _clip(tree, max_norm):
@@ -265,7 +319,8 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     opt = adam if cfg.clip_separately else optax.chain(
         optax.clip_by_global_norm(cfg.max_grad_norm), adam)
     p = init_params(env, cfg, seed)
-    carry = (p, opt.init(p), jax.random.PRNGKey(seed))
+    nrm = init_stats(env, cfg.num_envs, seed) if cfg.normalize_obs else None
+    carry = (p, opt.init(p), jax.random.PRNGKey(seed), nrm)
     update = make_update(env, cfg, opt)
     curve = {"return": [], "success": [], "env_steps": [], "wall_s": []}
     per = cfg.num_envs * env.max_steps
@@ -285,9 +340,10 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
             callback(u, m)
         if time_budget_s is not None and curve["wall_s"][-1] > time_budget_s:
             break
-    p = carry[0]
-    return Result(_to_np(p["actor"]), _to_np(p["critic"]), np.asarray(p["log_std"]),
-                  curve, cfg)
+    p, nrm = carry[0], carry[3]
+    return Result(fold_stats(_to_np(p["actor"]), nrm),
+                  fold_stats(_to_np(p["critic"]), nrm, env.obs_dim),
+                  np.asarray(p["log_std"]), curve, cfg)
 
 
 def evaluate(env, actor, episodes=100, seed=1234, activation="tanh", output="clip"):

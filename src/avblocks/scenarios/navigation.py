@@ -111,7 +111,7 @@ class NavigationTask(Block):
     ----------
     world : World, the obstacles and walls (their edges: the closeness term).
     half, radius, goal_radius, max_range, progress, collision, proximity,
-    margin, goal_bonus : numeric (module docstring).
+    margin, goal_bonus, first_hit, success_bonus : numeric (module docstring).
     rays : int (structural), number of range rays.
     sort_others : bool (structural), other agents nearest first.
     observe_velocity : bool (structural), also observe the other agents'
@@ -126,7 +126,8 @@ class NavigationTask(Block):
 
     def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
                  max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
-                 goal_bonus=0.1, sort_others=True, observe_velocity=False):
+                 goal_bonus=0.1, first_hit=0.0, success_bonus=0.0, sort_others=True,
+                 observe_velocity=False):
         super().__init__()
         self.n = n
         self.rays = int(rays)
@@ -142,6 +143,8 @@ class NavigationTask(Block):
         self.declare_parameter("proximity", proximity, bounds=(0, None))
         self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
         self.declare_parameter("goal_bonus", goal_bonus, bounds=(0, None))
+        self.declare_parameter("first_hit", first_hit, bounds=(0, None))
+        self.declare_parameter("success_bonus", success_bonus, bounds=(0, None))
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_input("ranges", (n, self.rays), unit="m")
@@ -191,7 +194,9 @@ class NavigationTask(Block):
                              axis=-1)
         at = d < self.goal_radius
         success = at & ~(x["hit"] | col)
+        first = col & ~x["hit"]
         reward = (self.progress * (x["prev"] - d) + self.goal_bonus * at
+                  + self.success_bonus * success - self.first_hit * first
                   - self.collision * col - self.proximity * self._closeness(p, xp))
         return {"obs": obs, "reward": reward, "done": xp.zeros(d.shape, dtype=bool),
                 "collision": col, "at_goal": at, "success": success}
@@ -204,6 +209,22 @@ class NavigationTask(Block):
         if self.observe_velocity:
             new["vel"] = u["velocity"]
         return new
+
+
+#: The reward's weights (the task block's parameters) and their defaults.
+REWARD = {"progress": 5.0, "goal_bonus": 0.1, "success_bonus": 0.0, "collision": 2.5,
+          "first_hit": 0.0, "proximity": 0.5, "margin": 0.2}
+
+
+def _weights(weights):
+    w = dict(REWARD)
+    for k, v in (weights or {}).items():
+        if k not in REWARD:
+            from avblocks.core.errors import ParameterError
+            raise ParameterError("unknown reward weight", block="task", param=str(k),
+                                 expected=sorted(REWARD), found=k)
+        w[k] = float(v)
+    return w
 
 
 def scripted_law(edges, half, speed, radius):
@@ -270,15 +291,19 @@ def _draw(n, half, grid, seed, clearance):
 def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
                  max_range=1.0, clearance=0.25, obstacles=OBSTACLES, controller="scripted",
                  seed=1, t_final=6.0, dt=0.1, sort_others=True, observe_velocity=False,
-                 vehicles=None):
+                 vehicles=None, weights=None):
     """The navigation diagram and its simulation settings (module docstring).
 
     ``vehicles``: optional ``vehicles(diagram, p0) -> (position, velocity)``
     adding other vehicles than the single integrators (``"fleet"``): the
     output port giving the (N, 2) positions the task senses from and the
     input port taking the (N, 2) velocity commands [m/s] (e.g. MuJoCo ground
-    robots behind an off-axis point map). Everything else is unchanged."""
+    robots behind an off-axis point map). Everything else is unchanged.
+
+    ``weights``: reward weights of the task block (:data:`REWARD`, e.g.
+    ``{"first_hit": 5.0}``); the others keep their defaults."""
     n, h, r = int(agents), float(half), float(radius)
+    w = _weights(weights)
     world = arena(h, obstacles)
     p0, goals = _draw(n, h, EdgeGrid(world, float(clearance)), seed, float(clearance))
     d = Diagram("navigation")
@@ -295,7 +320,7 @@ def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, ra
                                 goal_radius=float(goal_radius),
                                 max_range=float(max_range),
                                 sort_others=bool(sort_others),
-                                observe_velocity=bool(observe_velocity)), name="task")
+                                observe_velocity=bool(observe_velocity), **w), name="task")
     task.block.set_initial("prev", np.linalg.norm(goals - p0, axis=1))
     for b in (lidar, contact, task):
         d.connect(position, b.position)
@@ -322,13 +347,15 @@ def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, ra
 
 def rl_task(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
             max_range=1.0, clearance=0.25, obstacles=OBSTACLES, sort_others=True,
-            observe_velocity=False):
-    """The learning task (module docstring): settings for :class:`avblocks.rl.Task`."""
+            observe_velocity=False, weights=None):
+    """The learning task (module docstring): settings for :class:`avblocks.rl.Task`.
+    ``weights``: reward weights (:data:`REWARD`) as :func:`make_diagram`."""
     n, h = int(agents), float(half)
     d, sim = make_diagram(agents=n, half=h, speed=speed, radius=radius,
                           goal_radius=goal_radius, rays=rays, max_range=max_range,
                           clearance=clearance, obstacles=obstacles, controller="action",
-                          sort_others=sort_others, observe_velocity=observe_velocity)
+                          sort_others=sort_others, observe_velocity=observe_velocity,
+                          weights=weights)
     c = float(clearance)
     grid = EdgeGrid(arena(h, obstacles), c)
 

@@ -19,11 +19,11 @@ from .errors import ParameterError, SimulationError
 from .params import integer
 from .results import Results
 from .runguard import (
-    finite_number,
-    log_every_that_fits,
     _param_binding,
     _progress_wanted,
     default_log,
+    finite_number,
+    log_every_that_fits,
     progress_bar,
     whole_steps,
 )

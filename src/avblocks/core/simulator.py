@@ -47,11 +47,11 @@ from .diagram import CompiledDiagram, Diagram
 from .engine import Engine
 from .errors import AvError, ParameterError, ShapeError, SimulationError
 from .runguard import (  # noqa: F401  (default_log, initial_values: importable here as before)
-    finite_number,
-    log_every_that_fits,
     _seed,
     default_log,
+    finite_number,
     initial_values,
+    log_every_that_fits,
 )
 from .solvers import make_solver
 

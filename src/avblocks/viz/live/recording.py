@@ -19,7 +19,7 @@ import numpy as np
 from ...core.diagram import PortRef
 from ...core.errors import ParameterError
 from ...core.results import Results
-from ...core.runguard import log_every_that_fits, default_log
+from ...core.runguard import default_log, log_every_that_fits
 
 
 class Recording:

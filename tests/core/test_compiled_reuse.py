@@ -121,3 +121,12 @@ def test_a_block_added_is_seen_also_inside_a_subsystem(compiles):
     assert "sub.j.x" in got.final_state
     np.testing.assert_allclose(got.final_state["sub.j.x"],
                                av.simulate(d, **KW).final_state["sub.j.x"], atol=1e-10)
+
+
+def test_log_given_as_an_iterator_is_read_once(compiles):
+    d = fleet_diagram(seed=3)
+    kw = {k: v for k, v in KW.items() if k != "log"}
+    a = av.simulate(d, backend="jax", log=iter(["fleet.pose"]), **kw)
+    b = av.simulate(d, backend="jax", log=iter(["fleet.pose"]), **kw)
+    assert len(compiles) == 1
+    np.testing.assert_array_equal(a["fleet.pose"], b["fleet.pose"])

@@ -214,6 +214,8 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
     if realtime is not None:
         raise ParameterError("real-time pacing needs the NumPy backend", param="realtime",
                              hint="use backend='numpy' to pace a run to the clock")
+    if log is not None and not isinstance(log, (str, PortRef)):
+        log = list(log)                 # read once (it may be an iterator)
     settings = _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite) \
         if backend == "jax" else None
     runner = _last_runner(diagram, settings)

@@ -121,3 +121,43 @@ def test_a_block_added_is_seen_also_inside_a_subsystem(compiles):
     assert "sub.j.x" in got.final_state
     np.testing.assert_allclose(got.final_state["sub.j.x"],
                                av.simulate(d, **KW).final_state["sub.j.x"], atol=1e-10)
+
+
+def test_log_given_as_an_iterator_is_read_once(compiles):
+    d = fleet_diagram(seed=3)
+    kw = {k: v for k, v in KW.items() if k != "log"}
+    a = av.simulate(d, backend="jax", log=iter(["fleet.pose"]), **kw)
+    b = av.simulate(d, backend="jax", log=iter(["fleet.pose"]), **kw)
+    assert len(compiles) == 1
+    np.testing.assert_array_equal(a["fleet.pose"], b["fleet.pose"])
+
+
+def test_snapshot_sees_what_the_structure_key_sees():
+    """The quick test before the key: True only when the key is the same."""
+    import dataclasses
+
+    from avblocks.core.compiled.structure import Snapshot, diagram_key
+
+    @dataclasses.dataclass(frozen=True)
+    class Rec:
+        items: list
+
+    d = fleet_diagram(seed=4)
+    cd = d.build()
+    law = cd.blocks[cd.index("law")]
+    law.table = Rec([1, 2])                         # frozen, but not plain
+
+    def changed(change):
+        snap, key = Snapshot(cd), diagram_key(cd)
+        change()
+        same = snap.matches()
+        assert not same or diagram_key(cd) == key   # never True on another key
+        return not same
+
+    assert not changed(lambda: None)
+    assert not changed(lambda: law.set_parameter("k", 2.5))     # a value: data
+    assert changed(lambda: law.goal.__setitem__((0, 0), 9.0))  # array in place
+    assert changed(lambda: law.table.items.append(3))         # nested, in place
+    assert changed(lambda: setattr(law, "extra", 1))
+    assert changed(lambda: law.redeclare_output("cmd", (3, 2), "float32"))
+    assert changed(lambda: law._feedthrough.discard("pose"))

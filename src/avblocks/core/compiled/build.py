@@ -15,7 +15,7 @@ from . import devices as _devices
 from . import plans as _plans
 from .program import Program, get_program
 from .runner import Runner, _solver_key
-from .structure import diagram_key
+from .structure import Snapshot, diagram_key
 
 _DTYPES = {"float64": True, "float32": False}
 _UNTRACEABLE_HINT = ("run this diagram with backend='numpy' (simulate(..., "
@@ -168,7 +168,8 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
 
 
 #: Diagram -> the runner its last ``simulate(backend="jax")`` made, with what
-#: it was made from: ``(settings, wiring stamp, structure key, runner)``
+#: it was made from: ``(settings, wiring stamp, structure key, snapshot of
+#: the blocks, runner)``
 _LAST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
@@ -190,15 +191,21 @@ def _last_runner(diagram, settings):
     """The runner of ``diagram``'s previous compiled run when nothing it was
     made from changed: the same settings, no wiring change since (the
     diagram's stamp) and the same structure key (every block's structural
-    attributes, searched afresh: an in-place change of any is seen).
+    attributes, looked at afresh: an in-place change of any is seen; a
+    :class:`~.structure.Snapshot` says quickly that nothing changed, else
+    the key is worked out).
     Parameter values and initial states are read by the runner at each call."""
     last = _LAST.get(diagram) if isinstance(diagram, Diagram) else None
     if last is None or settings is None:
         return None
-    was, stamp, struct, runner = last
-    if was != settings or stamp != diagram._stamp or \
-            diagram_key(runner.compiled) != struct:
+    was, stamp, struct, snap, runner = last
+    if was != settings or stamp != diagram._stamp:
         return None
+    if not snap.matches():
+        # something changed: structure, or only values (a parameter's bounds)
+        if diagram_key(runner.compiled) != struct:
+            return None
+        _LAST[diagram] = (was, stamp, struct, Snapshot(runner.compiled), runner)
     return runner
 
 
@@ -214,6 +221,8 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
     if realtime is not None:
         raise ParameterError("real-time pacing needs the NumPy backend", param="realtime",
                              hint="use backend='numpy' to pace a run to the clock")
+    if log is not None and not isinstance(log, (str, PortRef)):
+        log = list(log)                 # read once (it may be an iterator)
     settings = _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite) \
         if backend == "jax" else None
     runner = _last_runner(diagram, settings)
@@ -222,7 +231,8 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
                          t0=t0, seed=seed, backend=backend, dtype=dtype,
                          check_finite=check_finite)
         if settings is not None and isinstance(diagram, Diagram):
-            _LAST[diagram] = (settings, diagram._stamp, runner.struct, runner)
+            _LAST[diagram] = (settings, diagram._stamp, runner.struct,
+                              Snapshot(runner.compiled), runner)
     p = runner.program
     need = runner.log_bytes
     if need > max_log_bytes:

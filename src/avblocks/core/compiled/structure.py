@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import operator
 import types
 import weakref
 
@@ -171,3 +172,75 @@ def diagram_key(compiled):
     return (tuple(compiled.names),
             tuple(tuple(sorted(s.items())) for s in compiled.sources),
             tuple(block_fingerprint(b) for b in compiled.blocks))
+
+
+
+def _stable(v):
+    """True for a value that can never change in place: plain values,
+    tuples of them, frozen dataclasses of plain values."""
+    if _plain(v):
+        return True
+    return bool(_IS_FROZEN.get(type(v))) and _frozen_fp(v, 1)[0] == "frozen"
+
+
+def _token(k, v, params):
+    """``(kind, value)``: what must stay the same for attribute ``k`` of a
+    block (value ``v``) to keep its part of :func:`block_fingerprint`."""
+    t = type(v)
+    if k in params:
+        return ("shape", np.shape(v))
+    if k == "_params":
+        return ("specs", tuple((n, p.shape) for n, p in v.items()))
+    if k == "_init":
+        return ("init", tuple((n, np.asarray(a).dtype.str, np.shape(a))
+                              for n, a in v.items()))
+    if _stable(v):
+        return ("same", v)                          # the same object
+    if t is np.ndarray and v.dtype != object:
+        return ("array", _array_fp(v))
+    if t is dict and all(_stable(x) for x in v.values()):
+        return ("items", (tuple(v), tuple(v.values())))
+    if (t is set or t is frozenset) and all(type(x) is str for x in v):
+        return ("set", frozenset(v))
+    return ("fp", fingerprint(v, 1))
+
+
+def _same_token(kind, tok, k, now, params):
+    if kind == "same":
+        return now is tok
+    if kind == "array":
+        return type(now) is np.ndarray and _array_fp(now) == tok
+    if kind == "items":
+        return (type(now) is dict and tuple(now) == tok[0]
+                and all(map(operator.is_, now.values(), tok[1])))
+    if kind == "set":
+        return type(now) in (set, frozenset) and now == tok
+    return _token(k, now, params) == (kind, tok)
+
+
+class Snapshot:
+    """A quick test that a compiled diagram's blocks still have the
+    structure they had when it was taken (the same :func:`diagram_key`):
+    attributes that cannot change in place are compared by identity, arrays
+    by content, dicts of unchangeable values by their items, anything else
+    by its fingerprint. ``matches()`` True implies the same key; False only
+    means "work the key out" (a parameter's bounds changed, say)."""
+
+    def __init__(self, compiled):
+        self.blocks = []
+        for b in compiled.blocks:
+            attrs = vars(b)
+            toks = [(k, *_token(k, v, b._params)) for k, v in attrs.items()
+                    if not k.endswith("_cache")]
+            self.blocks.append((b, type(b), tuple(attrs), toks))
+
+    def matches(self):
+        for b, cls, keys, toks in self.blocks:
+            attrs = vars(b)
+            if type(b) is not cls or tuple(attrs) != keys:
+                return False
+            params = b._params
+            for k, kind, tok in toks:
+                if not _same_token(kind, tok, k, attrs[k], params):
+                    return False
+        return True

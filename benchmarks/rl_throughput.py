@@ -299,10 +299,12 @@ def _fmt(v):
 
 def table(rows, n):
     vm = [c for c in rows[0] if c.startswith("VMAS")]
-    print("| num_envs | avblocks env-steps/s | agent-steps/s | pure JAX env-steps/s "
-          "| avblocks / pure JAX | " + " | ".join(f"{c} env-steps/s" for c in vm) +
-          " | avblocks / best VMAS stock | avblocks / best VMAS obstacles |")
-    print("|---:" * (7 + len(vm)) + "|")
+    extra = [f"{c} env-steps/s" for c in vm]
+    if vm:
+        extra += ["avblocks / best VMAS stock", "avblocks / best VMAS obstacles"]
+    print("| " + " | ".join(["num_envs", "avblocks env-steps/s", "agent-steps/s",
+                             "pure JAX env-steps/s", "avblocks / pure JAX", *extra]) + " |")
+    print("|---:" * (5 + len(extra)) + "|")
     for r in rows:
         ratios = []
         for kind in ("stock", "obstacles"):
@@ -310,7 +312,8 @@ def table(rows, n):
             ratios.append(f"{r['avblocks'] / max(v):.1f}" if v else "-")
         print(f"| {r['num_envs']} | {r['avblocks']:,.0f} | {r['avblocks'] * n:,.0f} | "
               f"{r['pure JAX']:,.0f} | {r['avblocks'] / r['pure JAX']:.2f} | " +
-              " | ".join(_fmt(r[c]) for c in vm) + f" | {' | '.join(ratios)} |")
+              "".join(f"{_fmt(r[c])} | " for c in vm) +
+              ("".join(f"{x} | " for x in ratios) if vm else ""))
 
 
 def xla_threads(argv, rounds):

@@ -168,7 +168,7 @@ def jax_loop():
     ``lax.scan`` (compiled with avblocks' XLA options): the floor of what a
     compiled avblocks run of W1 can reach."""
     from avblocks.core.compiled import require_jax
-    from avblocks.core.compiled.program import compiler_options
+    from avblocks.core.compiled.program import compile_lowered
     jax = require_jax()
     jnp = jax.numpy
 
@@ -196,8 +196,8 @@ def jax_loop():
         with jax.enable_x64(True):
             key = (n, steps)
             if key not in cache:
-                cache[key] = jax.jit(run_, static_argnums=2).lower(
-                    p0, goal, steps).compile(compiler_options())
+                cache[key] = compile_lowered(jax.jit(run_, static_argnums=2).lower(
+                    p0, goal, steps))
             return jax.block_until_ready(cache[key](p0, goal))
     return run
 

@@ -76,9 +76,30 @@ def compiler_options() -> dict:
     emitters recompute a fused producer for every column of an (N, k)
     result, which on the W1 benchmark made a step 1.5-2.5x slower
     (benchmarks/scaling.py --backend jax; docs/compiled.md)."""
-    if _jax.jax().default_backend() == "cpu":
+    if _jax.jax().default_backend() == "cpu" and _OPTIONS_OK["cpu"]:
         return {"xla_cpu_use_fusion_emitters": False}
     return {}
+
+
+# Whether this jaxlib's CPU compiler still knows the options above (newer
+# XLA releases dropped the flag with the classic emitters: JAX 0.11 answers
+# "No such compile option"). Learnt at the first compile of the process.
+_OPTIONS_OK = {"cpu": True}
+
+
+def compile_lowered(lowered):
+    """``lowered.compile(compiler_options())``, falling back to XLA's own
+    defaults (once per process) where this jaxlib rejects an option."""
+    opts = compiler_options()
+    if not opts:
+        return lowered.compile()
+    try:
+        return lowered.compile(opts)
+    except Exception as e:      # jax.errors.JaxRuntimeError: INVALID_ARGUMENT
+        if "No such compile option" not in str(e):
+            raise
+        _OPTIONS_OK["cpu"] = False
+        return lowered.compile()
 
 
 def get_program(key, factory):
@@ -286,7 +307,7 @@ class Program:
                 self._rebind(compiled)
             t = time.perf_counter()
             with _jax.x64(self.x64):
-                exe = jax.jit(build()).lower(*args).compile(compiler_options())
+                exe = compile_lowered(jax.jit(build()).lower(*args))
             spent = time.perf_counter() - t
         with self._lock:
             self._exe[key] = exe

@@ -400,7 +400,11 @@ def main(argv=None):
                 ax.loglog(sizes, ys, style, label=name)
         ax.set_xlabel(f"num_envs ({n} agents each)")
         ax.set_ylabel("env-steps / s")
-        ax.set_title("navigation task throughput, CPU (2 cores)")
+        import jax
+        dev = jax.devices()[0]
+        where = (f"CPU ({os.cpu_count()} cores)" if dev.platform == "cpu"
+                 else dev.device_kind)
+        ax.set_title(f"navigation task throughput, {where}")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
         fig.tight_layout()

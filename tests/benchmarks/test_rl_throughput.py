@@ -62,6 +62,7 @@ def test_hand_written_step_equals_the_diagram_step():
     assert hits > 0                   # the collision terms were exercised
 
 
+@pytest.mark.slow
 def test_runs_without_torch(monkeypatch, capsys):
     """The quick table runs and names the missing VMAS columns."""
     import builtins

@@ -18,7 +18,9 @@ columns alternate within a round, so a shared machine disturbs them alike):
           benchmark-only dependency. Checked against the NumPy engine at
           N = 100 (final positions to 1e-9 m) before timing.
 
-Peak RSS (MiB) of each process is reported too: no (N, N) array anywhere,
+The last column, NumPy / Numba in process CPU time (both single-threaded),
+is the ratio to trust on a shared machine, where other processes stretch
+wall-clock times unevenly. Peak RSS (MiB) of each process is reported too: no (N, N) array anywhere,
 so memory grows as O(N). Real-time factor = dt / (seconds per step).
 
     python benchmarks/interacting.py                  # N = 1e2 .. 1e5, plot
@@ -203,27 +205,27 @@ def one(engine, n, steps):
         p0, v0, centre = initial(n)
         tv = np.array([2.0, 1.0])
         run(p0, v0, 1, DT, centre, tv)                      # compile
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         run(p0, v0, steps, DT, centre, tv)
-        wall = time.perf_counter() - t
+        wall, cpu = time.perf_counter() - t, time.process_time() - c
     else:
         import avblocks as av
         dg = diagram(n)
         if engine == "numpy":
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             av.simulate(dg, t_final, dt=DT, log=["flock.position"], log_every=steps,
                         progress=False)
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
         else:
             runner = av.compile(dg, t_final, dt=DT, log=["flock.position"],
                                 log_every=steps)
             runner()
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             runner()
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"engine": engine, "n": n, "steps": steps, "s_per_step": wall / steps,
-            "rss_mib": rss}
+            "cpu_per_step": cpu / steps, "rss_mib": rss}
 
 
 def check_numba(n=100, steps=100):
@@ -251,6 +253,7 @@ def scaling(ns, engines, rounds, plot):
     print(f"numba twin vs NumPy engine, N = 100, 100 steps: max |dq| = {err:.2e} m")
     assert err < 1e-9, err
     rows = {}
+    cpu_ratio = "numpy" in engines and "numba" in engines
     for _ in range(rounds):
         for n in ns:
             for e in engines:
@@ -258,7 +261,8 @@ def scaling(ns, engines, rounds, plot):
                 rows.setdefault((e, n), []).append(r)
     print(f"\n{'N':>8} " + " ".join(f"{e + ' s/step':>14}" for e in engines)
           + "   " + " ".join(f"{e + '/numba':>12}" for e in engines if e != "numba")
-          + "   " + " ".join(f"{e + ' MiB':>10}" for e in engines) + "   RTF(jax)")
+          + "   " + " ".join(f"{e + ' MiB':>10}" for e in engines) + "   RTF(jax)"
+          + ("   numpy/numba CPU" if cpu_ratio else ""))
     table = {}
     for n in ns:
         med = {}
@@ -266,16 +270,18 @@ def scaling(ns, engines, rounds, plot):
             good = [r for r in rows[(e, n)] if "error" not in r]
             if not good:
                 print(f"{e} at N={n} failed: {rows[(e, n)][0].get('error')}")
-                med[e] = (float("nan"), float("nan"))
+                med[e] = (float("nan"), float("nan"), float("nan"))
                 continue
             med[e] = (float(np.median([r["s_per_step"] for r in good])),
-                      float(np.median([r["rss_mib"] for r in good])))
+                      float(np.median([r["rss_mib"] for r in good])),
+                      float(np.median([r["cpu_per_step"] for r in good])))
         table[n] = med
         nbt = med.get("numba", (np.nan,))[0]
         rtf = DT / med["jax"][0] if "jax" in med else float("nan")
         print(f"{n:>8} " + " ".join(f"{med[e][0]:>14.3e}" for e in engines)
               + "   " + " ".join(f"{med[e][0] / nbt:>12.2f}" for e in engines if e != "numba")
-              + "   " + " ".join(f"{med[e][1]:>10.0f}" for e in engines) + f"   {rtf:8.2f}")
+              + "   " + " ".join(f"{med[e][1]:>10.0f}" for e in engines) + f"   {rtf:8.2f}"
+              + (f"   {med['numpy'][2] / med['numba'][2]:17.2f}" if cpu_ratio else ""))
     if plot:
         import matplotlib
         matplotlib.use("Agg")

@@ -26,6 +26,7 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py                  # N = 1e2 .. 1e5, plot
     python benchmarks/interacting.py --quick          # N = 1e2 .. 1e4
     python benchmarks/interacting.py --ensemble       # 256 flocking seeds
+    python benchmarks/interacting.py --alternate --rounds 7   # NumPy / Numba, one process
 
 ``--ensemble``: the ``flocking`` scenario (50 agents, 30 s, dt 0.02, RK4) for
 256 seeds in one ``runner.ensemble`` call (second call) against sequential
@@ -239,6 +240,33 @@ def check_numba(n=100, steps=100):
     return float(np.abs(np.asarray(res["flock.position"])[-1] - q).max())
 
 
+def alternate(n, steps, rounds):
+    """NumPy engine / Numba loop in one process: the two runs alternate,
+    ``rounds`` times; the median of the per-round ratios of process CPU
+    time (and of wall time) -- what to compare on a shared machine."""
+    import avblocks as av
+    run = numba_kernels()
+    p0, v0, centre = initial(n)
+    tv = np.array([2.0, 1.0])
+    run(p0, v0, 1, DT, centre, tv)
+    av.simulate(diagram(n), 2 * DT, dt=DT, log=["flock.position"], log_every=2,
+                progress=False)
+    cpu, wall = [], []
+    for _ in range(rounds):
+        dg = diagram(n)
+        c, t = time.process_time(), time.perf_counter()
+        av.simulate(dg, steps * DT, dt=DT, log=["flock.position"], log_every=steps,
+                    progress=False)
+        c1, t1 = time.process_time() - c, time.perf_counter() - t
+        c, t = time.process_time(), time.perf_counter()
+        run(p0, v0, steps, DT, centre, tv)
+        cpu.append(c1 / (time.process_time() - c))
+        wall.append(t1 / (time.perf_counter() - t))
+    print(f"N = {n}: NumPy / Numba in one process, {rounds} rounds of {steps} steps: "
+          f"CPU time {np.median(cpu):.2f} (rounds {np.round(cpu, 2).tolist()}), "
+          f"wall {np.median(wall):.2f}")
+
+
 def child(engine, n, steps):
     env = dict(os.environ)
     out = subprocess.run([sys.executable, __file__, "--one", engine, str(n), str(steps)],
@@ -345,6 +373,8 @@ def main(argv=None):
     ap.add_argument("--ensemble", action="store_true")
     ap.add_argument("--runs", type=int, default=256)
     ap.add_argument("--numpy-runs", type=int, default=16, dest="numpy_runs")
+    ap.add_argument("--alternate", action="store_true",
+                    help="NumPy / Numba alternating in one process (--n, --rounds)")
     ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
                     help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -353,6 +383,10 @@ def main(argv=None):
         return
     if a.ensemble:
         ensemble(a.runs, a.numpy_runs)
+        return
+    if a.alternate:
+        for n in a.n or [1000, 10000]:
+            alternate(n, STEPS.get(n, 3) * (2 if n <= 1000 else 1), max(a.rounds, 5))
         return
     ns = a.n or ([100, 1000, 10000] + ([] if a.quick else [100000]))
     scaling(ns, a.engines.split(","), a.rounds, a.out)

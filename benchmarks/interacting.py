@@ -18,7 +18,9 @@ columns alternate within a round, so a shared machine disturbs them alike):
           benchmark-only dependency. Checked against the NumPy engine at
           N = 100 (final positions to 1e-9 m) before timing.
 
-Peak RSS (MiB) of each process is reported too: no (N, N) array anywhere,
+The last column, NumPy / Numba in process CPU time (both single-threaded),
+is the ratio to trust on a shared machine, where other processes stretch
+wall-clock times unevenly. Peak RSS (MiB) of each process is reported too: no (N, N) array anywhere,
 so memory grows as O(N). Real-time factor = dt / (seconds per step).
 
     python benchmarks/interacting.py                  # N = 1e2 .. 1e5, plot
@@ -26,6 +28,7 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py --ensemble       # 256 flocking seeds
     python benchmarks/interacting.py --n 1000000 --engines jax,numba \
         --steps-scale 10 --rounds 1                   # on a GPU machine
+    python benchmarks/interacting.py --alternate --rounds 7   # NumPy / Numba, one process
 
 On an accelerator the ``jax`` column runs there (JAX's default device,
 printed first); ``numpy`` and ``numba`` always run on the host's CPU.
@@ -210,27 +213,27 @@ def one(engine, n, steps):
         p0, v0, centre = initial(n)
         tv = np.array([2.0, 1.0])
         run(p0, v0, 1, DT, centre, tv)                      # compile
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         run(p0, v0, steps, DT, centre, tv)
-        wall = time.perf_counter() - t
+        wall, cpu = time.perf_counter() - t, time.process_time() - c
     else:
         import avblocks as av
         dg = diagram(n)
         if engine == "numpy":
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             av.simulate(dg, t_final, dt=DT, log=["flock.position"], log_every=steps,
                         progress=False)
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
         else:
             runner = av.compile(dg, t_final, dt=DT, log=["flock.position"],
                                 log_every=steps)
             runner()
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             runner()
-            wall = time.perf_counter() - t
+            wall, cpu = time.perf_counter() - t, time.process_time() - c
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return {"engine": engine, "n": n, "steps": steps, "s_per_step": wall / steps,
-            "rss_mib": rss}
+            "cpu_per_step": cpu / steps, "rss_mib": rss}
 
 
 def check_numba(n=100, steps=100):
@@ -242,6 +245,33 @@ def check_numba(n=100, steps=100):
     res = av.simulate(diagram(n), steps * DT, dt=DT, log=["flock.position"],
                       log_every=steps, progress=False)
     return float(np.abs(np.asarray(res["flock.position"])[-1] - q).max())
+
+
+def alternate(n, steps, rounds):
+    """NumPy engine / Numba loop in one process: the two runs alternate,
+    ``rounds`` times; the median of the per-round ratios of process CPU
+    time (and of wall time) -- what to compare on a shared machine."""
+    import avblocks as av
+    run = numba_kernels()
+    p0, v0, centre = initial(n)
+    tv = np.array([2.0, 1.0])
+    run(p0, v0, 1, DT, centre, tv)
+    av.simulate(diagram(n), 2 * DT, dt=DT, log=["flock.position"], log_every=2,
+                progress=False)
+    cpu, wall = [], []
+    for _ in range(rounds):
+        dg = diagram(n)
+        c, t = time.process_time(), time.perf_counter()
+        av.simulate(dg, steps * DT, dt=DT, log=["flock.position"], log_every=steps,
+                    progress=False)
+        c1, t1 = time.process_time() - c, time.perf_counter() - t
+        c, t = time.process_time(), time.perf_counter()
+        run(p0, v0, steps, DT, centre, tv)
+        cpu.append(c1 / (time.process_time() - c))
+        wall.append(t1 / (time.perf_counter() - t))
+    print(f"N = {n}: NumPy / Numba in one process, {rounds} rounds of {steps} steps: "
+          f"CPU time {np.median(cpu):.2f} (rounds {np.round(cpu, 2).tolist()}), "
+          f"wall {np.median(wall):.2f}")
 
 
 def child(engine, n, steps):
@@ -262,6 +292,7 @@ def scaling(ns, engines, rounds, plot, scale=1.0):
     print(f"numba twin vs NumPy engine, N = 100, 100 steps: max |dq| = {err:.2e} m")
     assert err < 1e-9, err
     rows = {}
+    cpu_ratio = "numpy" in engines and "numba" in engines
     for _ in range(rounds):
         for n in ns:
             for e in engines:
@@ -269,7 +300,8 @@ def scaling(ns, engines, rounds, plot, scale=1.0):
                 rows.setdefault((e, n), []).append(r)
     print(f"\n{'N':>8} " + " ".join(f"{e + ' s/step':>14}" for e in engines)
           + "   " + " ".join(f"{e + '/numba':>12}" for e in engines if e != "numba")
-          + "   " + " ".join(f"{e + ' MiB':>10}" for e in engines) + "   RTF(jax)")
+          + "   " + " ".join(f"{e + ' MiB':>10}" for e in engines) + "   RTF(jax)"
+          + ("   numpy/numba CPU" if cpu_ratio else ""))
     table = {}
     for n in ns:
         med = {}
@@ -277,16 +309,18 @@ def scaling(ns, engines, rounds, plot, scale=1.0):
             good = [r for r in rows[(e, n)] if "error" not in r]
             if not good:
                 print(f"{e} at N={n} failed: {rows[(e, n)][0].get('error')}")
-                med[e] = (float("nan"), float("nan"))
+                med[e] = (float("nan"), float("nan"), float("nan"))
                 continue
             med[e] = (float(np.median([r["s_per_step"] for r in good])),
-                      float(np.median([r["rss_mib"] for r in good])))
+                      float(np.median([r["rss_mib"] for r in good])),
+                      float(np.median([r["cpu_per_step"] for r in good])))
         table[n] = med
         nbt = med.get("numba", (np.nan,))[0]
         rtf = DT / med["jax"][0] if "jax" in med else float("nan")
         print(f"{n:>8} " + " ".join(f"{med[e][0]:>14.3e}" for e in engines)
               + "   " + " ".join(f"{med[e][0] / nbt:>12.2f}" for e in engines if e != "numba")
-              + "   " + " ".join(f"{med[e][1]:>10.0f}" for e in engines) + f"   {rtf:8.2f}")
+              + "   " + " ".join(f"{med[e][1]:>10.0f}" for e in engines) + f"   {rtf:8.2f}"
+              + (f"   {med['numpy'][2] / med['numba'][2]:17.2f}" if cpu_ratio else ""))
     if plot:
         import matplotlib
         matplotlib.use("Agg")
@@ -352,6 +386,8 @@ def main(argv=None):
     ap.add_argument("--numpy-runs", type=int, default=16, dest="numpy_runs")
     ap.add_argument("--steps-scale", type=float, default=1.0, dest="scale",
                     help="multiply the steps timed at each N")
+    ap.add_argument("--alternate", action="store_true",
+                    help="NumPy / Numba alternating in one process (--n, --rounds)")
     ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
                     help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -360,6 +396,10 @@ def main(argv=None):
         return
     if a.ensemble:
         ensemble(a.runs, a.numpy_runs)
+        return
+    if a.alternate:
+        for n in a.n or [1000, 10000]:
+            alternate(n, STEPS.get(n, 3) * (2 if n <= 1000 else 1), max(a.rounds, 5))
         return
     ns = a.n or ([100, 1000, 10000] + ([] if a.quick else [100000]))
     scaling(ns, a.engines.split(","), a.rounds, a.out, a.scale)

@@ -185,7 +185,7 @@ def _flat_pairs(idx, xp=np):
     pairs) is kept once, as ``i < j``, and evaluated once for both agents
     (its sigma-distance, bump and action are symmetric); the others once
     each. Found by sorting packed integer keys (a value sort, no argsort):
-    ``((min(i, j) N + max(i, j)) 2 + (i > j))``, so the two listings of a
+    ``(min(i, j), max(i, j), i > j)`` in bit fields, so the two listings of a
     pair are neighbours. Each block is ``(a, top, il, i, j, jl, m)``: the
     pairs whose ``i`` is one of the agents ``a:a + NUMPY_BLOCK``, the ``m``
     mirrored ones first (``j`` may lie beyond the block: ``top`` is one
@@ -198,11 +198,13 @@ def _flat_pairs(idx, xp=np):
     ok = idx >= 0
     jj = idx[ok].astype(np.int64)
     ii = np.repeat(np.arange(n, dtype=np.int64), np.count_nonzero(ok, axis=1))
+    bits = max(1, (n - 1).bit_length())
+    mask = (1 << bits) - 1
     lo, hi = np.minimum(ii, jj), np.maximum(ii, jj)
-    key = lo * n
-    key += hi
+    key = lo << bits
+    key |= hi
     key <<= 1
-    key += ii > jj
+    key |= ii > jj
     key.sort()
     dup = key[1:] == key[:-1]
     twin = ((key[1:] ^ key[:-1]) == 1) & ~(key[:-1] & 1).astype(bool)
@@ -213,16 +215,13 @@ def _flat_pairs(idx, xp=np):
     paired = first.copy()
     paired[1:] |= twin
     u = key[first] >> 1
-    mi, mj = u // n, u % n             # mirrored: i < j, sorted by i
+    mi, mj = u >> bits, u & mask       # mirrored: i < j, sorted by i
     s = key[~paired]
     us, flip = s >> 1, (s & 1).astype(bool)
-    slo, shi = us // n, us % n
-    si = np.where(flip, shi, slo)
-    sj = np.where(flip, slo, shi)
-    sk = si * n
-    sk += sj
+    slo, shi = us >> bits, us & mask
+    sk = np.where(flip, (shi << bits) | slo, us)
     sk.sort()
-    si, sj = sk // n, sk % n           # singles sorted by i
+    si, sj = sk >> bits, sk & mask     # singles sorted by i
     out = []
     for a in range(0, n, NUMPY_BLOCK):
         b = min(a + NUMPY_BLOCK, n)

@@ -59,7 +59,7 @@ def _frozen_fp(obj, depth):
     fp = ("frozen", obj)
     key = id(obj)
     try:
-        ref = weakref.ref(obj, lambda _r, key=key: _FROZEN.pop(key, None))
+        ref = weakref.ref(obj, lambda _r, key=key, memo=_FROZEN: memo.pop(key, None))
     except TypeError:               # not weakly referable: not remembered
         return fp
     _FROZEN[key] = (ref, fp)

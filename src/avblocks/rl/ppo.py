@@ -16,8 +16,12 @@ the wall-clock budget, whichever ends first (set before each update, so a
 loaded machine still ends the schedule within the budget). Options: the
 gradient norm clipped per network instead of jointly (``clip_separately``),
 the critic given the episode's elapsed fraction (``time_feature``; the
-actor never sees it), a reward scale for the losses. Transitions after an
-episode terminated are masked out. The
+actor never sees it), a reward scale for the losses, and observation
+standardization (``normalize_obs``: running mean and variance of every
+observation component, merged after each update and used by both networks;
+the returned weights have it folded into their first layer, so the saved
+:class:`~avblocks.controllers.Policy` reads raw observations). Transitions
+after an episode terminated are masked out. The
 policy is a Gaussian around an MLP mean (state-independent log std); the
 deployed :class:`~avblocks.controllers.Policy` uses the mean, clipped to the
 action box (``output="clip"``).

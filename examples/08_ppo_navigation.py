@@ -7,7 +7,8 @@
 runs independent PPO with one shared actor and critic (every agent's
 transition a sample): each update runs 128 episodes of 60 steps in
 lockstep (one vmapped ``lax.scan``), then 4 epochs of 8 minibatches of
-Adam, all in one jitted call. Observations are standardized by their
+Adam, all in one jitted call; actor and critic are MLPs of two hidden
+layers of 128 units. Observations are standardized by their
 running mean and variance (``normalize_obs``; folded into the saved
 weights). The learning rate (1e-3) decays linearly to zero over UPDATES
 updates (default 2500) or MINUTES of wall time (default 10, compile
@@ -43,8 +44,8 @@ from avblocks.scenarios import navigation  # noqa: E402
 updates = int(sys.argv[1]) if len(sys.argv) > 1 else 2500
 minutes = float(sys.argv[2]) if len(sys.argv) > 2 else 10.0
 small = bool(os.environ.get("AVBLOCKS_EXAMPLE_SMALL"))
-cfg = ppo.Config(num_envs=128, minibatches=8, updates=updates, normalize_obs=True, lr=1e-3,
-                 lam=0.9)
+cfg = ppo.Config(num_envs=128, minibatches=8, updates=updates, hidden=(128, 128),
+                 normalize_obs=True, lr=1e-3, lam=0.9)
 if small:
     cfg = ppo.Config(num_envs=8, updates=min(updates, 3), hidden=(32, 32), normalize_obs=True)
 

@@ -311,8 +311,9 @@ def init_params(env, cfg, seed=0):
 
 def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     """Train on ``env`` (a JAX :class:`~avblocks.rl.FunctionalEnv`) for
-    ``cfg.updates`` updates or until ``time_budget_s`` (wall clock, the
-    compile included) has passed; returns :class:`Result`."""
+    ``cfg.updates`` updates or within ``time_budget_s`` (wall clock, the
+    compile included: training stops when one more update as long as the
+    last would end past it); returns :class:`Result`."""
     import optax
     jax = _engine.jax()
     t0 = time.perf_counter()
@@ -342,7 +343,11 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
         curve["wall_s"].append(time.perf_counter() - t0)
         if callback is not None:
             callback(u, m)
-        if time_budget_s is not None and curve["wall_s"][-1] > time_budget_s:
+        # stop when the next update, as long as the last one, would end
+        # past the budget (the budget is kept, not overrun by one update)
+        now = curve["wall_s"][-1]
+        last = now - (curve["wall_s"][-2] if u else 0.0)
+        if time_budget_s is not None and now + last > time_budget_s:
             break
     p, nrm = carry[0], carry[3]
     return Result(fold_stats(_to_np(p["actor"]), nrm),

@@ -8,7 +8,8 @@ evaluation distribution) and measures, independently of any controller:
 - spawns in contact at t=0 (start discs touching an obstacle, a wall or
   another agent), and draws that missed the requested clearance/separation;
 - the shortest collision-free path of each agent alone (Dijkstra on a
-  0.02 m 8-connected grid of the free space inflated by the agent radius)
+  0.02 m 8-connected grid of the free space inflated by the agent radius;
+  an upper bound: grid paths are up to 8 % longer than straight ones)
   against what the horizon allows: at unit speed (any direction can be
   driven at 1 m/s) and at the diagonal speed sqrt(2) (no action is faster);
 - pairs of goals closer than two radii (both agents cannot sit on their goals).

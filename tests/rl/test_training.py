@@ -13,7 +13,7 @@ from avblocks.rl import apg, ppo  # noqa: E402
 
 def test_ppo_improves_the_return_on_navigation():
     env = rl.functional("navigation", max_steps=30)
-    cfg = ppo.Config(num_envs=16, updates=30, hidden=(32, 32), lr=1e-3)
+    cfg = ppo.Config(num_envs=16, updates=30, hidden=(32, 32), lr=1e-3, normalize_obs=True)
     res = ppo.train(env, cfg, seed=0)
     r = np.asarray(res.curve["return"])
     assert r[-5:].mean() > r[:5].mean() + 5.0          # -11 -> about 0 here

@@ -16,8 +16,12 @@ the wall-clock budget, whichever ends first (set before each update, so a
 loaded machine still ends the schedule within the budget). Options: the
 gradient norm clipped per network instead of jointly (``clip_separately``),
 the critic given the episode's elapsed fraction (``time_feature``; the
-actor never sees it), a reward scale for the losses. Transitions after an
-episode terminated are masked out. The
+actor never sees it), a reward scale for the losses, and observation
+standardization (``normalize_obs``: running mean and variance of every
+observation component, merged after each update and used by both networks;
+the returned weights have it folded into their first layer, so the saved
+:class:`~avblocks.controllers.Policy` reads raw observations). Transitions
+after an episode terminated are masked out. The
 policy is a Gaussian around an MLP mean (state-independent log std); the
 deployed :class:`~avblocks.controllers.Policy` uses the mean, clipped to the
 action box (``output="clip"``).
@@ -307,8 +311,9 @@ def init_params(env, cfg, seed=0):
 
 def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
     """Train on ``env`` (a JAX :class:`~avblocks.rl.FunctionalEnv`) for
-    ``cfg.updates`` updates or until ``time_budget_s`` (wall clock, the
-    compile included) has passed; returns :class:`Result`."""
+    ``cfg.updates`` updates or within ``time_budget_s`` (wall clock, the
+    compile included: training stops when one more update as long as the
+    last would end past it); returns :class:`Result`."""
     import optax
     jax = _engine.jax()
     t0 = time.perf_counter()
@@ -338,7 +343,11 @@ def train(env, cfg=Config(), seed=0, *, time_budget_s=None, callback=None):
         curve["wall_s"].append(time.perf_counter() - t0)
         if callback is not None:
             callback(u, m)
-        if time_budget_s is not None and curve["wall_s"][-1] > time_budget_s:
+        # stop when the next update, as long as the last one, would end
+        # past the budget (the budget is kept, not overrun by one update)
+        now = curve["wall_s"][-1]
+        last = now - (curve["wall_s"][-2] if u else 0.0)
+        if time_budget_s is not None and now + last > time_budget_s:
             break
     p, nrm = carry[0], carry[3]
     return Result(fold_stats(_to_np(p["actor"]), nrm),

@@ -38,7 +38,9 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
   ``- proximity * closeness`` where closeness sums ``clip(1 - gap/margin,
   0, 1)`` over the other agents and the nearest obstacle or wall (``gap``:
   distance minus the contact distance; a smooth warning before contact)
-  (``task.reward``).
+  ``+ success_bonus * success - first_hit * [first contact of the episode]``
+  (both 0 by default) (``task.reward``; the weights: :data:`REWARD`, set
+  with ``weights=`` in :func:`make_diagram` and :func:`rl_task`).
 - **done**: never; episodes last ``max_steps`` control steps (default 60
   of 0.1 s).
 - **success** (per agent, ``task.success``): at its goal (within
@@ -48,9 +50,20 @@ Task (what :func:`avblocks.rl.parallel_env` ``("navigation")`` exposes)
 
 Starts and goals are drawn anew at every reset, at least ``clearance`` from
 obstacles and walls (an :class:`~avblocks.environment.EdgeGrid` disc test)
-and ``5 * radius`` apart. ``avblocks run navigation`` runs the scripted
-controller (goal attraction plus repulsion from the nearest obstacle points
-and agents); ``controller="policy.npz"`` runs a trained
+and ``5 * radius`` apart.
+
+The task is fair as drawn (``benchmarks/navigation_failures.py``, 1,000
+resets): no agent touches anything at t=0, no pair of starts or of goals is
+closer than the requested 0.5 m, and the longest shortest collision-free
+path of an agent alone is 3.6 m, 3.6 s at 1 m/s (any direction can be
+driven at 1 m/s) against the 6 s horizon. What is hard is the agents
+among themselves: the scripted controller's failures are mostly contacts
+between agents (27 % of the agents), then ending away from the goal
+without contact (9 %), rarely obstacles or walls (2 %).
+
+``avblocks run navigation`` runs the scripted controller (goal attraction
+plus repulsion from the nearest obstacle points and agents);
+``controller="policy.npz"`` runs a trained
 :class:`~avblocks.controllers.Policy` instead.
 """
 

@@ -54,7 +54,7 @@ class Runner:
         self.t = program.t0 + (program.log_every * np.arange(program.nlog)) * program.dt
         self.devices = devices if devices is not None else _devices.resolve(None)
         self._run_exe = None            # (placement, executable) of __call__
-        self._device = None             # JAX's default backend, read once
+        self._fixed = None              # (program, the meta all its runs share)
         n = _devices.agents_of(compiled)
         self._single = _devices.Placement(
             self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
@@ -133,7 +133,7 @@ class Runner:
         cd = self.compiled
         X = []
         for j, (name, b) in enumerate(zip(cd.names, cd.blocks)):
-            x = b.initial_state()
+            x = dict(b._init)           # the declared arrays (a run never writes them)
             for (i, nm), v in x0vals.items():
                 if i == j:
                     x[nm] = v
@@ -155,15 +155,18 @@ class Runner:
 
     def _meta(self, seed, params, wall, compile_s):
         p = self.program
-        if self._device is None:
-            self._device = _jax.jax().default_backend()
-        meta = {"backend": "jax", "device": self._device,
+        if self._fixed is None or self._fixed[0] is not p:
+            # what every run of this program says the same (read once; the
+            # seed's place kept for the key order)
+            self._fixed = (p, {
+                "backend": "jax", "device": _jax.jax().default_backend(),
                 "dtype": self.dtype, "solver": self.solver_name, "dt": p.dt,
-                "seed": seed, "t0": p.t0, "t_final": p.t0 + p.nsteps * p.dt,
+                "seed": None, "t0": p.t0, "t_final": p.t0 + p.nsteps * p.dt,
                 "log_every": p.log_every, "steps": p.nsteps,
                 "agents": max([s.n or 0 for s in self.specs] + [0]),
-                "blocks": len(self.compiled.blocks), "compile_time": compile_s,
-                "wall_time": wall, "param_changes": []}
+                "blocks": len(self.compiled.blocks)})
+        meta = dict(self._fixed[1])
+        meta.update(seed=seed, compile_time=compile_s, wall_time=wall, param_changes=[])
         meta["realtime_factor"] = (p.nsteps * p.dt / wall) if wall > 0 else math.inf
         if params:
             meta["params"] = {str(k): np.asarray(v, float).tolist()

@@ -223,6 +223,9 @@ def _same_token(kind, tok, k, now, params):
             type(a) is np.ndarray and n == m and a.shape == shp and a.dtype.str == dt
             for (n, a), (m, dt, shp) in zip(now.items(), tok)):
         return True
+    if kind == "specs" and type(now) is dict and len(now) == len(tok) and all(
+            n == m and p.shape == shp for (n, p), (m, shp) in zip(now.items(), tok)):
+        return True
     return _token(k, now, params) == (kind, tok)
 
 

@@ -60,3 +60,22 @@ def test_run_facts_per_call():
     assert a.meta["steps"] == 10 and a.meta["t_final"] == pytest.approx(1.0)
     b.meta["steps"] = -1                 # a caller's edit stays in its Results
     assert run().meta["steps"] == 10
+
+
+class _Shifted(av.blocks.Integrator):
+    """An integrator whose own initial_state() starts one above its declared value."""
+
+    def initial_state(self):
+        return {k: v + 1.0 for k, v in super().initial_state().items()}
+
+
+def test_own_initial_state_is_used_as_by_numpy():
+    d = av.Diagram()
+    c = d.add(av.blocks.Constant([[1.0]]), name="c")
+    i = d.add(_Shifted([[0.5]]), name="i")
+    d.connect(c.y, i.u)
+    ref = av.simulate(d, 1.0, dt=0.1, solver="euler", log=[i.y], progress=False)
+    run = av.compile(d, 1.0, dt=0.1, solver="euler", log=[i.y])
+    for _ in range(2):
+        np.testing.assert_allclose(run()[i.y], ref[i.y], rtol=0, atol=1e-12)
+    assert ref[i.y][0, 0, 0] == pytest.approx(1.5)

@@ -11,6 +11,7 @@ import time
 import numpy as np
 
 from .. import rng as _rng
+from ..block import Block as _Block
 from ..errors import ParameterError
 from ..results import Results
 from . import _jax
@@ -133,7 +134,10 @@ class Runner:
         cd = self.compiled
         X = []
         for j, (name, b) in enumerate(zip(cd.names, cd.blocks)):
-            x = dict(b._init)           # the declared arrays (a run never writes them)
+            # the declared arrays (a run never writes them), unless the
+            # block says otherwise in its own initial_state()
+            x = dict(b._init) if type(b).initial_state is _Block.initial_state \
+                else b.initial_state()
             for (i, nm), v in x0vals.items():
                 if i == j:
                     x[nm] = v

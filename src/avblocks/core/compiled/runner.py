@@ -11,11 +11,13 @@ import time
 import numpy as np
 
 from .. import rng as _rng
-from ..errors import ParameterError, SimulationError
+from ..block import Block as _Block
+from ..errors import ParameterError
 from ..results import Results
 from . import _jax
 from . import devices as _devices
 from . import plans as _plans
+from .outcome import check_finite as _check_finite
 from .program import Program, get_program
 from .structure import diagram_key, fingerprint
 
@@ -53,6 +55,7 @@ class Runner:
         self.t = program.t0 + (program.log_every * np.arange(program.nlog)) * program.dt
         self.devices = devices if devices is not None else _devices.resolve(None)
         self._run_exe = None            # (placement, executable) of __call__
+        self._fixed = None              # (program, the meta all its runs share)
         n = _devices.agents_of(compiled)
         self._single = _devices.Placement(
             self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
@@ -113,6 +116,13 @@ class Runner:
                 theta[key] = spec.validate(v, cd.names[i])
         return {k: self._cast(v) for k, v in theta.items()}, batched
 
+    def _theta_plain(self):
+        """{path: array} of every numeric parameter at the blocks' own values
+        (validated when they were set), cast to the program's types."""
+        cast, cd = self._cast, self.compiled
+        return {f"{n}.{k}": cast(b.__dict__[k]) for n, b in zip(cd.names, cd.blocks)
+                for k in b._params}
+
     def _x0_values(self, x0, runs=None):
         """{(block index, state): array} from ``{"block.state": value}``."""
         from ..runguard import initial_values
@@ -124,7 +134,10 @@ class Runner:
         cd = self.compiled
         X = []
         for j, (name, b) in enumerate(zip(cd.names, cd.blocks)):
-            x = b.initial_state()
+            # the declared arrays (a run never writes them), unless the
+            # block says otherwise in its own initial_state()
+            x = dict(b._init) if type(b).initial_state is _Block.initial_state \
+                else b.initial_state()
             for (i, nm), v in x0vals.items():
                 if i == j:
                     x[nm] = v
@@ -146,13 +159,18 @@ class Runner:
 
     def _meta(self, seed, params, wall, compile_s):
         p = self.program
-        meta = {"backend": "jax", "device": _jax.jax().default_backend(),
+        if self._fixed is None or self._fixed[0] is not p:
+            # what every run of this program says the same (read once; the
+            # seed's place kept for the key order)
+            self._fixed = (p, {
+                "backend": "jax", "device": _jax.jax().default_backend(),
                 "dtype": self.dtype, "solver": self.solver_name, "dt": p.dt,
-                "seed": seed, "t0": p.t0, "t_final": p.t0 + p.nsteps * p.dt,
+                "seed": None, "t0": p.t0, "t_final": p.t0 + p.nsteps * p.dt,
                 "log_every": p.log_every, "steps": p.nsteps,
                 "agents": max([s.n or 0 for s in self.specs] + [0]),
-                "blocks": len(self.compiled.blocks), "compile_time": compile_s,
-                "wall_time": wall, "param_changes": []}
+                "blocks": len(self.compiled.blocks)})
+        meta = dict(self._fixed[1])
+        meta.update(seed=seed, compile_time=compile_s, wall_time=wall, param_changes=[])
         meta["realtime_factor"] = (p.nsteps * p.dt / wall) if wall > 0 else math.inf
         if params:
             meta["params"] = {str(k): np.asarray(v, float).tolist()
@@ -197,9 +215,10 @@ class Runner:
     def __call__(self, params=None, x0=None, seed=None):
         jax = _jax.jax()
         seed = self.seed if seed is None else int(seed)
-        theta, _ = self._theta(params)
-        x0vals, _ = self._x0_values(x0)
-        X0 = self._states(x0vals, [seed])
+        # no overrides (the common repeated call): the blocks' own values,
+        # read afresh each call, without the validation an override needs
+        theta = self._theta_plain() if params is None else self._theta(params)[0]
+        X0 = self._states(self._x0_values(x0)[0] if x0 is not None else {}, [seed])
         prog = self.program
         known = self._run_exe
         if known is not None:
@@ -207,22 +226,26 @@ class Runner:
             # signature is this runner's every time, no need to hash it again
             place, exe = known
             compile_s = 0.0
-            with _jax.x64(prog.x64):
-                args = place((theta, X0))
         else:
             exe, compile_s, place, args = self._placed(("run",), lambda: prog.run,
                                                        self._single, (theta, X0))
             self._single = place
             self._run_exe = (place, exe)
-        t = time.perf_counter()
         with _jax.x64(prog.x64):
+            if known is not None:
+                args = place((theta, X0))
+            t = time.perf_counter()
             logs, XF, needs = exe(*args)
-            jax.block_until_ready((logs, XF))
-        wall = time.perf_counter() - t
+            flat, tree = jax.tree_util.tree_flatten(XF)
+            for a in logs:
+                a.block_until_ready()
+            for a in flat:
+                a.block_until_ready()
+            wall = time.perf_counter() - t
         logs = [np.asarray(a) for a in logs]
-        XF = jax.tree_util.tree_map(np.asarray, XF)
+        XF = jax.tree_util.tree_unflatten(tree, [np.asarray(a) for a in flat])
         res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
-        over = _plans.overflows(self.compiled, prog.needs(needs))
+        over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows else ()
         if over:
             return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
@@ -456,40 +479,3 @@ def _count_runs(seeds, params, x0, runs):
                 return int(np.shape(v)[0])
     raise ParameterError("cannot tell how many runs", param="seeds",
                          hint="pass seeds=range(R), runs=R or per-run values")
-
-
-def _check_finite(res):
-    """Raise SimulationError (results attached) if a logged float signal or
-    the final state is NaN/inf: the first sample and signal that is."""
-    axis0 = 1 if res.runs is not None else 0
-    first, where = None, None
-    for k, v in res.data.items():
-        if v.dtype.kind != "f" or np.isfinite(v).all():
-            continue
-        bad = ~np.isfinite(v)
-        per_t = bad.reshape(*v.shape[:axis0 + 1], -1).any(-1)
-        if axis0:
-            per_t = per_t.any(0)
-        j = int(np.argmax(per_t))
-        if first is None or j < first:
-            first, where = j, k
-    if where is None:
-        for k, v in res.final_state.items():
-            if np.asarray(v).dtype.kind == "f" and not np.isfinite(v).all():
-                b, _, nm = k.rpartition(".")
-                raise SimulationError(
-                    f"state '{nm}' is NaN or infinite at the end of the run",
-                    block=b, results=res,
-                    hint="log more signals (or check_finite=False) to find where; the "
-                         "NumPy backend stops at the first step and names the block")
-        return
-    b, _, port = where.rpartition(".")
-    runs = ""
-    if res.runs is not None:
-        v = res.data[where]
-        bad = ~np.isfinite(v.reshape(v.shape[0], -1)).all(-1)
-        runs = f" in run(s) {np.flatnonzero(bad)[:10].tolist()}"
-    raise SimulationError(f"logged output is NaN or infinite{runs}", block=b, port=port,
-                          time=float(res.t[first]), results=res,
-                          hint="the NumPy backend stops at the first bad step and "
-                               "names the block that produced it")

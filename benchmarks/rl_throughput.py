@@ -71,12 +71,15 @@ def best_of(fn, repeats):
     return best
 
 
-def avblocks_runner(E, T):
+def avblocks_runner(E, T, **task):
+    """Our column; ``task``: navigation scenario parameters (``obstacles=()``:
+    the open arena, only its four walls, the like-for-like of VMAS's stock
+    scenario)."""
     import jax
     import jax.numpy as jnp
 
     from avblocks import rl
-    env = rl.functional("navigation")
+    env = rl.functional("navigation", **task)
 
     def episode(key):
         k0, k1 = jax.random.split(key)
@@ -260,11 +263,15 @@ def vmas_runner(variant, threads, device="cpu"):
     return make
 
 
+OPEN = "avblocks, open arena"
+
+
 def columns(vmas_device="cpu"):
     """(name, runner factory) of each column; on a GPU (``vmas_device``
     ``"cuda"``) VMAS has one column per scenario (torch's threads do not
     matter there)."""
-    cols = [("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner)]
+    cols = [("avblocks", avblocks_runner), ("pure JAX", pure_jax_runner),
+            (OPEN, lambda E, T: avblocks_runner(E, T, obstacles=()))]
     for variant in ("stock", "obstacles"):
         if vmas_device == "cpu":
             cols += [(f"VMAS {variant}, {k} thread{'s' * (k > 1)}", vmas_runner(variant, k))
@@ -299,9 +306,12 @@ def _fmt(v):
 
 def table(rows, n):
     vm = [c for c in rows[0] if c.startswith("VMAS")]
-    extra = [f"{c} env-steps/s" for c in vm]
+    has_open = rows[0].get(OPEN) is not None
+    extra = [f"{c} env-steps/s" for c in ([OPEN] if has_open else []) + vm]
     if vm:
         extra += ["avblocks / best VMAS stock", "avblocks / best VMAS obstacles"]
+        if has_open:
+            extra += ["open arena / best VMAS stock"]
     print("| " + " | ".join(["num_envs", "avblocks env-steps/s", "agent-steps/s",
                              "pure JAX env-steps/s", "avblocks / pure JAX", *extra]) + " |")
     print("|---:" * (5 + len(extra)) + "|")
@@ -310,9 +320,12 @@ def table(rows, n):
         for kind in ("stock", "obstacles"):
             v = [r[c] for c in vm if kind in c and r[c] is not None]
             ratios.append(f"{r['avblocks'] / max(v):.1f}" if v else "-")
+        if has_open:
+            v = [r[c] for c in vm if "stock" in c and r[c] is not None]
+            ratios.append(f"{r[OPEN] / max(v):.1f}" if v else "-")
         print(f"| {r['num_envs']} | {r['avblocks']:,.0f} | {r['avblocks'] * n:,.0f} | "
               f"{r['pure JAX']:,.0f} | {r['avblocks'] / r['pure JAX']:.2f} | " +
-              "".join(f"{_fmt(r[c])} | " for c in vm) +
+              "".join(f"{_fmt(r[c])} | " for c in ([OPEN] if has_open else []) + vm) +
               ("".join(f"{x} | " for x in ratios) if vm else ""))
 
 
@@ -371,7 +384,7 @@ def main(argv=None):
         return xla_threads(rest, a.xla_threads)
     T, n = a.steps, 4
     sizes = a.sizes or ([1, 64] if a.quick else [1, 64, 1024])
-    cols = columns(a.vmas_device)[:2 if a.jax_only else None]
+    cols = columns(a.vmas_device)[:3 if a.jax_only else None]
     print(f"load average before: {os.getloadavg()[0]:.2f} ({os.cpu_count()} CPUs)")
     rows, medians = [], []
     for E in sizes:
@@ -394,7 +407,7 @@ def main(argv=None):
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
         fig, ax = plt.subplots(figsize=(6.5, 4.2))
-        for (name, _), style in zip(cols, ("o-", "s--", "^:", "v:", "D-.", "x-.")):
+        for (name, _), style in zip(cols, ("o-", "s--", "o:", "^:", "v:", "D-.", "x-.")):
             ys = [r[name] for r in rows]
             if all(y is not None for y in ys):
                 ax.loglog(sizes, ys, style, label=name)

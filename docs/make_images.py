@@ -216,6 +216,11 @@ PRODUCERS = {
                                   "--out", "{images}/scaling.png"]), True),
     "interacting": (_script([sys.executable, "benchmarks/interacting.py",
                              "--out", "{images}/interacting.png"]), True),
+    # made on a GPU machine (the jax column runs on JAX's default device)
+    "interacting_gpu": (_script([sys.executable, "benchmarks/interacting.py", "--n", "100",
+                                 "1000", "10000", "100000", "1000000", "--engines",
+                                 "jax,numba", "--rounds", "1", "--steps-scale", "10",
+                                 "--out", "{images}/interacting_gpu.png"]), True),
     "tune_flocking": (_script([sys.executable, str(ROOT / "examples" / "10_tune_flocking.py")],
                               made="tune_flocking.png"), True),
     "physics-benchmark": (_script([sys.executable, "benchmarks/physics.py",
@@ -240,6 +245,10 @@ PRODUCERS = {
                                made="apg_navigation.png"), True),
     "rl_throughput": (_script([sys.executable, "benchmarks/rl_throughput.py",
                                "--plot", "{images}/rl_throughput.png"]), True),
+    # made on a GPU machine, VMAS on CUDA (XLA_PYTHON_CLIENT_PREALLOCATE=false)
+    "rl_throughput_gpu": (_script([sys.executable, "benchmarks/rl_throughput.py", "--sizes",
+                                   "1", "64", "1024", "16384", "65536", "--vmas-device", "cuda",
+                                   "--plot", "{images}/rl_throughput_gpu.png"]), True),
     "sweep_time_to_done": (_script([sys.executable, "-m", "avblocks", "sweep", "waypoints",
                                     "--grid", "drive.gain=0.5,1,2", "--grid",
                                     "drive.v_max=1,2,3", "--seeds", "4",

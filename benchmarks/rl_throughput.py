@@ -244,14 +244,17 @@ def pure_jax_runner(E, T, n=4):
     return lambda: f(key).block_until_ready()
 
 
-def vmas_runner(variant, threads, device="cpu"):
-    """A runner factory for VMAS (``benchmarks/rl_vmas.py``), or None
-    without ``vmas``/torch."""
-    def make(E, T, n=4):
+_VMAS = []
+
+
+def _vmas_module():
+    """``benchmarks/rl_vmas.py`` (loaded once), or None without vmas/torch."""
+    if not _VMAS:
         try:
             import torch  # noqa: F401
             import vmas  # noqa: F401
         except ImportError:
+            _VMAS.append(None)
             return None
         import importlib.util
         from pathlib import Path
@@ -259,7 +262,16 @@ def vmas_runner(variant, threads, device="cpu"):
             "rl_vmas", Path(__file__).with_name("rl_vmas.py"))
         mod = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(mod)
-        return mod.runner(variant, E, T, n, threads, device)
+        _VMAS.append(mod)
+    return _VMAS[0]
+
+
+def vmas_runner(variant, threads, device="cpu"):
+    """A runner factory for VMAS (``benchmarks/rl_vmas.py``), or None
+    without ``vmas``/torch."""
+    def make(E, T, n=4):
+        mod = _vmas_module()
+        return None if mod is None else mod.runner(variant, E, T, n, threads, device)
     return make
 
 

@@ -100,6 +100,19 @@ def resumed(value):
         yield t
 
 
+def through(fn):
+    """``fn`` as a control-flow body that carries the tally: ``(x, needs) ->
+    (fn(x), needs')``, where ``needs`` is what :func:`held` gave and the
+    searches ``fn`` traces report to a tally resumed from it (pass
+    ``needs'`` out of the control flow to :func:`absorb`)."""
+    def body(op):
+        x, needs = op
+        with resumed(needs) as tl:
+            y = fn(x)
+        return y, (needs if tl is None else tl.value)
+    return body
+
+
 def absorb(value):
     """After a control-flow body: its tally's value (which started from
     :func:`held`) becomes the current tally's."""

@@ -69,11 +69,14 @@ plus repulsion from the nearest obstacle points and agents);
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from avblocks.blocks import Constant, Function
 from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
+from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
 from avblocks.environment.edges import point_segment_distance
 from avblocks.vehicles import SingleIntegrator
@@ -224,16 +227,17 @@ class NavigationTask(Block):
         return new
 
 
-#: The reward's weights (the task block's parameters) and their defaults.
-REWARD = {"progress": 5.0, "goal_bonus": 0.1, "success_bonus": 0.0, "collision": 2.5,
-          "first_hit": 0.0, "proximity": 0.5, "margin": 0.2}
+#: The reward's weights (the task block's parameters) and their defaults,
+#: read from :class:`NavigationTask`'s signature (one place for the values).
+REWARD = {k: inspect.signature(NavigationTask).parameters[k].default
+          for k in ("progress", "goal_bonus", "success_bonus", "collision", "first_hit",
+                    "proximity", "margin")}
 
 
 def _weights(weights):
     w = dict(REWARD)
     for k, v in (weights or {}).items():
         if k not in REWARD:
-            from avblocks.core.errors import ParameterError
             raise ParameterError("unknown reward weight", block="task", param=str(k),
                                  expected=sorted(REWARD), found=k)
         w[k] = float(v)

@@ -263,17 +263,9 @@ class Program:
                 cur = jnp.where(inside[j], left, cur)
             return solver.step(eng, cur, X, Yc, t1 - cur)
 
-        def threaded(fn):
-            # the branches' searches report to the step's tally: carried in and out
-            def branch(op):
-                X, N = op
-                with _diagnostics.resumed(N) as tl:
-                    X = fn(X)
-                return X, (N if tl is None else tl.value)
-            return branch
-
-        X, N = jax.lax.cond(jnp.any(inside), threaded(split),
-                            threaded(lambda X: solver.step(eng, t, X, Y, dt)),
+        # the branches' searches report to the step's tally: carried in and out
+        X, N = jax.lax.cond(jnp.any(inside), _diagnostics.through(split),
+                            _diagnostics.through(lambda X: solver.step(eng, t, X, Y, dt)),
                             (X, _diagnostics.held()))
         _diagnostics.absorb(N)
         return X

@@ -140,13 +140,13 @@ def refresh(points, anchor, cand, built, radius, skin, build, xp=np, box=None,
     p = sg(points)
     stale = ~(built != 0) | moved(p, anchor, sg(radius), skin, xp, box, sg(margin))
 
+    # what the build's search needed is carried out of the loop (the
+    # compiled engine's needs tally, core.diagnostics), not called back
+    rebuild = diagnostics.through(lambda _: build(p).astype(cand.dtype))
+
     def body(c):
-        # what the build's search needed is carried out of the loop (the
-        # compiled engine's needs tally, core.diagnostics), not called back
-        with diagnostics.resumed(c[3]) as tl:
-            new = build(p).astype(cand.dtype)
-        return new, p.astype(anchor.dtype), xp.zeros_like(c[2]), \
-            (c[3] if tl is None else tl.value)
+        new, needs = rebuild((None, c[3]))
+        return new, p.astype(anchor.dtype), xp.zeros_like(c[2]), needs
 
     cand, anchor, _, needs = jax.lax.while_loop(
         lambda c: c[2], body, (cand, anchor, stale, diagnostics.held()))

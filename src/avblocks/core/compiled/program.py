@@ -35,6 +35,7 @@ from .. import diagnostics as _diagnostics
 from .. import memo as _memo
 from ..params import bound_parameters
 from . import _jax
+from .carry import Packing
 from .engine import TracedEngine
 
 _CACHE: OrderedDict = OrderedDict()
@@ -180,6 +181,11 @@ class Program:
             # state are so traced in one body, where values blocks share
             # through core.memo (the heading trig of a unicycle and its
             # controller) become one operation.
+            # Only the outputs of periodic blocks are read from the carry (held
+            # between hits): the others are not carried.
+            def held(Y):
+                return [y if p else {} for y, p in zip(Y, eng.periodic)]
+
             def step(carry, k):
                 X, Yp, N = carry
                 t = t0 + k * dt
@@ -188,11 +194,15 @@ class Program:
                     Y = eng.major_outputs(t, X, Yp, hit)
                     X = eng.update(t, X, Y, hit)
                     X = self._integrate(t, X, Y)
-                return (X, Y, tl.value if rows else None), None
+                return (X, held(Y), tl.value if rows else None)
 
+            # The step loop carries its state packed (see .carry): one fused
+            # loop per step where the state would be several.
             def advance(carry, k0, count):
-                carry, _ = lax.scan(step, carry, k0 + jnp.arange(count))
-                return carry
+                pk = Packing(carry, fdt)
+                packed, _ = lax.scan(lambda c, k: (pk.pack(step(pk.unpack(c), k)), None),
+                                     pk.pack(carry), k0 + jnp.arange(count))
+                return pk.unpack(packed)
 
             def advance_le(carry, k0):
                 return advance(carry, k0, le)
@@ -210,7 +220,7 @@ class Program:
                                  lambda c: c, carry)
                 return carry, row
 
-            carry, logs = lax.scan(outer, (X0, Y0, N0), jnp.arange(nlog))
+            carry, logs = lax.scan(outer, (X0, held(Y0), N0), jnp.arange(nlog))
             rem = self.nsteps - (nlog - 1) * le
             if rem:
                 carry = advance(carry, (nlog - 1) * le, rem)

@@ -35,7 +35,7 @@ from .. import diagnostics as _diagnostics
 from .. import memo as _memo
 from ..params import bound_parameters
 from . import _jax
-from .carry import Packing
+from .carry import scan_steps
 from .engine import TracedEngine
 
 _CACHE: OrderedDict = OrderedDict()
@@ -196,13 +196,10 @@ class Program:
                     X = self._integrate(t, X, Y)
                 return (X, held(Y), tl.value if rows else None)
 
-            # The step loop carries its state packed (see .carry): one fused
-            # loop per step where the state would be several.
+            # The step loop carries its state packed where the step is
+            # elementwise (see .carry): one fused loop per step, not several.
             def advance(carry, k0, count):
-                pk = Packing(carry, fdt)
-                packed, _ = lax.scan(lambda c, k: (pk.pack(step(pk.unpack(c), k)), None),
-                                     pk.pack(carry), k0 + jnp.arange(count))
-                return pk.unpack(packed)
+                return scan_steps(step, carry, k0 + jnp.arange(count), fdt)
 
             def advance_le(carry, k0):
                 return advance(carry, k0, le)

@@ -165,8 +165,10 @@ def numba_loop():
 
 def jax_loop():
     """The W1 law, Euler step and arrival latch written by hand as one JAX
-    ``lax.scan`` (compiled with avblocks' XLA options): the floor of what a
-    compiled avblocks run of W1 can reach."""
+    ``lax.scan`` (compiled with avblocks' XLA options): a naive reference.
+    Its carry is two arrays, so XLA runs each step as two fused loops and a
+    copy; avblocks' own program packs its carry and runs one loop per step
+    (``avblocks.core.compiled.carry``), so it is now faster than this."""
     from avblocks.core.compiled import require_jax
     from avblocks.core.compiled.program import compile_lowered
     jax = require_jax()

@@ -75,6 +75,7 @@ import math
 import numpy as np
 
 from ..core.errors import ParameterError
+from .boxes import DENSE_ITEMS, disc_hits_dense, split_boxes
 
 #: Padding coordinate: far from anything, finite, and small enough that its
 #: square stays finite in float32 (so no inf or NaN reaches a gradient).
@@ -303,6 +304,9 @@ class EdgeGrid:
         self.circle_center = np.concatenate([cc, [[_FAR, _FAR]]])
         self.circle_radius = np.concatenate([cr, [0.0]])
         self.circle_owner = np.concatenate([cid, [-1]]).astype(np.int32)
+        # axis-aligned rectangles as boxes; small worlds are queried densely
+        self.boxes, self.box_owner, self.rest = split_boxes(seg, owner)
+        self.dense = len(self.boxes) + len(self.rest) + self.n_circles <= DENSE_ITEMS
         # bounding boxes of edges and circles
         lo = np.concatenate([seg.min(axis=1), cc - cr[:, None]]) if len(seg) + len(cid) \
             else np.zeros((0, 2))
@@ -430,6 +434,8 @@ class EdgeGrid:
         """
         big = np.int32(np.iinfo(np.int32).max)
         r = xp.broadcast_to(xp.asarray(radius, dtype=points.dtype), points.shape[:1])
+        if self.dense:
+            return disc_hits_dense(self, points, r, big, xp)
         first = xp.full(points.shape[:1], big, dtype=np.int32)
         if self.n_edges:
             e, cell, ok = self.candidate_edges(points, xp)

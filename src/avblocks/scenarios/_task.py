@@ -37,6 +37,33 @@ def pairwise(p, xp):
     return xp.where(np.eye(n, dtype=bool), xp.inf, r)
 
 
+#: Rows up to this long are sorted by ranks (:func:`sort_rows`), longer by argsort.
+RANK_SORT_MAX = 16
+
+
+def sort_rows(keys, parts, xp):
+    """``parts`` (each (..., m, k)) reordered along the ``m`` axis by
+    ascending ``keys`` (..., m), ties in index order (a stable sort).
+
+    Short rows (``m <= RANK_SORT_MAX``) go by ranks: ``rank_i = #{j: key_j
+    < key_i, or key_j = key_i and j < i}``, then ``out[rank_i] = part[i]``
+    as a sum of one-hot selections: elementwise work ``m^2`` per row, no
+    sort operation (under ``vmap`` on a CPU, XLA's sort of thousands of
+    3-element rows costs more than the rest of the navigation task's
+    observation). Longer rows: ``argsort``."""
+    m = keys.shape[-1]
+    if m > RANK_SORT_MAX:
+        order = xp.argsort(keys, axis=-1)[..., None]
+        return [xp.take_along_axis(q, order, axis=-2) for q in parts]
+    i = np.arange(m)
+    ki, kj = keys[..., :, None], keys[..., None, :]                     # (..., m, m)
+    before = (kj < ki) | ((kj == ki) & (i[None, :] < i[:, None]))
+    rank = xp.sum(before.astype(np.int32), axis=-1)                     # (..., m)
+    onehot = (rank[..., :, None] == i)[..., None]                       # (..., m_i, m_out, 1)
+    return [xp.sum(xp.where(onehot, q[..., :, None, :], xp.zeros((), q.dtype)), axis=-3)
+            for q in parts]
+
+
 def uniform_points(key, n, half, xp, min_sep=0.0, tries=8):
     """``n`` points uniform in ``[-half, half]^2`` (rng keys; both engines).
     With ``min_sep`` the draw is repeated ``tries`` times and the candidate

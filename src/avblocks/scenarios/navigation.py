@@ -78,10 +78,17 @@ from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
 from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
-from avblocks.environment.edges import point_segment_distance
+from avblocks.environment.boxes import boundary_distance, split_boxes
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, free_points, others_index, pairwise
+from ._task import (
+    command_source,
+    drive_at_speed,
+    free_points,
+    others_index,
+    pairwise,
+    sort_rows,
+)
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 
@@ -149,7 +156,10 @@ class NavigationTask(Block):
         self.rays = int(rays)
         self.sort_others = bool(sort_others)
         self.observe_velocity = bool(observe_velocity)
-        self.seg = np.asarray(world.segments, float).reshape(-1, 4)   # walls included
+        seg = np.asarray(world.segments, float).reshape(-1, 4)        # walls included
+        # rectangles (the walls too) as boxes in closed form, other edges as such
+        self.boxes, _, rest = split_boxes(seg.reshape(-1, 2, 2), world.segment_owner)
+        self.rest_seg = seg[rest]
         self.declare_parameter("half", half, bounds=(0, None), unit="m")
         self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
         self.declare_parameter("goal_radius", goal_radius, bounds=(0, None), unit="m")
@@ -187,10 +197,8 @@ class NavigationTask(Block):
         r, m = self.radius, self.margin
         gap_a = pairwise(p, xp) - 2 * r
         near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
-        s = self.seg
-        d = point_segment_distance(p[..., 0:1], p[..., 1:2], s[:, 0], s[:, 1], s[:, 2],
-                                   s[:, 3], xp)                           # (..., N, E)
-        gap = xp.min(d, axis=-1) - r
+        gap = boundary_distance(p[..., 0:1], p[..., 1:2], self.boxes, self.rest_seg,
+                                xp) - r                                   # (..., N)
         return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
 
     def output(self, t, x, u, xp):
@@ -203,8 +211,7 @@ class NavigationTask(Block):
             v = x["vel"]
             parts.append(v[..., self.idx, :] - v[..., :, None, :])
         if self.sort_others and self.n > 2:
-            order = xp.argsort(xp.sum(rel_o * rel_o, -1), axis=-1)[..., None]
-            parts = [xp.take_along_axis(q, order, axis=-2) for q in parts]
+            parts = sort_rows(xp.sum(rel_o * rel_o, -1), parts, xp)
         others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from ..utility.arrays import norm2
 from .edges import EdgeGrid
 
 _KINDS = {"pose": (3, "m, m, rad", ("x", "y", "theta"), "agent poses"),
@@ -100,4 +101,4 @@ def all_pairs(search, points, xp):
     j = np.arange(n - 1)[None, :]
     idx = j + (j >= np.arange(n)[:, None])             # row i: every index but i
     d = points[idx] - points[:, None, :]
-    return idx, xp.sqrt(xp.sum(d * d, axis=-1))
+    return idx, xp.sqrt(norm2(d))

@@ -32,6 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..utility.arrays import fold
+from .kernels import _norm, point_in_polygons, point_segment_distance
+
 #: Worlds with at most this many boxes + other edges + circles are queried
 #: densely (every agent against every item): under ``vmap`` the gathers of
 #: a cell's candidates cost more than testing a few dozen items outright
@@ -107,16 +110,15 @@ def box_boundary_distance(px, py, x0, y0, x1, y1, xp=np):
 def boundary_distance(px, py, boxes, rest_seg, xp=np):
     """Least distance from points ``(px, py)`` (..., N, 1) to the boundary of
     any box ``boxes`` (B, 4) or edge ``rest_seg`` (E', 4): (..., N)."""
-    from .edges import point_segment_distance
     big = xp.full(px.shape[:-1], xp.inf, dtype=px.dtype)
     if len(boxes):
         b = boxes
         d = box_boundary_distance(px, py, b[:, 0], b[:, 1], b[:, 2], b[:, 3], xp)
-        big = xp.minimum(big, xp.min(d, axis=-1))
+        big = xp.minimum(big, fold(xp.minimum, d, -1, xp))
     if len(rest_seg):
         s = rest_seg
         d = point_segment_distance(px, py, s[:, 0], s[:, 1], s[:, 2], s[:, 3], xp)
-        big = xp.minimum(big, xp.min(d, axis=-1))
+        big = xp.minimum(big, fold(xp.minimum, d, -1, xp))
     return big
 
 
@@ -125,12 +127,11 @@ def disc_hits_dense(grid, points, r, big, xp=np):
     world tested (no cell lookup): boxes in closed form, the other
     polygons by their edges and a crossing-number inside test, circles by
     their centres. ``r`` (N,), ``big``: the int32 "none" sentinel."""
-    from .edges import _norm, point_in_polygons, point_segment_distance
     first = xp.full(points.shape[:1], big, dtype=np.int32)
     px, py = points[:, 0:1], points[:, 1:2]
 
     def lowest(touch, own):
-        return xp.min(xp.where(touch, xp.asarray(own), big), axis=1)
+        return fold(xp.minimum, xp.where(touch, xp.asarray(own), big), 1, xp)
     if len(grid.boxes):
         b = xp.asarray(grid.boxes, dtype=points.dtype)
         d2 = box_dist2(px, py, b[:, 0], b[:, 1], b[:, 2], b[:, 3], xp)       # (N, B)

@@ -58,6 +58,7 @@ from scipy.spatial import cKDTree
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from ..utility.arrays import fold
 from ..utility.spatial import Need, NeighborSearch
 from ._common import (
     SMALL_N,
@@ -183,7 +184,7 @@ def _posed_xp(body, pose, xp):
 
 def _first_pair(idx, hit, xp):
     big = np.int32(np.iinfo(np.int32).max)
-    f = xp.min(xp.where(hit, idx, big), axis=1)
+    f = fold(xp.minimum, xp.where(hit, idx, big), 1, xp)
     any_ = f < big
     return any_, xp.where(any_, f, -1)
 

@@ -54,6 +54,7 @@ from ..core import rng as _rng
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from ..utility.arrays import fold
 from ..utility.spatial import Need, NeighborSearch
 from ._common import (
     SMALL_N,
@@ -277,7 +278,8 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
     out = xp.full((n, ux.shape[-1]), xp.inf, dtype=pose.dtype)
 
     def nearest(t, ok=None):                    # (N, items, R) -> (N, R)
-        return xp.min(t if ok is None else xp.where(ok[..., None], t, xp.inf), axis=-2)
+        return fold(xp.minimum, t if ok is None else xp.where(ok[..., None], t, xp.inf),
+                    -2, xp)
 
     def col(a):                                 # items on the middle axis
         return xp.asarray(a, dtype=pose.dtype)[..., None]

@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from avblocks.utility.arrays import fold, norm2
+
 
 def others_index(n):
     """(n, n-1) int array: for agent i, the indices of the other agents."""
@@ -32,7 +34,7 @@ def others_index(n):
 def pairwise(p, xp):
     """(..., n, n) distances between the rows of p (..., n, 2); diagonal = +inf."""
     d = p[..., :, None, :] - p[..., None, :, :]
-    r = xp.sqrt(xp.sum(d * d, axis=-1) + 1e-12)
+    r = xp.sqrt(norm2(d) + 1e-12)
     n = p.shape[-2]
     return xp.where(np.eye(n, dtype=bool), xp.inf, r)
 
@@ -58,9 +60,9 @@ def sort_rows(keys, parts, xp):
     i = np.arange(m)
     ki, kj = keys[..., :, None], keys[..., None, :]                     # (..., m, m)
     before = (kj < ki) | ((kj == ki) & (i[None, :] < i[:, None]))
-    rank = xp.sum(before.astype(np.int32), axis=-1)                     # (..., m)
+    rank = fold(xp.add, before.astype(np.int32), -1, xp)               # (..., m)
     onehot = (rank[..., :, None] == i)[..., None]                       # (..., m_i, m_out, 1)
-    return [xp.sum(xp.where(onehot, q[..., :, None, :], xp.zeros((), q.dtype)), axis=-3)
+    return [fold(xp.add, xp.where(onehot, q[..., :, None, :], xp.zeros((), q.dtype)), -3, xp)
             for q in parts]
 
 

@@ -79,6 +79,7 @@ from avblocks.core.diagram import Diagram
 from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
 from avblocks.environment.boxes import boundary_distance, split_boxes
+from avblocks.utility.arrays import fold, norm2
 from avblocks.vehicles import SingleIntegrator
 
 from ._task import (
@@ -196,7 +197,7 @@ class NavigationTask(Block):
         distance): a smooth warning before contact."""
         r, m = self.radius, self.margin
         gap_a = pairwise(p, xp) - 2 * r
-        near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
+        near_a = fold(xp.add, xp.clip(1.0 - gap_a / m, 0.0, 1.0), -1, xp)
         gap = boundary_distance(p[..., 0:1], p[..., 1:2], self.boxes, self.rest_seg,
                                 xp) - r                                   # (..., N)
         return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
@@ -204,14 +205,14 @@ class NavigationTask(Block):
     def output(self, t, x, u, xp):
         p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
-        d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
+        d = xp.sqrt(norm2(rel) + 1e-12)
         rel_o = p[..., self.idx, :] - p[..., :, None, :]                # (..., n, n-1, 2)
         parts = [rel_o]
         if self.observe_velocity:
             v = x["vel"]
             parts.append(v[..., self.idx, :] - v[..., :, None, :])
         if self.sort_others and self.n > 2:
-            parts = sort_rows(xp.sum(rel_o * rel_o, -1), parts, xp)
+            parts = sort_rows(norm2(rel_o), parts, xp)
         others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)
@@ -227,7 +228,7 @@ class NavigationTask(Block):
     def update(self, t, x, u, xp):
         p, g = u["position"], u["goals"]
         rel = g - p
-        new = {"prev": xp.sqrt(xp.sum(rel * rel, -1) + 1e-12),
+        new = {"prev": xp.sqrt(norm2(rel) + 1e-12),
                "hit": x["hit"] | u["contact"]}
         if self.observe_velocity:
             new["vel"] = u["velocity"]

@@ -212,7 +212,8 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
         ok = idx >= 0
         j = xp.where(ok, idx, 0)
         if isinstance(footprint, Disc):
-            hit = ok & (dist <= r[:, None] + r[j])
+            rj = r[None, :] if dense is not None else r[j]     # all pairs: column j is j
+            hit = ok & (dist <= r[:, None] + rj)
         else:
             vi = verts[:, None, :, None, :]                    # (N, 1, V, 1, 2)
             vj = verts[j]                                       # (N, M, V, 2)

@@ -314,11 +314,15 @@ def cast_rays_grid(grid, search, pose, angles, max_range, agent_radius=None, xp=
     if agent_radius is not None and n > 1 and search is not None:
         r = xp.broadcast_to(xp.asarray(agent_radius, dtype=pose.dtype), (n,))
         dense = all_pairs(search, pose[:, :2], xp)     # discs past the range: capped
-        idx, _ = dense if dense is not None else \
-            search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
-        ok = idx >= 0
-        j = xp.where(ok, idx, 0)
-        t = ray_circle(ox, oy, ux, uy, col(pose[j, 0]), col(pose[j, 1]), col(r[j]), xp)
+        if dense is not None:                          # column j: agent j (no gather)
+            ok = dense[0] >= 0
+            cx, cy, rj = pose[None, :, 0], pose[None, :, 1], r[None, :]
+        else:
+            idx, _ = search.within(pose[:, :2], rmax + xp.max(r), xp=xp)
+            ok = idx >= 0
+            j = xp.where(ok, idx, 0)
+            cx, cy, rj = pose[j, 0], pose[j, 1], r[j]
+        t = ray_circle(ox, oy, ux, uy, col(cx), col(cy), col(rj), xp)
         out = xp.minimum(out, nearest(t, ok))                            # (N, M, R)
     return xp.minimum(out, rmax)
 

@@ -43,9 +43,18 @@ def pairwise(p, xp):
 RANK_SORT_MAX = 16
 
 
-def sort_rows(keys, parts, xp):
+def drop_diagonal(q, xp):
+    """(..., n, n, k) -> (..., n, n-1, k): row ``i`` without its column ``i``
+    (the others in index order), from two shifted slices (no gather)."""
+    n = q.shape[-2]
+    i, j = np.arange(n)[:, None], np.arange(n - 1)[None, :]
+    return xp.where((j >= i)[..., None], q[..., :, 1:, :], q[..., :, :-1, :])
+
+
+def sort_rows(keys, parts, xp, slots=None):
     """``parts`` (each (..., m, k)) reordered along the ``m`` axis by
-    ascending ``keys`` (..., m), ties in index order (a stable sort).
+    ascending ``keys`` (..., m), ties in index order (a stable sort); only
+    the first ``slots`` of the result (default all ``m``).
 
     Short rows (``m <= RANK_SORT_MAX``) go by ranks: ``rank_i = #{j: key_j
     < key_i, or key_j = key_i and j < i}``, then ``out[rank_i] = part[i]``
@@ -54,14 +63,15 @@ def sort_rows(keys, parts, xp):
     3-element rows costs more than the rest of the navigation task's
     observation). Longer rows: ``argsort``."""
     m = keys.shape[-1]
+    slots = m if slots is None else int(slots)
     if m > RANK_SORT_MAX:
-        order = xp.argsort(keys, axis=-1)[..., None]
+        order = xp.argsort(keys, axis=-1)[..., :slots, None]
         return [xp.take_along_axis(q, order, axis=-2) for q in parts]
     i = np.arange(m)
     ki, kj = keys[..., :, None], keys[..., None, :]                     # (..., m, m)
     before = (kj < ki) | ((kj == ki) & (i[None, :] < i[:, None]))
     rank = fold(xp.add, before.astype(np.int32), -1, xp)               # (..., m)
-    onehot = (rank[..., :, None] == i)[..., None]                       # (..., m_i, m_out, 1)
+    onehot = (rank[..., :, None] == i[:slots])[..., None]             # (..., m, slots, 1)
     return [fold(xp.add, xp.where(onehot, q[..., :, None, :], xp.zeros((), q.dtype)), -3, xp)
             for q in parts]
 

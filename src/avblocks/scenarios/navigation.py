@@ -85,8 +85,8 @@ from avblocks.vehicles import SingleIntegrator
 from ._task import (
     command_source,
     drive_at_speed,
+    drop_diagonal,
     free_points,
-    others_index,
     pairwise,
     sort_rows,
 )
@@ -182,7 +182,6 @@ class NavigationTask(Block):
             # the commands of the last step (not feedthrough: read from state)
             self.declare_input("velocity", (n, 2), unit="m/s", feedthrough=False)
             self.declare_discrete_state("vel", np.zeros((n, 2)), dtype="float64")
-        self.idx = others_index(n)
         self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)
                                     * (2 if self.observe_velocity else 1)))
         self.declare_output("reward", (n,))
@@ -206,13 +205,18 @@ class NavigationTask(Block):
         p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
         d = xp.sqrt(norm2(rel) + 1e-12)
-        rel_o = p[..., self.idx, :] - p[..., :, None, :]                # (..., n, n-1, 2)
-        parts = [rel_o]
+        # every agent relative to each (row i, column j: j - i), then the
+        # diagonal dropped by ranks or by two shifted slices (no gather)
+        rel_a = p[..., None, :, :] - p[..., :, None, :]                 # (..., n, n, 2)
+        parts = [rel_a]
         if self.observe_velocity:
             v = x["vel"]
-            parts.append(v[..., self.idx, :] - v[..., :, None, :])
+            parts.append(v[..., None, :, :] - v[..., :, None, :])
         if self.sort_others and self.n > 2:
-            parts = sort_rows(norm2(rel_o), parts, xp)
+            key = xp.where(np.eye(self.n, dtype=bool), xp.inf, norm2(rel_a))  # self last
+            parts = sort_rows(key, parts, xp, slots=self.n - 1)
+        else:
+            parts = [drop_diagonal(q, xp) for q in parts]             # (..., n, n-1, k)
         others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)

@@ -29,7 +29,9 @@ predicates with ``xp`` code that the compiled (JAX) engine traces
   uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`,
   built for the largest footprint reach ``bounding radius + margin``);
   each agent tests only the candidate edges, circles and polygons of its
-  cell (an (N, K) product, ``K`` the fullest cell's list);
+  cell (an (N, K) product, ``K`` the fullest cell's list); in a small world
+  every obstacle, rectangles as boxes in closed form (the grid's
+  ``dense``);
 - agents vs agents: :class:`~avblocks.utility.spatial.NeighborSearch`
   (a cell list) within twice the largest reach, then the exact test on
   the candidates: discs ``|c_i - c_j| <= r_i + r_j + 2 m``; polygons:

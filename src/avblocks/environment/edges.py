@@ -22,6 +22,12 @@ arrays of fixed shape:
 Queries never form an (N, E) product: a point looks up its cell and works
 on that cell's ``K`` candidate edges only, (N, K), with ``K`` fixed when the
 grid is built (the bounded candidate product the broad phase allows).
+Small worlds are the exception (``dense``: at most
+:data:`~avblocks.environment.boxes.DENSE_ITEMS` items): there every point
+tests every item, the axis-aligned rectangles (walls included) as boxes in
+closed form (``boxes``, ``box_owner``; the other polygons' edges:
+``rest``), which costs less than a cell's gathers (see
+:mod:`~avblocks.environment.boxes`).
 
 Point in polygon from a cell's reference point
 ----------------------------------------------

@@ -31,10 +31,15 @@ uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`
 built for ``reach = max_range``: an agent's cell lists every edge and
 circle within ``max_range`` of any point of the cell, ``K`` and ``Kc`` of
 them at most), so each agent intersects its R rays with its own
-candidates only, an (N, R, K) product (no angular culling: every ray
-tests every candidate). Other agents come from a
+candidates only, an (N, K, R) product (no angular culling: every ray
+tests every candidate). A small world (the grid's ``dense``) is tested
+whole instead, its axis-aligned rectangles and walls as boxes by the slab
+method (:func:`~avblocks.environment.boxes.ray_boxes`: one expression per
+box, not four edges); so is every edge when a cell keeps more than half
+of them. The fan of rays is turned by each agent's heading with one sin
+and cos per agent. Other agents come from a
 :class:`~avblocks.utility.spatial.NeighborSearch` within ``max_range +
-max(agent_radius)``: (N, R, M). Both methods agree to 1e-9 m (tests).
+max(agent_radius)``: (N, M, R). Both methods agree to 1e-9 m (tests).
 
 The default, ``method="auto"``, is traceable: a compiled run uses the grid
 method and the NumPy engine :func:`cast_rays`, the faster there (it culls

@@ -186,6 +186,7 @@ def navigation_task(n=4, xp=None):
     ica_y = (1.0 / np.where(sa == 0, 1e-30, sa)).astype(f32)
     eye = np.eye(n, dtype=bool)
     slot = np.arange(n - 1)
+    shift = slot[None, :] >= np.arange(n)[:, None]                     # column j -> agent j+1
 
     def step(p, g, prev, hit, a):
         p = p + dt * a                       # single integrator, Euler (exact here)
@@ -194,12 +195,13 @@ def navigation_task(n=4, xp=None):
         ranges = _rays(p, ca, sa, ica, ica_y, box, half, r, rmax, xp)
         rel_a = p[None, :, :] - p[:, None, :]                          # (n, n, 2): j - i
         d2 = rel_a[..., 0] ** 2 + rel_a[..., 1] ** 2
-        key = xp.where(eye, np.inf, d2)                                # self last
+        rel_x = xp.where(shift[..., None], rel_a[:, 1:], rel_a[:, :-1])  # (n, n-1, 2) others
+        key = xp.where(shift, d2[:, 1:], d2[:, :-1])
         before = (key[:, None, :] < key[:, :, None]) | \
-            ((key[:, None, :] == key[:, :, None]) & (np.arange(n)[None, :] < np.arange(n)[:, None]))
-        rank = _red(before.astype(np.int32), -1, "sum", xp)            # (n, n)
+            ((key[:, None, :] == key[:, :, None]) & (slot[None, :] < slot[:, None]))
+        rank = _red(before.astype(np.int32), -1, "sum", xp)            # (n, n-1)
         pick = (rank[:, :, None] == slot)[..., None]                   # (n, j, slot, 1)
-        rel_o = _red(xp.where(pick, rel_a[:, :, None, :], 0.0), 1, "sum", xp)
+        rel_o = _red(xp.where(pick, rel_x[:, :, None, :], 0.0), 1, "sum", xp)
         obs = xp.concatenate([rel, p / half, ranges / rmax, rel_o.reshape(n, -1)], -1)
         pair = xp.where(eye, np.inf, xp.sqrt(xp.where(eye, 1.0, d2) + 1e-12))
         qx, qy = p[:, 0:1], p[:, 1:2]                                  # boxes: closed form

@@ -205,18 +205,16 @@ class NavigationTask(Block):
         p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
         d = xp.sqrt(norm2(rel) + 1e-12)
-        # every agent relative to each (row i, column j: j - i), then the
-        # diagonal dropped by ranks or by two shifted slices (no gather)
+        # every agent relative to each (row i, column j: j - i), the diagonal
+        # dropped by two shifted slices (no gather), then sorted by ranks
         rel_a = p[..., None, :, :] - p[..., :, None, :]                 # (..., n, n, 2)
         parts = [rel_a]
         if self.observe_velocity:
             v = x["vel"]
             parts.append(v[..., None, :, :] - v[..., :, None, :])
+        parts = [drop_diagonal(q, xp) for q in parts]                 # (..., n, n-1, k)
         if self.sort_others and self.n > 2:
-            key = xp.where(np.eye(self.n, dtype=bool), xp.inf, norm2(rel_a))  # self last
-            parts = sort_rows(key, parts, xp, slots=self.n - 1)
-        else:
-            parts = [drop_diagonal(q, xp) for q in parts]             # (..., n, n-1, k)
+            parts = sort_rows(norm2(parts[0]), parts, xp)
         others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)

@@ -38,8 +38,8 @@ from .kernels import _norm, point_in_polygons, point_segment_distance
 #: Worlds with at most this many boxes + other edges + circles are queried
 #: densely (every agent against every item): under ``vmap`` the gathers of
 #: a cell's candidates cost more than testing a few dozen items outright
-#: (the navigation task, 7 boxes: ray casts 3x, disc tests 4x cheaper than
-#: through the grid).
+#: (the navigation task's disc test, 7 boxes, 1024 copies: 1 ms against 21
+#: ms through the cells per 60-step rollout, CPU time of one XLA thread).
 DENSE_ITEMS = 32
 
 #: ``1 / u`` for a ray component that is exactly 0 (see the module docstring).

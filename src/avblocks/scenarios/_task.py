@@ -59,9 +59,10 @@ def sort_rows(keys, parts, xp, slots=None):
     Short rows (``m <= RANK_SORT_MAX``) go by ranks: ``rank_i = #{j: key_j
     < key_i, or key_j = key_i and j < i}``, then ``out[rank_i] = part[i]``
     as a sum of one-hot selections: elementwise work ``m^2`` per row, no
-    sort operation (under ``vmap`` on a CPU, XLA's sort of thousands of
-    3-element rows costs more than the rest of the navigation task's
-    observation). Longer rows: ``argsort``."""
+    sort operation and no gather (the navigation task's sort of the other
+    agents at 1024 copies, 60 steps, CPU time of one XLA thread: 39 ms with
+    ``argsort`` and ``take_along_axis``, 11 ms by ranks). Longer rows:
+    ``argsort``."""
     m = keys.shape[-1]
     slots = m if slots is None else int(slots)
     if m > RANK_SORT_MAX:

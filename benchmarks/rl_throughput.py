@@ -101,66 +101,60 @@ def avblocks_runner(E, T, **task):
 
 # ---------------------------------------------------------------- pure JAX
 # The navigation task written by hand, dense (every ray against every
-# edge, every pair of agents): what the diagram's blocks (RangeSensor,
-# Collision, the task block) compute, without the block machinery.
+# obstacle, every pair of agents): what the diagram's blocks (RangeSensor,
+# Collision, the task block) compute, without the block machinery, with the
+# same algorithms (the rectangles as boxes in closed form, reductions that
+# XLA fuses, ranks rather than a sort) and what only a hand-written version
+# can use: the arena's walls as the exit from the arena (valid inside it).
 
-def _edges(obstacles, half):
-    """(E, 4) edges of the rectangles (cx, cy, w, h) and of the arena's border."""
-    out = []
-    for cx, cy, w, h in obstacles:
-        x0, x1, y0, y1 = cx - w / 2, cx + w / 2, cy - h / 2, cy + h / 2
-        v = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-        out.append(np.concatenate([v, np.roll(v, -1, axis=0)], axis=1))
-    return np.concatenate(out)
-
-
-def _seg_dist(p, e, jnp):
-    """(n, E) distance from points p (n, 2) to the edges e (E, 4)."""
-    a, ab = e[:, :2], e[:, 2:] - e[:, :2]
-    ap = p[:, None, :] - a
-    s = jnp.clip(jnp.sum(ap * ab, -1) / jnp.sum(ab * ab, -1), 0.0, 1.0)
-    d = ap - s[..., None] * ab
-    return jnp.sqrt(jnp.sum(d * d, -1))
+def _red(x, axis, how, xp):
+    """min or sum over a short axis; under JAX as a ``lax.reduce`` that XLA's
+    CPU backend fuses (its plain min/sum reductions go to a slow library
+    kernel for rows this short)."""
+    if xp is np:
+        return (np.min if how == "min" else np.sum)(x, axis=axis)
+    from jax import lax
+    if how == "min":
+        return lax.reduce(x, xp.asarray(np.inf, x.dtype),
+                          lambda a, b: xp.where(a < b, a, b), (axis % x.ndim,))
+    return lax.reduce(x, xp.asarray(0, x.dtype), lambda a, b: a - (-b), (axis % x.ndim,))
 
 
-def _inside(p, e, jnp):
-    """(n,) inside an obstacle (crossing parity; obstacles do not overlap)."""
-    x, y = p[:, 0:1], p[:, 1:2]
-    x1, y1, x2, y2 = e[:, 0], e[:, 1], e[:, 2], e[:, 3]
-    dy = jnp.where(y2 == y1, 1.0, y2 - y1)
-    cross = ((y1 > y) != (y2 > y)) & (x < x1 + (y - y1) * (x2 - x1) / dy)
-    return jnp.sum(cross, -1) % 2 == 1
+def _rays(p, ca, sa, ica, ica_y, box, half, r, rmax, xp):
+    """(n, R) ranges along directions (ca, sa) (R,): the boxes (slabs), the
+    arena's walls (its exit), the other discs; layout (n, item, R)."""
+    ox, oy = p[:, 0, None, None], p[:, 1, None, None]                  # (n, 1, 1)
+    x0, y0, x1, y1 = (box[:, k, None] for k in range(4))               # (B, 1)
+    ax, bx = (x0 - ox) * ica, (x1 - ox) * ica
+    ay, by = (y0 - oy) * ica_y, (y1 - oy) * ica_y
+    near = xp.maximum(xp.minimum(ax, bx), xp.minimum(ay, by))
+    far = xp.minimum(xp.maximum(ax, bx), xp.maximum(ay, by))
+    t = xp.where((near <= far) & (far >= 0), xp.where(near >= 0, near, far), np.inf)
+    t = _red(t, 1, "min", xp)                                          # (n, R)
+    wx = (xp.where(ca >= 0, half, -half) - p[:, 0:1]) * ica            # the walls
+    wy = (xp.where(sa >= 0, half, -half) - p[:, 1:2]) * ica_y
+    t = xp.minimum(t, xp.minimum(wx, wy))
+    fx = p[None, :, 0] - p[:, 0:1]                                     # (n, n): j - i
+    fy = p[None, :, 1] - p[:, 1:2]
+    ff = (fx * fx + fy * fy)[..., None]
+    tca = fx[..., None] * ca + fy[..., None] * sa                      # (n, n, R)
+    disc = r * r - (ff - tca * tca)
+    th = tca - xp.sqrt(xp.maximum(disc, 0.0))
+    inside = ff <= r * r                                               # in a disc: 0
+    hit = (disc >= 0) & (th >= 0) | inside
+    other = ~np.eye(p.shape[0], dtype=bool)[..., None]
+    th = xp.where(hit & other, xp.where(inside, 0.0, th), np.inf)
+    return xp.minimum(xp.minimum(t, _red(th, 1, "min", xp)), rmax)
 
 
-def _rays(p, d, e, half, r, rmax, jnp):
-    """(n, R) ranges along directions d (R, 2): edges, walls, other discs."""
-    a, ev = e[:, :2], e[:, 2:] - e[:, :2]
-    ao = a[None] - p[:, None]                                          # (n, E, 2)
-    den = d[:, 0:1] * ev[None, :, 1] - d[:, 1:2] * ev[None, :, 0]      # (R, E)
-    sd = jnp.where(jnp.abs(den) < 1e-12, 1e-12, den)
-    t = (ao[:, None, :, 0] * ev[:, 1] - ao[:, None, :, 1] * ev[:, 0]) / sd
-    u = (ao[:, None, :, 0] * d[None, :, None, 1] - ao[:, None, :, 1] * d[None, :, None, 0]) / sd
-    t = jnp.min(jnp.where((t >= 0) & (u >= 0) & (u <= 1), t, jnp.inf), -1)
-    flat = jnp.abs(d) < 1e-12                              # parallel to a wall
-    dd = jnp.where(flat, 1.0, d)
-    tw = jnp.where(flat[None], jnp.inf,
-                   (jnp.where(d > 0, half, -half)[None] - p[:, None, :]) / dd[None])
-    t = jnp.minimum(t, jnp.min(jnp.maximum(tw, 0.0), -1))
-    oc = p[None, :, :] - p[:, None, :]                                 # (n, m, 2)
-    proj = jnp.einsum("nmk,rk->nrm", oc, d)
-    disc = r * r - (jnp.sum(oc * oc, -1)[:, None, :] - proj * proj)
-    th = proj - jnp.sqrt(jnp.maximum(disc, 0.0))
-    n = p.shape[0]
-    hit = (disc >= 0) & (th >= 0) & ~np.eye(n, dtype=bool)[:, None, :]
-    t = jnp.minimum(t, jnp.min(jnp.where(hit, th, jnp.inf), -1))
-    return jnp.minimum(t, rmax)
-
-
-def _free(key, n, half, e, c, min_sep, jnp, tries=24):
+def _free(key, n, half, box, c, min_sep, jnp, tries=24):
+    """``n`` points farther than ``c`` from the boxes and ``min_sep`` apart:
+    the first of ``tries`` draws that is (the arena's margin by the range)."""
     import jax
     q = jax.random.uniform(key, (tries, n, 2), minval=-(half - c), maxval=half - c)
-    ok = ~_inside(q.reshape(-1, 2), e, jnp).reshape(tries, n) & \
-        (jnp.min(_seg_dist(q.reshape(-1, 2), e, jnp), -1).reshape(tries, n) > c)
+    ex = jnp.maximum(jnp.maximum(box[:, 0] - q[..., 0:1], q[..., 0:1] - box[:, 2]), 0.0)
+    ey = jnp.maximum(jnp.maximum(box[:, 1] - q[..., 1:2], q[..., 1:2] - box[:, 3]), 0.0)
+    ok = _red(ex * ex + ey * ey, -1, "min", jnp) > c * c                # (tries, n)
     chosen = []
     for i in range(n):
         oki = ok[:, i]
@@ -177,34 +171,52 @@ def navigation_task(n=4, xp=None):
     observation and reward at the new positions; ``prev`` is the distance
     to the goal before the step, ``hit`` the episode's collision flags) and
     ``start(key) -> (p, g)`` (JAX only). ``xp``: ``jax.numpy`` (default) or
-    NumPy; the same numbers as the diagram's step (tests/rl)."""
+    NumPy; the same numbers as the diagram's step for agents in the arena
+    (tests/benchmarks)."""
     if xp is None:
         import jax.numpy as xp
     from avblocks.scenarios.navigation import OBSTACLES
     half, r, rmax, dt = 1.5, 0.1, 1.0, 0.1
-    f32 = xp.float32 if xp is not np else np.float64
-    edges = xp.asarray(_edges(OBSTACLES, half), f32)
+    f32 = np.float32 if xp is not np else np.float64
+    box = np.array([[cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2]
+                    for cx, cy, w, h in OBSTACLES], f32)               # (B, 4)
     ang = np.linspace(-np.pi, np.pi, 12, endpoint=False)
-    dirs = xp.asarray(np.stack([np.cos(ang), np.sin(ang)], -1), f32)
-    j = np.arange(n - 1)[None, :]
-    idx = j + (j >= np.arange(n)[:, None])
+    ca, sa = np.cos(ang).astype(f32), np.sin(ang).astype(f32)
+    ica = (1.0 / np.where(ca == 0, 1e-30, ca)).astype(f32)             # 0: tiny positive
+    ica_y = (1.0 / np.where(sa == 0, 1e-30, sa)).astype(f32)
     eye = np.eye(n, dtype=bool)
+    slot = np.arange(n - 1)
+    shift = slot[None, :] >= np.arange(n)[:, None]                     # column j -> agent j+1
 
     def step(p, g, prev, hit, a):
         p = p + dt * a                       # single integrator, Euler (exact here)
         rel = g - p
-        d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
-        ranges = _rays(p, dirs, edges, half, r, rmax, xp)
-        rel_o = p[idx] - p[:, None, :]
-        rel_o = xp.take_along_axis(rel_o, xp.argsort(xp.sum(rel_o ** 2, -1), -1)[..., None],
-                                   axis=1).reshape(n, -1)
-        obs = xp.concatenate([rel, p / half, ranges / rmax, rel_o], -1)
-        pair = xp.where(eye, xp.inf, xp.sqrt(xp.sum((p[:, None] - p[None]) ** 2, -1)))
-        gap_e = xp.minimum(xp.min(_seg_dist(p, edges, xp), -1),
-                           xp.min(half - xp.abs(p), -1)) - r
-        col = (gap_e <= 0) | _inside(p, edges, xp) | xp.any(pair <= 2 * r, -1)
+        d = xp.sqrt(rel[:, 0] ** 2 + rel[:, 1] ** 2 + 1e-12)
+        ranges = _rays(p, ca, sa, ica, ica_y, box, half, r, rmax, xp)
+        rel_a = p[None, :, :] - p[:, None, :]                          # (n, n, 2): j - i
+        d2 = rel_a[..., 0] ** 2 + rel_a[..., 1] ** 2
+        rel_x = xp.where(shift[..., None], rel_a[:, 1:], rel_a[:, :-1])  # (n, n-1, 2) others
+        key = xp.where(shift, d2[:, 1:], d2[:, :-1])
+        before = (key[:, None, :] < key[:, :, None]) | \
+            ((key[:, None, :] == key[:, :, None]) & (slot[None, :] < slot[:, None]))
+        rank = _red(before.astype(np.int32), -1, "sum", xp)            # (n, n-1)
+        pick = (rank[:, :, None] == slot)[..., None]                   # (n, j, slot, 1)
+        rel_o = _red(xp.where(pick, rel_x[:, :, None, :], 0.0), 1, "sum", xp)
+        obs = xp.concatenate([rel, p / half, ranges / rmax, rel_o.reshape(n, -1)], -1)
+        pair = xp.where(eye, np.inf, xp.sqrt(xp.where(eye, 1.0, d2) + 1e-12))
+        qx, qy = p[:, 0:1], p[:, 1:2]                                  # boxes: closed form
+        ex = xp.maximum(box[:, 0] - qx, qx - box[:, 2])                # (n, B)
+        ey = xp.maximum(box[:, 1] - qy, qy - box[:, 3])
+        ox, oy = xp.maximum(ex, 0.0), xp.maximum(ey, 0.0)
+        out2 = ox * ox + oy * oy
+        gap_b = xp.where(out2 > 0, xp.sqrt(xp.where(out2 > 0, out2, 1.0)),
+                         -xp.maximum(ex, ey))                          # to the boundary
+        gap_e = xp.minimum(_red(gap_b, 1, "min", xp),
+                           xp.minimum(half - xp.abs(p[:, 0]), half - xp.abs(p[:, 1]))) - r
+        col = (gap_e <= 0) | (_red(out2, 1, "min", xp) <= r * r) | \
+            (_red(pair, 1, "min", xp) <= 2 * r)
         at = d < 0.15
-        close = xp.sum(xp.clip(1.0 - (pair - 2 * r) / 0.2, 0.0, 1.0), -1) + \
+        close = _red(xp.clip(1.0 - (pair - 2 * r) / 0.2, 0.0, 1.0), 1, "sum", xp) + \
             xp.clip(1.0 - gap_e / 0.2, 0.0, 1.0)
         reward = 5.0 * (prev - d) + 0.1 * at - 2.5 * col - 0.5 * close
         return p, obs, reward, d, hit | col
@@ -212,8 +224,8 @@ def navigation_task(n=4, xp=None):
     def start(key):
         import jax
         k0, k1 = jax.random.split(key)
-        return (_free(k0, n, half, edges, 0.25, 0.5, xp),
-                _free(k1, n, half, edges, 0.25, 0.5, xp))
+        return (_free(k0, n, half, box, 0.25, 0.5, xp),
+                _free(k1, n, half, box, 0.25, 0.5, xp))
 
     return step, start
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from ..utility.arrays import norm2
 from .edges import EdgeGrid
 
 _KINDS = {"pose": (3, "m, m, rad", ("x", "y", "theta"), "agent poses"),
@@ -87,17 +88,20 @@ SMALL_N = 64
 
 
 def all_pairs(search, points, xp):
-    """Every other agent of each agent, ``(idx (N, N-1), dist (N, N-1))``,
-    when ``search`` compares every pair anyway (infinite reach, no periodic
-    box: the blocks' default for N <= SMALL_N); ``None`` for a planned
-    search. The same candidates as ``search.within`` (an (N, N-1) product;
-    callers reduce over them, so the order does not matter) without the
-    cell list's sorting and compaction, which under ``vmap`` cost several
-    times the rest of a small diagram's step (the navigation task: 2.5x)."""
+    """Every agent against every other, ``(idx (N, N), dist (N, N))`` with
+    ``idx[i, j] = j`` and ``-1`` on the diagonal (not a candidate; its
+    ``dist`` is 1), when ``search`` compares every pair anyway (infinite
+    reach, no periodic box: the blocks' default for N <= SMALL_N); ``None``
+    for a planned search. The same candidates as ``search.within`` (callers
+    reduce over them, so the order does not matter) without the cell
+    list's sorting and compaction, which under ``vmap`` cost several times
+    the rest of a small diagram's step (the navigation task: 2.5x), and
+    without a gather: column ``j`` is agent ``j`` (callers broadcast the
+    agents' values along the rows rather than index them with ``idx``)."""
     if search is None or search.box is not None or math.isfinite(search.reach):
         return None
     n = points.shape[0]
-    j = np.arange(n - 1)[None, :]
-    idx = j + (j >= np.arange(n)[:, None])             # row i: every index but i
-    d = points[idx] - points[:, None, :]
-    return idx, xp.sqrt(xp.sum(d * d, axis=-1))
+    eye = np.eye(n, dtype=bool)
+    idx = np.where(eye, -1, np.arange(n)[None, :])
+    s = xp.where(eye, 1.0, norm2(points[None, :, :] - points[:, None, :]))
+    return idx, xp.sqrt(s)

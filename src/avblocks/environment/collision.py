@@ -29,7 +29,9 @@ predicates with ``xp`` code that the compiled (JAX) engine traces
   uniform-grid broad phase (:class:`~avblocks.environment.edges.EdgeGrid`,
   built for the largest footprint reach ``bounding radius + margin``);
   each agent tests only the candidate edges, circles and polygons of its
-  cell (an (N, K) product, ``K`` the fullest cell's list);
+  cell (an (N, K) product, ``K`` the fullest cell's list); in a small world
+  every obstacle, rectangles as boxes in closed form (the grid's
+  ``dense``);
 - agents vs agents: :class:`~avblocks.utility.spatial.NeighborSearch`
   (a cell list) within twice the largest reach, then the exact test on
   the candidates: discs ``|c_i - c_j| <= r_i + r_j + 2 m``; polygons:
@@ -58,6 +60,7 @@ from scipy.spatial import cKDTree
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..core.params import positive_scalar
+from ..utility.arrays import fold
 from ..utility.spatial import Need, NeighborSearch
 from ._common import (
     SMALL_N,
@@ -183,7 +186,7 @@ def _posed_xp(body, pose, xp):
 
 def _first_pair(idx, hit, xp):
     big = np.int32(np.iinfo(np.int32).max)
-    f = xp.min(xp.where(hit, idx, big), axis=1)
+    f = fold(xp.minimum, xp.where(hit, idx, big), 1, xp)
     any_ = f < big
     return any_, xp.where(any_, f, -1)
 
@@ -211,7 +214,8 @@ def collide_grid(grid, search, pose, footprint, margin=0.0, agents=True, xp=np):
         ok = idx >= 0
         j = xp.where(ok, idx, 0)
         if isinstance(footprint, Disc):
-            hit = ok & (dist <= r[:, None] + r[j])
+            rj = r[None, :] if dense is not None else r[j]     # all pairs: column j is j
+            hit = ok & (dist <= r[:, None] + rj)
         else:
             vi = verts[:, None, :, None, :]                    # (N, 1, V, 1, 2)
             vj = verts[j]                                       # (N, M, V, 2)

@@ -78,10 +78,18 @@ from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
 from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
-from avblocks.environment.edges import point_segment_distance
+from avblocks.environment.boxes import boundary_distance, split_boxes
+from avblocks.utility.arrays import fold, norm2
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, free_points, others_index, pairwise
+from ._task import (
+    command_source,
+    drive_at_speed,
+    drop_diagonal,
+    free_points,
+    pairwise,
+    sort_rows,
+)
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 
@@ -149,7 +157,10 @@ class NavigationTask(Block):
         self.rays = int(rays)
         self.sort_others = bool(sort_others)
         self.observe_velocity = bool(observe_velocity)
-        self.seg = np.asarray(world.segments, float).reshape(-1, 4)   # walls included
+        seg = np.asarray(world.segments, float).reshape(-1, 4)        # walls included
+        # rectangles (the walls too) as boxes in closed form, other edges as such
+        self.boxes, _, rest = split_boxes(seg.reshape(-1, 2, 2), world.segment_owner)
+        self.rest_seg = seg[rest]
         self.declare_parameter("half", half, bounds=(0, None), unit="m")
         self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
         self.declare_parameter("goal_radius", goal_radius, bounds=(0, None), unit="m")
@@ -171,7 +182,6 @@ class NavigationTask(Block):
             # the commands of the last step (not feedthrough: read from state)
             self.declare_input("velocity", (n, 2), unit="m/s", feedthrough=False)
             self.declare_discrete_state("vel", np.zeros((n, 2)), dtype="float64")
-        self.idx = others_index(n)
         self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)
                                     * (2 if self.observe_velocity else 1)))
         self.declare_output("reward", (n,))
@@ -186,25 +196,25 @@ class NavigationTask(Block):
         distance): a smooth warning before contact."""
         r, m = self.radius, self.margin
         gap_a = pairwise(p, xp) - 2 * r
-        near_a = xp.sum(xp.clip(1.0 - gap_a / m, 0.0, 1.0), axis=-1)
-        s = self.seg
-        d = point_segment_distance(p[..., 0:1], p[..., 1:2], s[:, 0], s[:, 1], s[:, 2],
-                                   s[:, 3], xp)                           # (..., N, E)
-        gap = xp.min(d, axis=-1) - r
+        near_a = fold(xp.add, xp.clip(1.0 - gap_a / m, 0.0, 1.0), -1, xp)
+        gap = boundary_distance(p[..., 0:1], p[..., 1:2], self.boxes, self.rest_seg,
+                                xp) - r                                   # (..., N)
         return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
 
     def output(self, t, x, u, xp):
         p, g, col = u["position"], u["goals"], u["contact"]
         rel = g - p
-        d = xp.sqrt(xp.sum(rel * rel, -1) + 1e-12)
-        rel_o = p[..., self.idx, :] - p[..., :, None, :]                # (..., n, n-1, 2)
-        parts = [rel_o]
+        d = xp.sqrt(norm2(rel) + 1e-12)
+        # every agent relative to each (row i, column j: j - i), the diagonal
+        # dropped by two shifted slices (no gather), then sorted by ranks
+        rel_a = p[..., None, :, :] - p[..., :, None, :]                 # (..., n, n, 2)
+        parts = [rel_a]
         if self.observe_velocity:
             v = x["vel"]
-            parts.append(v[..., self.idx, :] - v[..., :, None, :])
+            parts.append(v[..., None, :, :] - v[..., :, None, :])
+        parts = [drop_diagonal(q, xp) for q in parts]                 # (..., n, n-1, k)
         if self.sort_others and self.n > 2:
-            order = xp.argsort(xp.sum(rel_o * rel_o, -1), axis=-1)[..., None]
-            parts = [xp.take_along_axis(q, order, axis=-2) for q in parts]
+            parts = sort_rows(norm2(parts[0]), parts, xp)
         others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
         obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
                              axis=-1)
@@ -220,7 +230,7 @@ class NavigationTask(Block):
     def update(self, t, x, u, xp):
         p, g = u["position"], u["goals"]
         rel = g - p
-        new = {"prev": xp.sqrt(xp.sum(rel * rel, -1) + 1e-12),
+        new = {"prev": xp.sqrt(norm2(rel) + 1e-12),
                "hit": x["hit"] | u["contact"]}
         if self.observe_velocity:
             new["vel"] = u["velocity"]

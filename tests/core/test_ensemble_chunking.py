@@ -4,7 +4,6 @@ platforms; the largest step array of a traced run."""
 
 import os
 
-import numpy as np
 import pytest
 
 from avblocks.core.compiled import chunking as C

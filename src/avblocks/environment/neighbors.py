@@ -255,7 +255,13 @@ class Neighbors(Block):
         (N, N) array (:func:`dense_nearest`; the same neighbours, cheaper for
         small N and across ensembles; not with ``fov`` or ``box``); or
         ``"auto"``: every pair up to :data:`DENSE_MAX` agents, else the cell
-        list. The NumPy engine always uses the k-d tree.
+        list. The NumPy engine always uses the k-d tree. Comparing every
+        pair, a compiled run makes as many selection passes as the search's
+        plan has ``hits`` (the most others within range one agent had at
+        ``t0``, times the headroom, at least 8) when that is below ``k``;
+        an agent with more is an overflow, handled as the cell list's
+        (re-planned and rerun, or raised; see
+        :mod:`avblocks.core.compiled.plans`).
     capacity : int, optional
         Fix the compiled search's static capacity (candidates per agent, see
         :mod:`avblocks.utility.spatial`) instead of letting the compiled

@@ -212,7 +212,7 @@ def dense_select(points, radius, k, xp=np, passes=None):
     # and each pass takes elementwise minima of rows (measured 25 % faster
     # than minima of each row in a vmapped ensemble)
     m2, j = k_smallest(d2, ids[:, None], k if passes is None else min(int(k), int(passes)),
-                       xp, axis=0)
+                       xp, axis=0, nonneg=True)
     pad = int(k) - m2.shape[1]
     if pad:
         m2 = xp.concatenate([m2, xp.full((n, pad), xp.inf, dtype=m2.dtype)], axis=1)

@@ -285,6 +285,17 @@ def test_ensemble_seeds_params_x0_and_chunks():
                             x0={"fleet.pose": p0}, max_log_bytes=2 * per_run)
     assert small.meta["chunks"] == 3
     np.testing.assert_array_equal(small["fleet.pose"], ens["fleet.pose"])
+    # the same by the chunk argument, which overrides the policy
+    for chunk, calls in ((1, 5), (2, 3), (5, 1)):
+        other = runner.ensemble(seeds=range(10, 10 + R), params={"g.k": gains},
+                                x0={"fleet.pose": p0}, chunk=chunk)
+        assert (other.meta["chunk_size"], other.meta["chunks"]) == (chunk, calls)
+        np.testing.assert_array_equal(other["fleet.pose"], ens["fleet.pose"])
+        np.testing.assert_array_equal(other.final_state["fleet.pose"],
+                                      ens.final_state["fleet.pose"])
+    with pytest.raises(av.ParameterError) as e:
+        runner.ensemble(seeds=range(3), chunk=0)
+    assert e.value.param == "chunk"
     ds = ens.to_xarray()
     assert ds["fleet.pose"].dims[:2] == ("run", "time")
     assert list(ds["seed"].values) == list(range(10, 10 + R))

@@ -34,6 +34,15 @@ def test_ensemble_member_k_equals_the_single_run_with_seed_k():
                                rtol=0, atol=1e-9)
     # the members differ (they start differently)
     assert np.abs(ens["flock.position"][1, 0] - ens["flock.position"][2, 0]).max() > 1.0
+    # any chunking gives the same runs (one run per call, an odd chunk with
+    # the last call padded, all at once); the vectorised code of another
+    # chunk size may round differently: 1e-12 m
+    for chunk, calls in ((1, 8), (3, 3), (8, 1)):
+        other = runner.ensemble(seeds=seeds, x0=F.ensemble_x0(seeds, agents=12),
+                                chunk=chunk)
+        assert other.meta["chunk_size"] == chunk and other.meta["chunks"] == calls
+        for port in ("flock.position", "flock.velocity", "view.order"):
+            np.testing.assert_allclose(other[port], ens[port], rtol=0, atol=1e-12)
 
 
 def test_gradient_through_flocking_equals_central_differences_of_numpy_runs():

@@ -188,3 +188,33 @@ def test_jit_packed_sort_equals_stable_argsort():
         slow = jax.jit(lambda k: sp._sort(k, jnp, 1e18))(jnp.asarray(keys))
     np.testing.assert_array_equal(np.asarray(fast), np.argsort(keys, kind="stable"))
     np.testing.assert_array_equal(np.asarray(slow), np.argsort(keys, kind="stable"))
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_k_smallest_integer_minima_of_nonnegative_floats_are_exact(dtype):
+    """``nonneg=True`` (traced: minima of the float bits as integers) selects
+    what the float minima select, with ties, zeros and infinities, along
+    either axis; against NumPy's float passes and a sort. (Subnormal
+    squared distances, below 1e-308, are not compared: XLA on a CPU reads
+    them as zero in float comparisons, with or without ``nonneg``.)"""
+    jax = pytest.importorskip("jax")
+    from avblocks.core.compiled import _jax
+    from avblocks.utility.spatial.queries import k_smallest
+    rng = np.random.default_rng(11)
+    d2 = np.round(rng.uniform(0, 6, (40, 30))).astype(dtype)     # many ties
+    d2[rng.uniform(size=d2.shape) < 0.3] = np.inf
+    d2[0, :5] = 0.0
+    idx = np.broadcast_to(np.arange(30, dtype=np.int32), d2.shape)
+    with _jax.x64(dtype == "float64"):
+        for axis in (1, 0):
+            a = d2 if axis == 1 else d2.T.copy()
+            i = idx if axis == 1 else idx.T.copy()
+            want = k_smallest(a, i, 7, np, axis=axis)
+            got = jax.jit(lambda a, i, ax=axis: k_smallest(a, i, 7, jax.numpy, axis=ax,
+                                                           nonneg=True))(a, i)
+            np.testing.assert_array_equal(np.asarray(got[0]), want[0])
+            np.testing.assert_array_equal(np.asarray(got[1]), want[1])
+    # independent truth: a lexsort of (d2, index) per row
+    order = np.lexsort((idx, d2), axis=1)[:, :7]
+    np.testing.assert_array_equal(np.take_along_axis(idx, order, 1),
+                                  k_smallest(d2, idx, 7, np)[1])

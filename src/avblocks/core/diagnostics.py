@@ -134,17 +134,33 @@ def searches_of(b):
             if getattr(type(v), "neighbor_search", False)]
 
 
-def report(owner, need, plan):
-    """Record that ``owner`` (a search object) needed ``need`` under ``plan``
-    (a running maximum in the current tally; nothing without one)."""
+def _row(owner):
+    """The current tally and ``owner``'s row in it, or ``(None, None)``."""
     cur = _CURRENT.get()
     t = _TALLY.get()
-    if cur is None or plan is None or t is None:
-        return
+    if cur is None or t is None:
+        return None, None
     name, b = cur
     num = next((j for j, s in enumerate(searches_of(b)) if s is owner), None)
     row = t.rows.get((name, num))
-    if row is None:
+    return (None, None) if row is None else (t, row)
+
+
+def kept(owner) -> bool:
+    """Whether a :func:`report` of ``owner`` (a search object) now reaches a
+    tally that the engine checks after the run. A search that may cut a
+    selection short to its plan must be exact where this is False (an
+    environment stepping the engine itself keeps no tally)."""
+    return _row(owner)[0] is not None
+
+
+def report(owner, need, plan):
+    """Record that ``owner`` (a search object) needed ``need`` under ``plan``
+    (a running maximum in the current tally; nothing without one)."""
+    if plan is None:
+        return
+    t, row = _row(owner)
+    if t is None:
         return
     import jax
     import jax.numpy as jnp

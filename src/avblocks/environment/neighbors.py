@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..core import diagnostics
 from ..core.block import Block
 from ..core.errors import ParameterError
 from ..utility.spatial import Need, NeighborSearch, verlet
@@ -179,28 +180,46 @@ def dense_nearest(points, radius, k, xp=np):
     neighbours. O(N^2) memory: for small N (``Neighbors`` uses it for compiled
     runs with ``method="dense"``, or ``"auto"`` and at most :data:`DENSE_MAX`
     agents)."""
+    idx, dist, _ = dense_select(points, radius, k, xp)
+    return idx, dist
+
+
+def dense_select(points, radius, k, xp=np, passes=None):
+    """:func:`dense_nearest` with at most ``passes`` selection passes (None:
+    ``k``), and the most others within ``radius`` one point had. The result
+    is :func:`dense_nearest`'s whenever no point had more than ``passes``
+    (each pass selects one neighbour of every point; the passes a point does
+    not need select nothing): a caller that cuts the passes short reports
+    that count and is rerun when it exceeded them (``Neighbors``: its plan's
+    ``hits``)."""
     n = points.shape[0]
     cols = [points[:, a] for a in range(points.shape[1])]
     d2 = 0.0
     for c in cols:
         da = c[None, :] - c[:, None]
         d2 = d2 + da * da
-    ids = xp.arange(n)
+    # int32 indices: the tie-breaking minima of the selection move half the
+    # bytes of int64 ones (measured 8-10 % of the search in a vmapped
+    # ensemble); the result is int64 as the port says
+    ids = xp.arange(n, dtype=xp.int32)
     r = xp.asarray(radius, dtype=d2.dtype)
-    d2 = xp.where((d2 <= r * r) & (ids[None, :] != ids[:, None]), d2, xp.inf)
+    ok = (d2 <= r * r) & (ids[None, :] != ids[:, None])
+    most = xp.max(xp.sum(ok, axis=0)) if n else 0
+    d2 = xp.where(ok, d2, xp.inf)
     # the search's exact selection (k passes of a minimum, ties by index:
     # k_smallest) over the candidates of each point; d2 is symmetric (the
     # same squares either way), so the candidates of point q are column q
     # and each pass takes elementwise minima of rows (measured 25 % faster
     # than minima of each row in a vmapped ensemble)
-    m2, j = k_smallest(d2, ids[:, None], k, xp, axis=0)
+    m2, j = k_smallest(d2, ids[:, None], k if passes is None else min(int(k), int(passes)),
+                       xp, axis=0, nonneg=True)
     pad = int(k) - m2.shape[1]
     if pad:
         m2 = xp.concatenate([m2, xp.full((n, pad), xp.inf, dtype=m2.dtype)], axis=1)
         j = xp.concatenate([j, xp.full((n, pad), -1, dtype=j.dtype)], axis=1)
     fin = xp.isfinite(m2)
-    idx = xp.where(fin, j, -1)
-    return idx, xp.where(fin, xp.sqrt(xp.where(fin, m2, 1.0)), xp.inf)
+    idx = xp.where(fin, j, -1).astype(np.int64)
+    return idx, xp.where(fin, xp.sqrt(xp.where(fin, m2, 1.0)), xp.inf), most
 
 
 class Neighbors(Block):
@@ -236,7 +255,13 @@ class Neighbors(Block):
         (N, N) array (:func:`dense_nearest`; the same neighbours, cheaper for
         small N and across ensembles; not with ``fov`` or ``box``); or
         ``"auto"``: every pair up to :data:`DENSE_MAX` agents, else the cell
-        list. The NumPy engine always uses the k-d tree.
+        list. The NumPy engine always uses the k-d tree. Comparing every
+        pair, a compiled run makes as many selection passes as the search's
+        plan has ``hits`` (the most others within range one agent had at
+        ``t0``, times the headroom, at least 8) when that is below ``k``;
+        an agent with more is an overflow, handled as the cell list's
+        (re-planned and rerun, or raised; see
+        :mod:`avblocks.core.compiled.plans`).
     capacity : int, optional
         Fix the compiled search's static capacity (candidates per agent, see
         :mod:`avblocks.utility.spatial`) instead of letting the compiled
@@ -362,10 +387,11 @@ class Neighbors(Block):
         return self.method == "dense" or self.n <= DENSE_MAX
 
     def searches(self):
-        """The neighbour searches this block owns (planned by the compiled
-        engine; none when small compiled runs compare every pair without a
-        skin; with a skin the plan gives the Verlet list's width)."""
-        return [] if (self._dense() and not self.skin) else [self.search]
+        """The neighbour search this block owns, planned by the compiled
+        engine: the cell list's sizes; with a skin the Verlet list's width;
+        when compiled runs compare every pair, the plan's ``hits`` bounds
+        the selection passes (:func:`dense_select`)."""
+        return [self.search]
 
     def searches_planned(self):
         """Called by the compiled engine after it planned (or grew) the
@@ -417,7 +443,16 @@ class Neighbors(Block):
                                       fov=self.fov)
             return {"neighbors": idx, "distance": xp.where(idx >= 0, dist, PAD_DISTANCE)}
         if xp is not np and self._dense():
-            idx, dist = dense_nearest(p[:, :2], self.radius, self.k, xp)
+            # as many selection passes as the plan's hits (the most others
+            # within range one agent had at t0, with headroom) when fewer
+            # than k and an overflow is caught after the run
+            plan = self.search.cells
+            passes = plan.hits if (plan is not None and plan.hits is not None
+                                   and plan.hits < self.k
+                                   and diagnostics.kept(self.search)) else None
+            idx, dist, most = dense_select(p[:, :2], self.radius, self.k, xp, passes)
+            if passes is not None:
+                self.search._report(Need(0, 0.0, most), plan, xp)
             return {"neighbors": idx,
                     "distance": xp.where(idx >= 0, dist, PAD_DISTANCE)}
         if self.fov is None:

@@ -152,6 +152,7 @@ class Program:
         #: the rows of the needs tally the run returns (core.diagnostics)
         self.need_rows = _diagnostics.rows_of(compiled.blocks, compiled.names)
         self.traces = 0
+        self._step_bytes = None
         self._exe = {}
         self._lock = threading.Lock()
 
@@ -292,7 +293,6 @@ class Program:
         must not race with another trace."""
         import time
 
-        from .structure import diagram_key
         jax = _jax.jax()
         key = (mode, signature(args))
         with self._lock:
@@ -304,9 +304,7 @@ class Program:
                 exe = self._exe.get(key)
             if exe is not None:
                 return exe, 0.0
-            if compiled is not None and compiled is not self.cd and \
-                    diagram_key(self.cd) != self.struct:
-                self._rebind(compiled)
+            self._current(compiled)
             t = time.perf_counter()
             with _jax.x64(self.x64):
                 exe = compile_lowered(jax.jit(build()).lower(*args))
@@ -314,6 +312,35 @@ class Program:
         with self._lock:
             self._exe[key] = exe
         return exe, spent
+
+    def step_bytes(self, args, compiled=None) -> int:
+        """Bytes of the largest array one step of one run computes
+        (:func:`.chunking.largest_step_array` of the run traced for
+        ``args = (theta, X0)``, one run's values); traced once per program
+        and remembered. This probe is not a compilation: it leaves
+        :attr:`traces` and :func:`cache_info` as they were."""
+        if self._step_bytes is not None:
+            return self._step_bytes
+        from .chunking import largest_step_array
+        jax = _jax.jax()
+        with _TRACE_LOCK:
+            self._current(compiled)
+            counts = self.traces, _STATS["traces"]
+            try:
+                with _jax.x64(self.x64):
+                    jp = jax.make_jaxpr(self.run)(*args)
+            finally:
+                self.traces, _STATS["traces"] = counts
+        self._step_bytes = largest_step_array(jp)
+        return self._step_bytes
+
+    def _current(self, compiled):
+        """Trace with ``compiled``'s blocks when the blocks this program was
+        first traced with have since been changed structurally."""
+        from .structure import diagram_key
+        if compiled is not None and compiled is not self.cd and \
+                diagram_key(self.cd) != self.struct:
+            self._rebind(compiled)
 
     def _rebind(self, compiled):
         jax = _jax.jax()

@@ -15,6 +15,7 @@ from ..block import Block as _Block
 from ..errors import ParameterError
 from ..results import Results
 from . import _jax
+from . import chunking as _chunking
 from . import devices as _devices
 from . import plans as _plans
 from .outcome import check_finite as _check_finite
@@ -65,7 +66,9 @@ class Runner:
         """Bytes of the log of one run."""
         p = self.program
         item = 8 if p.x64 else 4
-        return sum(p.nlog * math.prod(s.shape) * item for s in self.specs)
+        return sum(p.nlog * math.prod(s.shape) * (
+            item if np.dtype(s.dtype).kind == "f" else np.dtype(s.dtype).itemsize)
+            for s in self.specs)
 
     @property
     def compilations(self) -> int:
@@ -254,7 +257,7 @@ class Runner:
 
     # ---------------------------------------------------------- ensemble
     def ensemble(self, seeds=None, params=None, x0=None, *, runs=None,
-                 max_log_bytes=512 * 1024**2):
+                 max_log_bytes=512 * 1024**2, chunk=None):
         """Many runs in one vmapped program; Results with a leading run axis.
 
         Parameters
@@ -274,6 +277,16 @@ class Runner:
             Largest log one vmapped call may produce: the runs are split into
             chunks of equal size under it (one compile for all chunks), each
             copied into the result arrays as it finishes.
+        chunk : int, optional
+            Runs per vmapped call, overriding the policy below (a multiple
+            of the device count is split across the devices).
+
+        Chunks: under ``max_log_bytes``; on a CPU also small enough that a
+        step's arrays stay in the cache (each device gets ``CPU_STEP_BYTES
+        // b`` runs, ``b`` the largest array one step of one run computes,
+        found by tracing the run once; at least one run per device); on
+        other platforms (GPU) as big as the log budget allows. The chunking
+        never changes the results. See :mod:`avblocks.core.compiled.chunking`.
 
         Returns
         -------
@@ -295,18 +308,16 @@ class Runner:
         x_axes = [{k: (0 if ((i, k) in xb or (k in b._random and varied_seeds)) else None)
                    for k in X0[i]} for i, b in enumerate(cd.blocks)]
         t_axes = {k: (0 if k in tb else None) for k in theta}
-        # chunking
+        # chunking (see core.compiled.chunking)
         prog = self.program
-        item = 8 if prog.x64 else 4
-        per_run = sum(prog.nlog * int(np.prod(s.shape)) *
-                      (item if np.dtype(s.dtype).kind == "f"
-                       else np.dtype(s.dtype).itemsize) for s in self.specs)
-        chunk = int(max(1, min(R, max_log_bytes // max(per_run, 1))))
-        ndev = len(self.devices)
-        if ndev > 1 and R > 1:
-            # whole runs per device: a multiple of the device count (the
-            # last chunk is padded anyway)
-            chunk = max(ndev, chunk // ndev * ndev)
+
+        def step_bytes():                   # traced with the values of run 0
+            one = ({k: (v if t_axes[k] is None else v[0]) for k, v in theta.items()},
+                   [{k: (v if x_axes[i][k] is None else v[0]) for k, v in x.items()}
+                    for i, x in enumerate(X0)])
+            return prog.step_bytes(one, self.compiled)
+        chunk = _chunking.chunk_size(R, self.log_bytes, max_log_bytes, self.devices,
+                                     step_bytes, chunk)
         place = _devices.Placement(self.devices, chunk)
         nchunks = -(-R // chunk)
         out = [np.empty((R, prog.nlog, *s.shape), dtype=_canon_np(s.dtype, prog.x64))
@@ -361,7 +372,7 @@ class Runner:
         over = _plans.overflows(self.compiled, prog.needs(needs))
         if over:
             return _plans.settle(self, over, lambda: self.ensemble(
-                seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes))
+                seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes, chunk=chunk))
         if self.check_finite:
             _check_finite(res)
         return res

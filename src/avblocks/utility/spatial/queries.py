@@ -229,25 +229,30 @@ def compact(ok, cols, width, xp):
     return outs, need
 
 
-def k_smallest(d2, idx, k, xp, axis=1):
+def k_smallest(d2, idx, k, xp, axis=1, nonneg=False):
     """The ``k`` smallest ``(d2, idx)`` pairs of each query, sorted: ``k``
     passes of a minimum (distance first, then the smaller index among
     equal distances), each removing what it took. Exact; O(k M) per query.
     ``idx`` (broadcast to ``d2``) must be unique per query where ``d2`` is
     finite. ``axis`` holds each query's candidates: 1 (a row per query,
     the default) or 0 (a column per query: each pass is then an elementwise
-    minimum of query-long vectors, faster under XLA on a CPU). Returns
-    ``(d2 (Q, k), idx (Q, k))``."""
+    minimum of query-long vectors, faster under XLA on a CPU). ``nonneg``:
+    ``d2`` holds no negative number and no NaN, so a traced run may take
+    the minima of its bits as integers (the same order, the same values;
+    XLA's CPU backend sends float minima to YNNPACK, and the integer ones
+    made a flocking ensemble 11-13 % faster). Returns ``(d2 (Q, k), idx
+    (Q, k))``."""
     qn, w = (d2.shape[0], d2.shape[1]) if axis == 1 else (d2.shape[1], d2.shape[0])
     kk = min(int(k), w)
     big = np.iinfo(np.int64).max if np.dtype(idx.dtype).itemsize == 8 else \
         np.iinfo(np.int32).max
+    minimum = _bits_min if (nonneg and xp is not np) else xp.min
 
     def spread(v):                      # a per-query vector against d2
         return v[:, None] if axis == 1 else v[None, :]
     od, oi = [], []
     for _ in range(kk):
-        m = xp.min(d2, axis=axis)
+        m = minimum(d2, axis=axis)
         j = xp.min(xp.where(d2 == spread(m), idx, big), axis=axis)
         od.append(m)
         oi.append(j)
@@ -255,6 +260,16 @@ def k_smallest(d2, idx, k, xp, axis=1):
     if kk == 0:
         return xp.zeros((qn, 0), dtype=d2.dtype), xp.zeros((qn, 0), dtype=idx.dtype)
     return xp.stack(od, axis=1), xp.stack(oi, axis=1)
+
+
+def _bits_min(a, axis):
+    """Traced: ``min(a, axis)`` of a float array without negatives or NaN,
+    as the minimum of its bits read as integers (IEEE order)."""
+    import jax
+    it = np.int64 if np.dtype(a.dtype).itemsize == 8 else np.int32
+    lax = jax.lax
+    return lax.bitcast_convert_type(
+        jax.numpy.min(lax.bitcast_convert_type(a, it), axis=axis), a.dtype)
 
 
 def _smallest_keyed(d2, idx, k, n, xp):

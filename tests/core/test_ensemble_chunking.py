@@ -1,0 +1,69 @@
+"""The ensemble chunk policy (avblocks.core.compiled.chunking): the log
+budget everywhere, a cache-sized working set on a CPU, big chunks on other
+platforms; the largest step array of a traced run."""
+
+import os
+
+import pytest
+
+from avblocks.core.compiled import chunking as C
+from avblocks.core.errors import ParameterError
+
+if os.environ.get("CI"):
+    import jax  # noqa: F401 - in CI the jax extra is installed: never skip
+else:
+    jax = pytest.importorskip("jax")
+pytestmark = pytest.mark.jax
+
+
+class Dev:
+    def __init__(self, platform):
+        self.platform = platform
+
+
+def test_cpu_chunks_hold_a_cache_sized_working_set():
+    cpu2 = [Dev("cpu"), Dev("cpu")]
+    big = 1 << 40                                  # no log limit
+    # 20 kB step arrays: CPU_STEP_BYTES // 20000 runs per device
+    per_dev = C.CPU_STEP_BYTES // 20000
+    assert C.chunk_size(256, 1000, big, cpu2, lambda: 20000) == 2 * per_dev
+    # tiny arrays: every run in one call (up to the run count)
+    assert C.chunk_size(256, 1000, big, cpu2, lambda: 8) == 256
+    # an array larger than the budget: still one run per device
+    assert C.chunk_size(256, 1000, big, cpu2, lambda: 10 * C.CPU_STEP_BYTES) == 2
+    # the log budget wins when it is smaller, rounded to whole runs per device
+    assert C.chunk_size(256, 1000, 5000, cpu2, lambda: 8) == 4
+    assert C.chunk_size(256, 1000, 5000, [Dev("cpu")], lambda: 8) == 5
+
+
+def test_gpu_chunks_follow_the_log_budget_only():
+    def never():
+        raise AssertionError("a GPU chunk does not trace for a step size")
+    gpu = [Dev("gpu")]
+    assert C.chunk_size(256, 1000, 1 << 40, gpu, never) == 256
+    assert C.chunk_size(256, 1000, 64_000, gpu, never) == 64
+    assert C.chunk_size(3, 1000, 64_000, gpu, never) == 3
+
+
+@pytest.mark.parametrize("bad", [0, -2, 1.5, "4", True])
+def test_chunk_override_is_taken_as_given_or_refused(bad):
+    cpu2 = [Dev("cpu"), Dev("cpu")]
+    assert C.chunk_size(256, 1000, 1 << 40, cpu2, lambda: 20000, chunk=7) == 7
+    assert C.chunk_size(5, 1000, 1 << 40, cpu2, lambda: 20000, chunk=64) == 5
+    with pytest.raises(ParameterError) as e:
+        C.chunk_size(256, 1000, 1 << 40, cpu2, lambda: 20000, chunk=bad)
+    assert e.value.param == "chunk"
+
+
+def test_largest_step_array_looks_inside_the_loops_only():
+    jnp = jax.numpy
+
+    def run(x):                         # a (7, 7) float32 array inside the scan
+        def body(c, _):
+            m = c[:, None] * c[None, :]
+            return c + m.sum(axis=0), c
+        return jax.lax.scan(body, x, None, length=100)
+    jp = jax.make_jaxpr(run)(jnp.ones(7, jnp.float32))
+    # the stacked (100, 7) output at the top level is not a step array
+    assert C.largest_step_array(jp) == 7 * 7 * 4
+    assert C.largest_step_array(jax.make_jaxpr(lambda x: x * 2)(jnp.ones(9))) == 0

@@ -67,3 +67,23 @@ def test_largest_step_array_looks_inside_the_loops_only():
     # the stacked (100, 7) output at the top level is not a step array
     assert C.largest_step_array(jp) == 7 * 7 * 4
     assert C.largest_step_array(jax.make_jaxpr(lambda x: x * 2)(jnp.ones(9))) == 0
+
+
+def test_the_step_probe_is_no_compilation_and_sizes_cpu_chunks():
+    import numpy as np
+
+    import avblocks as av
+    d = av.Diagram()
+    c = d.add(av.blocks.Constant(np.ones((3, 2))), name="c")
+    i = d.add(av.blocks.Integrator(np.zeros((3, 2))), name="i")
+    d.connect(c.y, i.u)
+    runner = av.compile(d, 1.0, dt=0.1, log=["i.y"])
+    n = runner.compilations
+    ens = runner.ensemble(params={"c.value": np.ones((6, 3, 2))}, x0={"i.x": np.zeros((6, 3, 2))})
+    assert runner.compilations == n + 1                 # the ensemble's own compile
+    # (3, 2) float64 arrays: every run in one call on a CPU
+    assert runner.program.step_bytes(None) == 3 * 2 * 8
+    ndev = len(runner.devices)
+    if runner.devices[0].platform == "cpu":
+        assert ens.meta["chunk_size"] == 6 // ndev * ndev
+    np.testing.assert_allclose(ens["i.y"][:, -1], 1.0, atol=1e-12)

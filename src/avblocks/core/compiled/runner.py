@@ -284,9 +284,11 @@ class Runner:
         Chunks: under ``max_log_bytes``; on a CPU also small enough that a
         step's arrays stay in the cache (each device gets ``CPU_STEP_BYTES
         // b`` runs, ``b`` the largest array one step of one run computes,
-        found by tracing the run once; at least one run per device); on
-        other platforms (GPU) as big as the log budget allows. The chunking
-        never changes the results. See :mod:`avblocks.core.compiled.chunking`.
+        found by tracing the run once, when it is at least
+        ``CPU_MIN_ARRAY``; at least one run per device); on other platforms
+        (GPU) as big as the log budget allows; then made equal. The
+        chunking never changes the results beyond round-off. See
+        :mod:`avblocks.core.compiled.chunking`.
 
         Returns
         -------

@@ -97,9 +97,12 @@ def test_flocking_block_with_gamma_equals_algorithm_2_and_reuses_the_padded_inde
     assert m.misses == 1 and m.hits == 2          # flat pair list made once
 
 
-def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite():
+@pytest.mark.parametrize("rows", [True, False])
+def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite(rows, monkeypatch):
     jax = pytest.importorskip("jax")
     import jax.numpy as jnp
+    # the neighbours gathered as rows (small tables) or column by column
+    monkeypatch.setattr(F, "ROW_GATHER_BYTES", 1 << 30 if rows else 0)
     rng = np.random.default_rng(12)
     d, r = 2.0, 2.4
     q, p, idx = _cloud(rng, 30, 2, d, r)
@@ -109,6 +112,8 @@ def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite():
         got = np.asarray(law(jnp.asarray(q), jnp.asarray(p)))
         np.testing.assert_allclose(got, F.flocking_law(q, p, idx, d, r), rtol=1e-12,
                                    atol=1e-12)
+        np.testing.assert_allclose(got, _reference(q, p, idx, d, r, 0.1, 5.0, 5.0, 0.2,
+                                                    1.0, 1.0), rtol=1e-12, atol=1e-12)
         # d/dp of sum(u . v) is linear in p: equals a central difference exactly
         v = rng.normal(size=q.shape)
 

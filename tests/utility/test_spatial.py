@@ -218,3 +218,34 @@ def test_k_smallest_integer_minima_of_nonnegative_floats_are_exact(dtype):
     order = np.lexsort((idx, d2), axis=1)[:, :7]
     np.testing.assert_array_equal(np.take_along_axis(idx, order, 1),
                                   k_smallest(d2, idx, 7, np)[1])
+
+
+def test_k_smallest_integer_minima_keep_the_gradient():
+    """The distances ``nonneg=True`` selects carry the gradient ``min`` has
+    (the dense neighbour search's ``distance`` output is differentiable)."""
+    jax = pytest.importorskip("jax")
+    from avblocks.core.compiled import _jax
+    from avblocks.environment.neighbors import dense_nearest
+    from avblocks.utility.spatial.queries import k_smallest
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0, 10, (20, 2))
+    d2 = rng.uniform(0, 5, (12, 9))
+    idx = np.broadcast_to(np.arange(9, dtype=np.int32), d2.shape)
+    with _jax.x64(True):
+        for nonneg in (False, True):
+            g = jax.grad(lambda a, nn=nonneg: jax.numpy.sum(
+                k_smallest(a, idx, 4, jax.numpy, nonneg=nn)[0] ** 2))(d2)
+            want = np.zeros_like(d2)             # d/da of the 4 smallest a^2: 2 a there
+            rows = np.arange(12)[:, None]
+            cols = np.argsort(d2, axis=1)[:, :4]
+            want[rows, cols] = 2 * d2[rows, cols]
+            np.testing.assert_allclose(np.asarray(g), want, rtol=1e-12, atol=0)
+
+        def cost(q):
+            i, d = dense_nearest(q, 4.0, 5, jax.numpy)
+            return jax.numpy.sum(jax.numpy.where(i >= 0, d, 0.0))
+        g = np.asarray(jax.grad(cost)(p))
+        e = np.zeros_like(p)
+        e[3, 0] = 1e-6
+        fd = (float(cost(p + e)) - float(cost(p - e))) / 2e-6
+        assert np.abs(g).max() > 0.1 and abs(g[3, 0] - fd) < 1e-6

@@ -284,9 +284,11 @@ class Runner:
         Chunks: under ``max_log_bytes``; on a CPU also small enough that a
         step's arrays stay in the cache (each device gets ``CPU_STEP_BYTES
         // b`` runs, ``b`` the largest array one step of one run computes,
-        found by tracing the run once; at least one run per device); on
-        other platforms (GPU) as big as the log budget allows. The chunking
-        never changes the results. See :mod:`avblocks.core.compiled.chunking`.
+        found by tracing the run once, when it is at least
+        ``CPU_MIN_ARRAY``; at least one run per device); on other platforms
+        (GPU) as big as the log budget allows; then made equal. The
+        chunking never changes the results beyond round-off. See
+        :mod:`avblocks.core.compiled.chunking`.
 
         Returns
         -------
@@ -316,8 +318,9 @@ class Runner:
                    [{k: (v if x_axes[i][k] is None else v[0]) for k, v in x.items()}
                     for i, x in enumerate(X0)])
             return prog.step_bytes(one, self.compiled)
+        asked = chunk
         chunk = _chunking.chunk_size(R, self.log_bytes, max_log_bytes, self.devices,
-                                     step_bytes, chunk)
+                                     step_bytes, asked)
         place = _devices.Placement(self.devices, chunk)
         nchunks = -(-R // chunk)
         out = [np.empty((R, prog.nlog, *s.shape), dtype=_canon_np(s.dtype, prog.x64))
@@ -372,7 +375,7 @@ class Runner:
         over = _plans.overflows(self.compiled, prog.needs(needs))
         if over:
             return _plans.settle(self, over, lambda: self.ensemble(
-                seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes, chunk=chunk))
+                seeds, params, x0, runs=runs, max_log_bytes=max_log_bytes, chunk=asked))
         if self.check_finite:
             _check_finite(res)
         return res

@@ -264,12 +264,38 @@ def k_smallest(d2, idx, k, xp, axis=1, nonneg=False):
 
 def _bits_min(a, axis):
     """Traced: ``min(a, axis)`` of a float array without negatives or NaN,
-    as the minimum of its bits read as integers (IEEE order)."""
+    as the minimum of its bits read as integers (IEEE order). Differentiable
+    as ``min`` is in JAX (the tangent of the minimum, shared among ties)."""
+    global _BITS_MIN
+    if _BITS_MIN is None:
+        _BITS_MIN = _make_bits_min()
+    return _BITS_MIN(a, axis)
+
+
+_BITS_MIN = None
+
+
+def _make_bits_min():
+    import functools
+
     import jax
-    it = np.int64 if np.dtype(a.dtype).itemsize == 8 else np.int32
-    lax = jax.lax
-    return lax.bitcast_convert_type(
-        jax.numpy.min(lax.bitcast_convert_type(a, it), axis=axis), a.dtype)
+    lax, jnp = jax.lax, jax.numpy
+
+    @functools.partial(jax.custom_jvp, nondiff_argnums=(1,))
+    def bits_min(a, axis):
+        it = np.int64 if np.dtype(a.dtype).itemsize == 8 else np.int32
+        return lax.bitcast_convert_type(
+            jnp.min(lax.bitcast_convert_type(a, it), axis=axis), a.dtype)
+
+    @bits_min.defjvp
+    def _jvp(axis, primals, tangents):
+        (a,), (t,) = primals, tangents
+        m = bits_min(a, axis)
+        at = a == jnp.expand_dims(m, axis)
+        share = jnp.sum(at, axis=axis).astype(a.dtype)
+        return m, jnp.sum(jnp.where(at, t, 0.0), axis=axis) / share
+
+    return bits_min
 
 
 def _smallest_keyed(d2, idx, k, n, xp):

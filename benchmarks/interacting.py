@@ -17,6 +17,9 @@ columns alternate within a round, so a shared machine disturbs them alike):
           side r, K nearest by insertion, RK4), written here; numba is a
           benchmark-only dependency. Checked against the NumPy engine at
           N = 100 (final positions to 1e-9 m) before timing.
+  numba2  the same loop with its two loops over the agents run on two of
+          Numba's threads (``prange``; not in the default columns): what
+          two cores give the fused loop at best.
 
 The last column, NumPy / Numba in process CPU time (both single-threaded),
 is the ratio to trust on a shared machine, where other processes stretch
@@ -86,10 +89,13 @@ def diagram(n):
 
 
 # --------------------------------------------------------------- Numba twin
-def numba_kernels():
+def numba_kernels(parallel=False):
+    """The fused loop; ``parallel``: its two loops over the agents as
+    ``prange`` (Numba's threads; the ``numba2`` column runs it on two)."""
     import numba as nb
+    jit = nb.njit(cache=not parallel, parallel=parallel)
 
-    @nb.njit(cache=True)
+    @jit
     def neighbours(q, k, r):
         n = q.shape[0]
         lo0, lo1 = q[:, 0].min(), q[:, 1].min()
@@ -109,9 +115,10 @@ def numba_kernels():
             order[fill[cell[i]]] = i
             fill[cell[i]] += 1
         idx = -np.ones((n, k), np.int64)
-        best = np.empty(k)
+        rows = np.empty((n if parallel else 1, k))   # a row per thread's agent
         r2 = r * r
-        for i in range(n):
+        for i in nb.prange(n):
+            best = rows[i if parallel else 0]
             m = 0
             cx = int((q[i, 0] - lo0) / r)
             cy = int((q[i, 1] - lo1) / r)
@@ -143,13 +150,13 @@ def numba_kernels():
                             m += 1
         return idx
 
-    @nb.njit(cache=True)
+    @jit
     def accel(q, p, idx, t, target, tvel, out):
         eps, a, b, h, c1, c2, c1g, c2g = 0.1, 5.0, 5.0, 0.2, 1.0, 1.0, 0.2, 0.4
         r_a = (np.sqrt(1.0 + eps * R * R) - 1.0) / eps
         d_a = (np.sqrt(1.0 + eps * D * D) - 1.0) / eps
         c = abs(a - b) / np.sqrt(4.0 * a * b)
-        for i in range(q.shape[0]):
+        for i in nb.prange(q.shape[0]):
             ax = 0.0
             ay = 0.0
             for s in range(idx.shape[1]):
@@ -177,7 +184,7 @@ def numba_kernels():
             out[i, 1] = ay - c1g * (q[i, 1] - target[1] - tvel[1] * t) \
                 - c2g * (p[i, 1] - tvel[1])
 
-    @nb.njit(cache=True)
+    @jit
     def run(q, p, steps, dt, target, tvel):
         n = q.shape[0]
         k1 = np.empty((n, 2))
@@ -208,8 +215,11 @@ def numba_kernels():
 def one(engine, n, steps):
     """Seconds per step of one column at one N (run in its own process)."""
     t_final = steps * DT
-    if engine == "numba":
-        run = numba_kernels()
+    if engine in ("numba", "numba2"):
+        run = numba_kernels(parallel=engine == "numba2")
+        if engine == "numba2":
+            import numba as nb
+            nb.set_num_threads(min(2, nb.config.NUMBA_NUM_THREADS))
         p0, v0, centre = initial(n)
         tv = np.array([2.0, 1.0])
         run(p0, v0, 1, DT, centre, tv)                      # compile

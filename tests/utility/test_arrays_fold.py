@@ -27,6 +27,18 @@ def test_fold_equals_reductions(axis):
                                   k.min(axis=axis))
 
 
+@pytest.mark.jax
+@pytest.mark.parametrize("where", [0, 3, 6])
+def test_fold_propagates_nan_as_min_does(where):
+    jnp = pytest.importorskip("jax.numpy")
+    x = np.arange(14.0).reshape(2, 7)
+    x[0, where] = np.nan
+    for op, red in ((jnp.minimum, np.min), (jnp.maximum, np.max), (jnp.add, np.sum)):
+        got = np.asarray(fold(op, jnp.asarray(x), 1, jnp))
+        np.testing.assert_array_equal(got, red(x, axis=1))      # NaN in row 0 only
+        assert np.isnan(got[0]) and np.isfinite(got[1])
+
+
 def test_norm2():
     v = np.array([[3.0, 4.0], [1.0, -2.0]])
     np.testing.assert_array_equal(norm2(v), [25.0, 5.0])

@@ -53,10 +53,13 @@ def fold(op, x, axis, xp):
         return lax.reduce(x, xp.asarray(0, x.dtype), lambda a, b: a - (-b), (axis,))
     if not xp.issubdtype(x.dtype, xp.floating):
         init = xp.iinfo(x.dtype).max if red == "min" else xp.iinfo(x.dtype).min
+        pick = (lambda a, b: xp.where(a < b, a, b)) if red == "min" else \
+            (lambda a, b: xp.where(a > b, a, b))
     else:
+        # a NaN wins, as in xp.min / xp.max (a NaN is never silently dropped)
         init = xp.inf if red == "min" else -xp.inf
-    pick = (lambda a, b: xp.where(a < b, a, b)) if red == "min" else \
-        (lambda a, b: xp.where(a > b, a, b))
+        pick = (lambda a, b: xp.where((a < b) | (a != a), a, b)) if red == "min" else \
+            (lambda a, b: xp.where((a > b) | (a != a), a, b))
     return lax.reduce(x, xp.asarray(init, x.dtype), pick, (axis,))
 
 

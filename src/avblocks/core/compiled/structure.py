@@ -174,7 +174,6 @@ def diagram_key(compiled):
             tuple(block_fingerprint(b) for b in compiled.blocks))
 
 
-
 def _stable(v):
     """True for a value that can never change in place: plain values,
     tuples of them, frozen dataclasses of plain values."""

@@ -6,15 +6,19 @@ from __future__ import annotations
 
 def add_commands(sub):
     """Add the ``robots`` command group."""
+    from ..flight.cli import add_commands as add_drone_commands
     from .emulator import add_parser
-    return add_parser(sub)
+    r = add_parser(sub)
+    add_drone_commands(sub)       # avblocks mavlink ... (interfaces.flight.cli.FLEETS)
+    return r
 
 
 def add_run_options(r):
     """Options of ``avblocks run`` that put the scenario on robots."""
     g = r.add_argument_group("robots (extra [ros2])")
     g.add_argument("--robots", help="run on these ROS 2 robots instead of the model, "
-                                    "e.g. tb1,tb2,tb3 (agent order)")
+                                    "e.g. tb1,tb2,tb3 (agent order); or on drones: "
+                                    "'mavlink' or 'crazyflies' (see the drones options)")
     g.add_argument("--transport", default="bridge", choices=["bridge", "rmw_zenoh", "rclpy"],
                    help="zenoh-bridge-ros2dds keys, rmw_zenoh keys, or rclpy")
     g.add_argument("--router", default="tcp/127.0.0.1:7447", help="Zenoh router endpoint")
@@ -28,6 +32,8 @@ def add_run_options(r):
                         "save the results so far and exit 3")
     g.add_argument("--pose-source", default="odom", choices=["odom", "mocap"],
                    dest="pose_source")
+    from ..flight.cli import add_run_options as add_drone_options
+    add_drone_options(r)
 
 
 def apply(args, diagram, sim):
@@ -36,6 +42,10 @@ def apply(args, diagram, sim):
     ``time_scale`` follows it (an emulator run with the same factor)."""
     if not getattr(args, "robots", None):
         return None
+    from ..flight.cli import FLEETS
+    if args.robots in FLEETS:     # drones: interfaces.flight.cli
+        from ..flight.cli import apply as fly
+        return fly(args, diagram, sim)
     from .swap import _find_model, replace_block, robots_like
     name = args.replace or ("fleet" if "fleet" in diagram.blocks else _find_model(diagram))
     sim.setdefault("realtime", 1.0)

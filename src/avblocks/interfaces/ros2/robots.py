@@ -61,7 +61,8 @@ import numpy as np
 
 from ...core.block import Block
 from ...core.errors import ParameterError, SimulationError
-from . import _guard, _msgs
+from ..flight import _guard
+from . import _msgs
 from .errors import PreflightError, RobotLinkError
 from .inbox import PoseInbox
 

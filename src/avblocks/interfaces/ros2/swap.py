@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.errors import ParameterError, WiringError
+from ...core.errors import ParameterError
+from ..flight.swap import replace_block  # noqa: F401  (moved there, shared)
 from .robots import Robots
 
 #: Model classes a Robots block of each kind can stand in for.
@@ -50,36 +51,3 @@ def robots_like(model, names, **kw):
         return Robots(names, kind=f"holonomic{d}d", **kw)
     raise ParameterError(f"no robot interface for a {cls} block",
                          param="robots", expected="Unicycle or SingleIntegrator", found=cls)
-
-
-def replace_block(diagram, name, block):
-    """Put ``block`` in place of the block named ``name`` (default: the
-    first ``Unicycle``/``SingleIntegrator`` if ``name`` is None) in
-    ``diagram``; returns the old block. Ports are checked first."""
-    if name is None:
-        name = _find_model(diagram)
-        if name is None:
-            raise WiringError("no vehicle model block to replace",
-                              expected="a Unicycle or SingleIntegrator block",
-                              hint="name the block to replace")
-    if name not in diagram.blocks:
-        raise WiringError("no such block to replace", block=name,
-                          expected=f"one of {sorted(diagram.blocks)}", found=name)
-    handle = diagram[name]
-    old = handle.block
-    for kind, olds, news in (("input", old.input_ports, block.input_ports),
-                             ("output", old.output_ports, block.output_ports)):
-        for p, spec in olds.items():
-            if p not in news:
-                raise WiringError(f"the new block lacks the {kind} port", block=name,
-                                  port=p, expected=sorted(olds), found=sorted(news))
-            if spec.shape is not None and news[p].shape != spec.shape:
-                raise WiringError(f"{kind} port shapes differ", block=name, port=p,
-                                  expected=spec.shape, found=news[p].shape)
-    extra_in = set(block.input_ports) - set(old.input_ports)
-    if extra_in:
-        raise WiringError("the new block has inputs the old one had not (they would "
-                          "be unconnected)", block=name, found=sorted(extra_in),
-                          hint="build it with estop=False, or wire the input afterwards")
-    object.__setattr__(handle, "block", block)
-    return old

@@ -1,0 +1,71 @@
+"""Stop every robot whatever ends the process.
+
+The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
+the handler first commands every registered robot to zero velocity, then
+hands the signal to the handler that was there before (the CLI's guard
+raises its own interrupt), or raises :class:`KeyboardInterrupt` in the
+main thread, so that
+``simulate()`` takes its interrupted path: it returns the results logged so
+far (the CLI saves them) after calling every block's ``on_stop`` (which
+stops the robots again). An ``atexit`` hook stops any block still
+registered when the interpreter exits. Handlers are installed only from
+the main thread and the previous ones are restored when the last block
+stops.
+"""
+
+from __future__ import annotations
+
+import atexit
+import signal
+import threading
+import weakref
+
+_live = weakref.WeakSet()
+_previous = {}
+_lock = threading.Lock()
+_atexit_done = False
+
+
+def _stop_all():
+    for b in list(_live):
+        try:
+            b.stop_robots()
+        except Exception:  # noqa: BLE001 - stopping the others matters more
+            pass
+
+
+def _handler(signum, frame):
+    _stop_all()
+    prev = _previous.get(signum)
+    if callable(prev):          # e.g. the CLI's guard: it raises its own interrupt
+        prev(signum, frame)
+    if prev is not signal.SIG_IGN:
+        raise KeyboardInterrupt(f"signal {signum}")
+
+
+def register(block):
+    global _atexit_done
+    with _lock:
+        if not _atexit_done:
+            atexit.register(_stop_all)
+            _atexit_done = True
+        first = not _live
+        _live.add(block)
+        if first and threading.current_thread() is threading.main_thread():
+            for s in (signal.SIGTERM, signal.SIGINT):
+                try:
+                    _previous[s] = signal.signal(s, _handler)
+                except (ValueError, OSError):  # pragma: no cover
+                    pass
+
+
+def unregister(block):
+    with _lock:
+        _live.discard(block)
+        if not _live and threading.current_thread() is threading.main_thread():
+            for s, h in list(_previous.items()):
+                try:
+                    signal.signal(s, h)
+                except (ValueError, OSError, TypeError):  # pragma: no cover
+                    pass
+            _previous.clear()

@@ -1,0 +1,437 @@
+"""The protocol-free part of a drone-fleet block: ports, flight phases,
+limits, fail-safe, log. See the package docstring for the overview."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+
+from ...core.block import Block
+from ...core.errors import ParameterError
+from . import _guard
+from .errors import FailsafeError, PreflightError
+from .limits import FlightLimits
+
+#: The phases a run goes through, in order (``failsafe`` can follow any).
+PHASES = ("idle", "preflight", "takeoff", "mission", "land", "landed", "failsafe")
+
+
+def quat_yaw(q):
+    """Yaw [rad] of unit quaternions (N, 4) (w, x, y, z), body -> world."""
+    w, x, y, z = q[:, 0], q[:, 1], q[:, 2], q[:, 3]
+    return np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def fleet_names(names, what="vehicle"):
+    """``"cf1,cf2"`` or a list -> a list of unique, non-empty names."""
+    if isinstance(names, str):
+        names = [s for s in names.split(",") if s.strip()]
+    names = [str(s).strip() for s in names]
+    if not names or any(not s for s in names):
+        raise ParameterError(f"give one name per {what}", param="names", found=names)
+    dup = sorted({s for s in names if names.count(s) > 1})
+    if dup:
+        raise ParameterError(f"{what} names must be unique", param="names", found=dup)
+    return names
+
+
+class FleetLink:
+    """What a protocol provides to :class:`Fleet` (subclass and override).
+
+    ``telemetry`` is a :class:`~avblocks.interfaces.flight.telemetry.TelemetryBuffer`
+    that the link's threads fill (world frame). Every method is called from
+    the main thread except :meth:`land`, which any thread may call (the
+    signal handler, the watchdog) and which must not block for long.
+    """
+
+    telemetry = None
+
+    def open(self):
+        """Connect; start the threads that fill ``telemetry``."""
+        raise NotImplementedError
+
+    def takeoff(self, height, timeout):
+        """Arm every vehicle and climb to ``height`` [m above its start];
+        return when all are there. Raise :class:`FlightError` naming the
+        vehicle, the command and the reason on a refusal or a timeout."""
+        raise NotImplementedError
+
+    def send_velocity(self, v):
+        """Send the world-frame velocity set-points ``v`` (N, 3) [m/s] (keep
+        streaming them if the protocol needs a rate)."""
+        raise NotImplementedError
+
+    def land(self, action="land"):
+        """Command every vehicle to land now (``action="rtl"``: return to
+        launch where the protocol has it), stop streaming set-points.
+        Idempotent; any thread; no waiting for acknowledgements."""
+        raise NotImplementedError
+
+    def close(self):
+        """Stop the threads and close the connections."""
+        raise NotImplementedError
+
+
+class Fleet(Block):
+    """N drones commanded through a protocol, with the ports of
+    :func:`~avblocks.vehicles.velocity_controlled_quadrotor` (base class).
+
+    Ports
+    -----
+    velocity : in, (N, 3) [m/s]
+        World-frame (ENU) velocity set-points.
+    position : out, (N, 3) [m]
+        Latest reported positions, world frame.
+    pose : out, (N, 3) [m, m, rad]
+        (x, y, yaw) from the latest position and attitude.
+    attitude : out, (N, 4)
+        Unit quaternion (w, x, y, z), body FLU -> world ENU.
+    fresh : out, (N,) bool
+        A pose arrived within ``timeout``.
+    age : out, (N,) [s]
+        Time since each vehicle's latest pose.
+
+    State
+    -----
+    The outputs, as discrete states updated once per major step (or per
+    ``period``) from the telemetry buffer; side effects (sending) happen in
+    ``on_start``, ``on_major_step`` and ``on_stop`` only.
+
+    Parameters
+    ----------
+    names : list of str or "a,b,c"
+        Vehicle names, in agent order.
+    takeoff_height : float [m]
+        Height of the takeoff phase (above each vehicle's start).
+    speed_max, accel_max, geofence, min_separation, lookahead, fence_margin
+        Flight limits (:class:`~avblocks.interfaces.flight.limits.FlightLimits`).
+    battery_min : float
+        Pre-flight: a reported charge below this fraction refuses the start.
+    timeout : float [s]
+        ``fresh`` is false for a pose older than this.
+    stale_timeout : float [s]
+        In flight, a pose older than this lands the fleet (fail-safe).
+    link_timeout : float [s]
+        In flight, a vehicle not heard for this long lands the fleet.
+    stall_timeout : float [s]
+        A watchdog thread lands the fleet if no command step happened for
+        this long (the diagram hangs).
+    wait : float [s]
+        Pre-flight: how long to wait for every vehicle to answer.
+    takeoff_timeout, land_wait : float [s]
+        Takeoff must finish within this; at the normal end, wait this long
+        at most for every vehicle to report landed.
+    failsafe : {"land", "rtl"}
+        What the fail-safe commands (``"rtl"`` where the protocol has it).
+    log : path, optional
+        JSON-lines flight log, written (and flushed) as things happen, so a
+        killed process leaves it behind.
+    period : float, optional
+        Control period (a multiple of the run's ``dt``); default every step.
+
+    Equations
+    ---------
+    Sent set-point ``v_i`` = the input shaped by the limits (speed scaled
+    to ``speed_max``, change limited to ``accel_max dt``, cut at the
+    geofence within ``lookahead``); no set-point after the fail-safe.
+
+    References
+    ----------
+    AVLib paper, Sections III.D and IV.D (vehicle interface blocks with the
+    model's ports).
+    """
+
+    side_effects = True
+    #: Actions the protocol supports for ``failsafe``.
+    failsafe_actions = ("land", "rtl")
+
+    def __init__(self, names, *, takeoff_height=1.0, speed_max=1.0, accel_max=np.inf,
+                 geofence=None, min_separation=0.0, lookahead=1.0, fence_margin=0.2,
+                 battery_min=0.2, timeout=0.5, stale_timeout=1.0, link_timeout=2.0,
+                 stall_timeout=1.0, wait=10.0, takeoff_timeout=30.0, land_wait=20.0,
+                 failsafe="land", log=None, period=None):
+        super().__init__()
+        self.names = fleet_names(names)
+        self.n = n = len(self.names)
+        blk = type(self).__name__
+        if failsafe not in self.failsafe_actions:
+            raise ParameterError("unknown fail-safe action", block=blk, param="failsafe",
+                                 expected=list(self.failsafe_actions), found=failsafe)
+        self.failsafe = failsafe
+        self.limits = FlightLimits(n, speed_max, accel_max, geofence, min_separation,
+                                   lookahead, fence_margin)
+        for name, v in (("takeoff_height", takeoff_height), ("timeout", timeout),
+                        ("stale_timeout", stale_timeout), ("link_timeout", link_timeout),
+                        ("stall_timeout", stall_timeout), ("wait", wait),
+                        ("takeoff_timeout", takeoff_timeout), ("land_wait", land_wait)):
+            if not (np.isfinite(v) and v >= 0):
+                raise ParameterError("must be a finite number >= 0", block=blk, param=name,
+                                     found=v)
+            setattr(self, name, float(v))
+        if not 0 <= battery_min < 1:
+            raise ParameterError("battery_min is a fraction in [0, 1)", block=blk,
+                                 param="battery_min", found=battery_min)
+        self.battery_min = float(battery_min)
+        self.log_path = log
+        xyz = ("x", "y", "z")
+        self.declare_input("velocity", (n, 3), unit="m/s", labels=xyz, feedthrough=False,
+                           doc="velocity set-point, world frame (ENU)")
+        self.declare_output("position", (n, 3), unit="m", labels=xyz)
+        self.declare_output("pose", (n, 3), unit="m, m, rad", labels=("x", "y", "yaw"),
+                            doc="planar pose (x, y, yaw)")
+        self.declare_output("attitude", (n, 4), labels=("w", "x", "y", "z"),
+                            doc="unit quaternion, body -> world")
+        self.declare_output("fresh", (n,), dtype="bool")
+        self.declare_output("age", (n,), unit="s")
+        self._outs = ("position", "pose", "attitude", "fresh", "age")
+        self.declare_discrete_state("position", np.zeros((n, 3)))
+        self.declare_discrete_state("pose", np.zeros((n, 3)))
+        self.declare_discrete_state("attitude", np.tile([1.0, 0.0, 0.0, 0.0], (n, 1)))
+        self.declare_discrete_state("fresh", np.zeros(n, bool))
+        self.declare_discrete_state("age", np.zeros(n))
+        if period is not None:
+            self.declare_periodic(float(period))
+        self.link = None
+        self.phase = "idle"
+        #: Flight log of the last run: dicts with ``wall`` and ``ev`` (also in ``log``).
+        self.events = []
+        #: Velocity set-points sent at the last command step (N, 3).
+        self.sent = None
+        self.steps_sent = 0
+        self._log = None
+        self._lock = threading.Lock()
+        self._landing = False
+        self._watch = None
+
+    # ---------------------------------------------------------------- to override
+    def open_link(self):
+        """The :class:`FleetLink` of this protocol (subclasses)."""
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- log
+    def record(self, ev, **kw):
+        """Add an event to :attr:`events` and the log file (any thread)."""
+        rec = {"wall": time.time(), "ev": ev, **kw}
+        with self._lock:
+            self.events.append(rec)
+            if self._log is not None:
+                try:
+                    self._log.write(json.dumps(rec, default=float) + "\n")
+                    self._log.flush()
+                except (OSError, ValueError):  # pragma: no cover - disk full, closed
+                    pass
+
+    def _set_phase(self, phase, **kw):
+        self.phase = phase
+        self.record("phase", phase=phase, **kw)
+
+    # ---------------------------------------------------------------- block functions
+    def output(self, t, x, u, xp):
+        return {k: x[k] for k in self._outs}
+
+    def update(self, t, x, u, xp):
+        # The one impure read (as in interfaces.ros2.Robots): the latest
+        # telemetry becomes the next state, once per major step.
+        if self.link is None:
+            return {k: x[k] for k in self._outs}
+        return self._state_from(self.link.telemetry.snapshot())
+
+    def _state_from(self, tm):
+        pos = np.nan_to_num(tm.position)
+        yaw = quat_yaw(tm.attitude)
+        return {"position": pos, "pose": np.column_stack([pos[:, :2], yaw]),
+                "attitude": tm.attitude, "fresh": tm.pose_age <= self.timeout,
+                "age": np.minimum(tm.pose_age, 1e9)}
+
+    # ---------------------------------------------------------------- phases
+    def on_start(self):
+        self.events, self.steps_sent, self.sent = [], 0, None
+        self._landing = False
+        self._v_prev, self._t_prev = None, None
+        self._next_send = None
+        if self.log_path is not None:
+            self._log = open(self.log_path, "a", buffering=1)
+        self.record("start", vehicles=self.names, block=type(self).__name__)
+        try:
+            self.link = self.open_link()
+            _guard.register(self)
+            self.link.open()
+            self._set_phase("preflight")
+            self._preflight()
+            self._set_phase("takeoff", height=self.takeoff_height)
+            self.link.takeoff(self.takeoff_height, self.takeoff_timeout)
+            tm = self.link.telemetry.snapshot()
+            self._set_phase("mission", position=tm.position.tolist())
+        except BaseException as e:
+            self.record("abort", phase=self.phase, error=f"{type(e).__name__}: {e}")
+            self.on_stop()
+            raise
+        for k, v in self._state_from(tm).items():
+            self.set_initial(k, v)
+        self._last_step = time.monotonic()
+        self._watch_stop = threading.Event()
+        self._watch = threading.Thread(target=self._watchdog, daemon=True,
+                                       name="avblocks-fleet-watchdog")
+        self._watch.start()
+
+    def _preflight(self):
+        """Every vehicle answers, has a fresh pose, enough battery, is inside
+        the geofence and far enough from the others; else PreflightError
+        naming each vehicle and its reason (nothing was commanded)."""
+        deadline = time.monotonic() + self.wait
+        while True:
+            tm = self.link.telemetry.snapshot()
+            if (tm.poses > 0).all() or time.monotonic() > deadline:
+                break
+            time.sleep(0.02)
+        why = []
+        for i, nm in enumerate(self.names):
+            if not np.isfinite(tm.heard_age[i]):
+                why.append(f"{nm}: does not answer (nothing heard within {self.wait:g} s)")
+            elif tm.poses[i] == 0:
+                why.append(f"{nm}: reports no pose (answers, but sent no position "
+                           f"within {self.wait:g} s)")
+            elif tm.pose_age[i] > self.stale_timeout:
+                why.append(f"{nm}: pose is stale ({tm.pose_age[i]:.2f} s old, "
+                           f"stale_timeout {self.stale_timeout:g} s)")
+            b = tm.battery[i]
+            if np.isfinite(b) and b < self.battery_min:
+                why.append(f"{nm}: battery low ({100 * b:.0f} % < battery_min "
+                           f"{100 * self.battery_min:.0f} %)")
+        have = tm.poses > 0
+        if have.any():
+            idx = np.nonzero(have)[0]
+            sub = [self.names[i] for i in idx]
+            why += self.limits.outside(sub, tm.position[idx])
+            why += [f"too close: {s}" for s in self.limits.too_close(sub, tm.position[idx])]
+        if why:
+            self.record("preflight_refused", reasons=why)
+            raise PreflightError("pre-flight check failed, nothing was commanded: "
+                                 + "; ".join(why), block=type(self).__name__,
+                                 hint="fix the vehicles named (or the limits) and start "
+                                      "again")
+        self.record("preflight_ok", position=tm.position.tolist(),
+                    battery=[None if not np.isfinite(b) else float(b) for b in tm.battery])
+
+    # ---------------------------------------------------------------- mission
+    def on_major_step(self, t, x, u, y):
+        if self.link is None or self.phase != "mission":
+            return
+        if self._next_send is not None and t < self._next_send - 1e-9:
+            return
+        per = getattr(self.sample_time, "period", None)
+        self._next_send = t + per if per else None
+        now = time.monotonic()
+        self._last_step = now
+        v = np.array(u["velocity"], dtype=float)
+        bad = ~np.all(np.isfinite(v), axis=1)
+        if bad.any():
+            who = [nm for nm, b in zip(self.names, bad) if b]
+            self._fail(t, "nan", who, f"the velocity command is NaN or infinite for {who}")
+        tm = self.link.telemetry.snapshot()
+        silent = tm.heard_age > self.link_timeout
+        if silent.any():
+            who = [nm for nm, s in zip(self.names, silent) if s]
+            self._fail(t, "silent", who, f"nothing heard from {who} for more than "
+                                         f"link_timeout={self.link_timeout:g} s")
+        stale = tm.pose_age > self.stale_timeout
+        if stale.any():
+            who = [nm for nm, s in zip(self.names, stale) if s]
+            self._fail(t, "stale", who, f"no pose from {who} for more than "
+                                        f"stale_timeout={self.stale_timeout:g} s")
+        breach = self.limits.breaches(self.names, tm.position)
+        if breach:
+            self._fail(t, "limit", [], "a flight limit was broken: " + "; ".join(breach))
+        dt = 0.0 if self._t_prev is None else now - self._t_prev
+        c = self.limits.shape(v, self._v_prev, dt, tm.position)
+        self.link.send_velocity(c)
+        self._v_prev, self._t_prev = c, now
+        self.sent = c
+        self.steps_sent += 1
+        self.record("cmd", t=float(t), v=np.round(c, 6).tolist())
+
+    def _fail(self, t, reason, vehicles, what):
+        self.land_all(reason, vehicles)
+        raise FailsafeError(f"{what}; every vehicle was commanded to "
+                            f"{self.failsafe.upper()} and the run ended",
+                            reason=reason, vehicles=vehicles, block=type(self).__name__,
+                            time=t, hint="the log up to now is in err.results (and the "
+                                         "flight log)")
+
+    def land_all(self, reason="fail-safe", vehicles=()):
+        """Fail-safe: command every vehicle to land (or RTL) now and stop
+        sending set-points. Any thread; idempotent."""
+        link = self.link
+        if link is None:
+            return
+        first = not self._landing
+        self._landing = True
+        if first:
+            self.phase = "failsafe"
+        try:
+            link.land(self.failsafe)
+        finally:
+            if first:
+                self.record("failsafe", reason=reason, vehicles=list(vehicles),
+                            action=self.failsafe)
+
+    def stop_robots(self):
+        """The signal guard's hook (``interfaces.flight._guard``): land all."""
+        if self.phase in ("mission", "takeoff", "preflight", "land"):
+            self.land_all("signal or exit")
+
+    def _watchdog(self):
+        while not self._watch_stop.wait(0.05):
+            if self.phase != "mission":
+                continue
+            stalled = time.monotonic() - self._last_step
+            if stalled > self.stall_timeout:
+                self.land_all(f"no command step for {stalled:.2f} s (stall_timeout "
+                              f"{self.stall_timeout:g} s)")
+                return
+
+    # ---------------------------------------------------------------- end
+    def on_stop(self):
+        link = self.link
+        try:
+            if link is not None:
+                if self.phase == "mission":      # the normal end: land, then wait
+                    self._set_phase("land")
+                    self._landing = True
+                    link.land("land")
+                    self._wait_landed()
+                elif not self._landing and self.phase in ("takeoff", "preflight"):
+                    self.land_all(f"run ended during {self.phase}")
+                elif self._landing:
+                    link.land(self.failsafe)     # once more, for lossy links
+        finally:
+            if self._watch is not None:
+                self._watch_stop.set()
+                self._watch = None
+            _guard.unregister(self)
+            self.link = None
+            if link is not None:
+                try:
+                    link.close()
+                finally:
+                    self.record("end", phase=self.phase)
+            else:
+                self.record("end", phase=self.phase)
+            if self._log is not None:
+                self._log.close()
+                self._log = None
+
+    def _wait_landed(self):
+        deadline = time.monotonic() + self.land_wait
+        while time.monotonic() < deadline:
+            tm = self.link.telemetry.snapshot()
+            if tm.landed.all():
+                self._set_phase("landed", position=tm.position.tolist())
+                return
+            time.sleep(0.05)
+        tm = self.link.telemetry.snapshot()
+        self.record("land_timeout", flying=[nm for nm, ld in zip(self.names, tm.landed)
+                                            if not ld])

@@ -19,7 +19,8 @@ def test_speed_then_acceleration_then_fence():
     # 2: vy -0.05 toward the face 0.02 m away -> -0.02
     np.testing.assert_allclose(out, [[0.6, 0.8, 0.0], [0.0, 0.0, 0.05], [0.0, -0.02, 0.0]])
     # acceleration: from rest, 1 m/s wanted, 2 m/s^2 over 0.1 s -> 0.2 m/s
-    out = lim.shape(np.array([[1.0, 0, 0]] * 3), np.zeros((3, 3)), 0.1, np.zeros((3, 3)) + [0, 0, 1])
+    p = np.zeros((3, 3)) + [0, 0, 1]
+    out = lim.shape(np.array([[1.0, 0, 0]] * 3), np.zeros((3, 3)), 0.1, p)
     np.testing.assert_allclose(out[:, 0], 0.2)
 
 

@@ -1,0 +1,528 @@
+"""Emulated Crazyflies behind an emulated Crazyswarm2 server, on Zenoh
+(rmw_zenoh keys), for tests and demos without hardware.
+
+What it speaks (as Crazyswarm2's ``crazyflie_server`` does, per vehicle
+``cfN``): subscriptions ``/cfN/cmd_full_state`` (FullState) and
+``/cfN/cmd_velocity_world`` (VelocityWorld); services ``/cfN/takeoff``,
+``/cfN/land``, ``/cfN/notify_setpoints_stop``; publications ``/cfN/pose``
+(PoseStamped, world frame, like the server's ``default_topics.pose`` log
+block) and ``/cfN/status`` (Status: battery voltage, supervisor bits).
+
+Each vehicle is the library's own model: a
+:class:`~avblocks.vehicles.Quadrotor` (Crazyflie 2.1 mass and inertia)
+flown by :class:`~avblocks.vehicles.QuadrotorVelocityControl`, integrated
+with RK4 at ``rate`` Hz; a position loop ``v_ref = v_d + a_d / kv +
+kp (p_d - p)`` (``kv`` the controller's velocity gain) turns position
+set-points with their velocity and acceleration into its velocity
+set-point.
+
+Firmware behaviour copied (crazyflie-firmware 2026.08, commit 2a18fc2:
+``commander.c``, ``supervisor.c``, ``supervisor_state_machine.c``,
+``crtp_commander_high_level.c``, ``planner.c``):
+
+* **high-level commander**: ``takeoff`` is accepted only while the
+  planner is idle (on the ground, or after a finished landing); takeoff
+  and land fly a 7th-order polynomial from the current position to
+  ``(x, y, height)`` in ``duration`` with zero velocity, acceleration and
+  jerk at both ends; when a landing trajectory ends the planner goes idle
+  and the motors stop. Takeoff heights are absolute (``z = height``).
+* **priorities**: a streamed set-point (full state, velocity) has the
+  CRTP priority and stops the high-level planner; high-level set-points
+  are ignored until ``notify_setpoints_stop`` relaxes the priority. An
+  idle planner at low priority outputs the null set-point (motors off):
+  after ``notify_setpoints_stop`` a ``land`` (or takeoff/go_to) must
+  follow at once.
+* **set-point watchdog** (supervisor): a streamed set-point older than
+  0.5 s puts the vehicle in *warning, level out* (roll and pitch zero, no
+  horizontal control, z kept as the last set-point had it); older than
+  2 s the supervisor cuts the motors (*exception: free fall*, then
+  *locked* until reboot): the vehicle falls. A Crazyflie whose commanding
+  process dies while streaming therefore falls after 2 s; it does not
+  land by itself.
+* **refusing set-points before takeoff** (emulator rule, stricter than
+  the firmware, which would fly on them once armed): a streamed set-point
+  to a vehicle on the ground is logged as ``refused`` and ignored.
+
+Faults: ``silent`` (``{name: t}``: from ``t`` s after the fleet's first
+streamed set-point the vehicle is gone: it publishes nothing, ignores
+set-points and answers no service, so its own watchdog runs) and
+``stale`` (``{name: t}``: its pose publications stop, as when motion
+capture loses it; it still answers). ``battery`` (``{name: volts}``).
+
+The log (JSON lines; ``wall`` = ``time.time()``, ``t`` = emulator seconds)
+records every set-point received (accepted or refused), every service
+request with its arguments, the planner's trajectories, the watchdog's
+transitions, ground contacts and the final positions.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+
+import numpy as np
+
+from ...core.errors import ParameterError
+from ...vehicles import Quadrotor, QuadrotorVelocityControl
+from . import _types
+from ._link import CfLink, NoReply
+
+#: Crazyflie 2.1 with a motion-capture marker deck: mass [kg], inertia
+#: [kg m^2] (Foerster 2015 system identification), arm length [m].
+CF21 = {"mass": 0.034, "inertia": (1.66e-5, 1.66e-5, 2.93e-5), "arm_length": 0.046}
+#: Velocity-controller gains of the emulated vehicles (a Crazyflie tracks
+#: faster than the library's default 1 kg vehicle).
+GAINS = {"kv": 4.0, "k_att": 12.0, "k_rate": 40.0}
+#: Supervisor timeouts of the firmware [s] (COMMANDER_WDT_TIMEOUT_STABILIZE,
+#: COMMANDER_WDT_TIMEOUT_SHUTDOWN in supervisor.c).
+WDT_LEVEL_OUT, WDT_SHUTDOWN = 0.5, 2.0
+#: Status.supervisor_info bits (crazyflie_interfaces/msg/Status).
+CAN_FLY, IS_FLYING, IS_LOCKED = 8, 16, 64
+#: Vehicle modes of the emulator (``drop``: motors stopped at the end of a
+#: landing above the floor; it settles, then is ``landed``).
+MODES = ("landed", "hl", "stream", "level_out", "falling", "drop", "locked")
+
+
+def smooth7(s):
+    """The 7th-order rest-to-rest polynomial (zero velocity, acceleration
+    and jerk at s = 0 and 1) and its first two derivatives in s, for s in
+    [0, 1] (constant outside)."""
+    s = np.clip(s, 0.0, 1.0)
+    f = s ** 4 * (35 - 84 * s + 70 * s ** 2 - 20 * s ** 3)
+    df = 140 * s ** 3 * (1 - s) ** 3
+    ddf = 420 * s ** 2 * (1 - s) ** 2 * (1 - 2 * s)
+    return f, df, ddf
+
+
+def _names(names):
+    names = [s.strip() for s in (names.split(",") if isinstance(names, str) else names)]
+    if not names or any(not s for s in names) or len(set(names)) != len(names):
+        raise ParameterError("give unique vehicle names", param="names", found=names)
+    return names
+
+
+def _per_name(d, names, what):
+    d = dict(d or {})
+    unknown = set(d) - set(names)
+    if unknown:
+        raise ParameterError(f"{what} names a vehicle that is not emulated", param=what,
+                             expected=names, found=sorted(unknown))
+    return d
+
+
+class CrazyflieEmulator:
+    """Emulated Crazyflies and Crazyswarm2 server on one Zenoh session (see
+    the module docstring).
+
+    Parameters
+    ----------
+    names : list of str or "cf1,cf2"
+    position0 : (N, 3), optional
+        Start positions [m] (default: a line along -y, 0.5 m apart, z = 0).
+    router : str
+        Zenoh router endpoint.
+    rate : float
+        Physics and watchdog rate [Hz].
+    pose_rate : float
+        ``/cfN/pose`` rate [Hz] (a divisor of ``rate``).
+    kp : float
+        Position gain of the trajectory / full-state tracking [1/s].
+    battery : dict, optional
+        ``{name: volts}`` (default 4.0 V each).
+    silent, stale : dict, optional
+        Faults (see the module docstring).
+    log : path, optional
+    domain : int, optional
+    """
+
+    def __init__(self, names, position0=None, *, router="tcp/127.0.0.1:7447", rate=100.0,
+                 pose_rate=50.0, kp=2.5, battery=None, silent=None, stale=None, log=None,
+                 domain=None):
+        self.names = _names(names)
+        n = self.n = len(self.names)
+        if position0 is None:
+            position0 = [[0.0, -0.5 * k, 0.0] for k in range(n)]
+        p0 = np.array(position0, float)
+        if p0.shape != (n, 3) or not np.isfinite(p0).all():
+            raise ParameterError("position0 must be (N, 3) finite", param="position0",
+                                 found=p0.shape)
+        self.quad = Quadrotor(p0, input="wrench", frame="crazyflie", **CF21)
+        self.ctrl = QuadrotorVelocityControl.for_quadrotor(self.quad, **GAINS)
+        self.x = {k: np.array(v, float) for k, v in self.quad.initial_state().items()}
+        self.h = 1.0 / float(rate)
+        self.pose_every = max(1, int(round(rate / pose_rate)))
+        self.kp = float(kp)
+        self.kv = float(self.ctrl.kv)
+        volts = _per_name(battery, self.names, "battery")
+        self.volts = np.array([float(volts.get(nm, 4.0)) for nm in self.names])
+        self.silent = _per_name(silent, self.names, "silent")
+        self.stale = _per_name(stale, self.names, "stale")
+        self.mode = ["landed"] * n
+        self.crtp = np.zeros(n, bool)          # streamed set-points have the priority
+        self.sp = [None] * n                   # last streamed set-point (dict)
+        self.traj = [None] * n                 # planner: dict or None (idle)
+        self.gone = np.zeros(n, bool)          # silent fault active
+        self.no_pose = np.zeros(n, bool)       # stale fault active
+        self.t_first_sp = None
+        self._lock = threading.RLock()
+        self._log = open(log, "a", buffering=1) if log else None
+        self._stop = threading.Event()
+        self.wall0 = time.monotonic()
+        self.link = CfLink(router, domain=domain, node="crazyflie_server")
+        self.pose_pubs = [self.link.publisher(f"/{nm}/pose", _types.POSE_STAMPED)
+                          for nm in self.names]
+        self.status_pubs = [self.link.publisher(f"/{nm}/status", _types.STATUS)
+                            for nm in self.names]
+        for i, nm in enumerate(self.names):
+            self.link.subscribe(f"/{nm}/cmd_full_state", _types.FULL_STATE,
+                                lambda d, now, i=i: self._on_setpoint(i, "full_state", d))
+            self.link.subscribe(f"/{nm}/cmd_velocity_world", _types.VELOCITY_WORLD,
+                                lambda d, now, i=i: self._on_setpoint(i, "velocity", d))
+            for srv, fn in ((_types.TAKEOFF, self._takeoff), (_types.LAND, self._land),
+                            (_types.NOTIFY, self._notify)):
+                short = srv.rsplit("/", 1)[1]
+                topic = {"Takeoff": "takeoff", "Land": "land",
+                         "NotifySetpointsStop": "notify_setpoints_stop"}[short]
+                self.link.serve(f"/{nm}/{topic}", srv,
+                                lambda req, i=i, fn=fn, topic=topic: self._service(
+                                    i, topic, fn, req))
+        self.write({"ev": "start", "vehicles": self.names, "position": p0.tolist()})
+
+    # ------------------------------------------------------------------ helpers
+    def now(self):
+        """Emulator time [s] since start."""
+        return time.monotonic() - self.wall0
+
+    def write(self, rec):
+        if self._log is not None:
+            rec = {"wall": time.time(), "t": round(self.now(), 6), **rec}
+            with self._lock:
+                if self._log is not None:
+                    self._log.write(json.dumps(rec) + "\n")
+
+    def _ignore(self, i):
+        return bool(self.gone[i])
+
+    # ------------------------------------------------------------------ inputs
+    def _on_setpoint(self, i, kind, data):
+        if self._ignore(i):
+            return
+        m = _types.deserialize(data, _types.FULL_STATE if kind == "full_state"
+                               else _types.VELOCITY_WORLD)
+        if kind == "full_state":
+            p, v = m.pose.position, m.twist.linear
+            sp = {"kind": kind, "pos": [p.x, p.y, p.z], "vel": [v.x, v.y, v.z],
+                  "acc": [m.acc.x, m.acc.y, m.acc.z]}
+        else:
+            sp = {"kind": kind, "vel": [m.vel.x, m.vel.y, m.vel.z], "yaw_rate": m.yaw_rate}
+        t = self.now()
+        with self._lock:
+            mode = self.mode[i]
+            ok = mode not in ("landed", "locked", "falling", "drop")
+            if ok:
+                sp["t"] = t
+                self.sp[i] = sp
+                self.crtp[i] = True
+                self.traj[i] = None            # the planner stops (CRTP priority)
+                self.mode[i] = "stream"
+                if self.t_first_sp is None:
+                    self.t_first_sp = t
+        rec = {"ev": "setpoint", "vehicle": self.names[i], **{k: v for k, v in sp.items()
+                                                              if k != "t"},
+               "accepted": ok}
+        if not ok:
+            rec["reason"] = f"vehicle is {mode}"
+        self.write(rec)
+
+    def _service(self, i, topic, fn, req):
+        if self._ignore(i):
+            raise NoReply                       # a vehicle that is gone answers nothing
+        self.write({"ev": "service", "vehicle": self.names[i], "service": topic,
+                    "request": req})
+        fn(i, req)
+        return None
+
+    def _plan(self, i, kind, height, duration):
+        p0 = self.x["position"][i].copy()
+        p1 = np.array([p0[0], p0[1], float(height)])
+        self.traj[i] = {"kind": kind, "t0": self.now(), "dur": max(float(duration), 1e-3),
+                        "p0": p0, "p1": p1}
+        self.write({"ev": "plan", "vehicle": self.names[i], "kind": kind,
+                    "from": p0.tolist(), "to": p1.tolist(), "duration": float(duration)})
+
+    def _takeoff(self, i, req):
+        with self._lock:
+            idle = self.traj[i] is None and self.mode[i] in ("landed",)
+            if not idle:
+                self.write({"ev": "refused", "vehicle": self.names[i], "service": "takeoff",
+                            "reason": f"planner not idle (vehicle is {self.mode[i]})"})
+                return
+            self.crtp[i] = False
+            self._plan(i, "takeoff", req["height"], req["duration"])
+            self.mode[i] = "hl"
+
+    def _land(self, i, req):
+        with self._lock:
+            if self.mode[i] in ("landed", "locked", "falling", "drop"):
+                return
+            if self.traj[i] is not None and self.traj[i]["kind"] == "land":
+                return                          # plan_land refuses while landing
+            self._plan(i, "land", req["height"], req["duration"])
+            if not self.crtp[i]:
+                self.mode[i] = "hl"
+
+    def _notify(self, i, req):
+        with self._lock:
+            self.crtp[i] = False
+            if self.mode[i] in ("stream", "level_out"):
+                self.mode[i] = "hl"
+
+    # ------------------------------------------------------------------ firmware
+    def _references(self, t):
+        """Velocity references (N, 3), motors-on mask (N,) and events."""
+        n = self.n
+        p, v = self.x["position"], self.x["velocity"]
+        vref = np.zeros((n, 3))
+        on = np.zeros(n, bool)
+        events = []
+        for i in range(n):
+            mode = self.mode[i]
+            if mode in ("landed", "locked", "falling", "drop"):
+                continue
+            if self.crtp[i]:
+                sp = self.sp[i]
+                age = t - sp["t"]
+                if age > WDT_SHUTDOWN:
+                    self.mode[i] = "falling"
+                    events.append({"ev": "wdt_motors_off", "vehicle": self.names[i],
+                                   "age": age, "z": float(p[i, 2])})
+                    continue
+                if age > WDT_LEVEL_OUT:
+                    if mode != "level_out":
+                        self.mode[i] = "level_out"
+                        events.append({"ev": "wdt_level_out", "vehicle": self.names[i],
+                                       "age": age})
+                    vref[i, :2] = v[i, :2]      # no horizontal control
+                    vref[i, 2] = (self.kp * (sp["pos"][2] - p[i, 2])
+                                  if sp["kind"] == "full_state" else sp["vel"][2])
+                else:
+                    vref[i] = sp["vel"]
+                    if sp["kind"] == "full_state":
+                        vref[i] = vref[i] + (np.asarray(sp["acc"]) / self.kv
+                                             + self.kp * (np.asarray(sp["pos"]) - p[i]))
+                on[i] = True
+                continue
+            tr = self.traj[i]
+            if tr is None:                      # idle planner: the null set-point
+                continue
+            s = (t - tr["t0"]) / tr["dur"]
+            f, df, ddf = smooth7(s)
+            dp = tr["p1"] - tr["p0"]
+            pd = tr["p0"] + f * dp
+            vd = df / tr["dur"] * dp
+            ad = ddf / tr["dur"] ** 2 * dp
+            if s >= 1.0 and tr["kind"] == "land":
+                self.traj[i] = None             # planner idle: null set-point
+                self.mode[i] = "drop" if p[i, 2] > 0.0 else "landed"
+                events.append({"ev": "land_done", "vehicle": self.names[i],
+                               "position": p[i].tolist()})
+                continue
+            vref[i] = vd + ad / self.kv + self.kp * (pd - p[i])
+            on[i] = True
+        return vref, on, events
+
+    def _rk4(self, vref, on):
+        quad, ctrl, h = self.quad, self.ctrl, self.h
+        mask = on[:, None].astype(float)
+
+        def f(x):
+            w = ctrl.output(0.0, {}, {"velocity": vref, "measured_velocity": x["velocity"],
+                                      "attitude": x["attitude"], "rates": x["rates"]},
+                            np)["wrench"] * mask
+            return quad.derivative(0.0, x, {"wrench": w}, np)
+
+        x = self.x
+        k1 = f(x)
+        k2 = f({k: x[k] + 0.5 * h * k1[k] for k in x})
+        k3 = f({k: x[k] + 0.5 * h * k2[k] for k in x})
+        k4 = f({k: x[k] + h * k3[k] for k in x})
+        return {k: x[k] + h / 6 * (k1[k] + 2 * k2[k] + 2 * k3[k] + k4[k]) for k in x}
+
+    def step(self, t):
+        """One physics tick at emulator time ``t``."""
+        with self._lock:
+            vref, on, events = self._references(t)
+            modes = list(self.mode)
+        new = self._rk4(vref, on)
+        ground = np.array([m in ("landed", "locked") for m in modes])
+        for k in new:                           # vehicles on the ground stay put
+            new[k][ground] = self.x[k][ground]
+        below = (new["position"][:, 2] < 0.0) & ~ground
+        if below.any():
+            with self._lock:
+                for i in np.nonzero(below)[0]:
+                    mode = self.mode[i]
+                    if mode in ("falling", "drop") or (
+                            self.traj[i] is not None and self.traj[i]["kind"] == "land"):
+                        events.append({"ev": "ground", "vehicle": self.names[i],
+                                       "speed": float(-new["velocity"][i, 2]), "mode": mode})
+                        self.mode[i] = "locked" if mode == "falling" else "landed"
+                        self.traj[i] = None
+                        self.crtp[i] = False
+                    # else: pressed against the floor (a takeoff starting, a set-point
+                    # pointing down): the floor holds it, the mode stays
+            new["position"][below, 2] = 0.0
+            new["velocity"][below] = 0.0
+            new["rates"][below] = 0.0
+            q = new["attitude"][below]
+            yaw = np.arctan2(2 * (q[:, 0] * q[:, 3] + q[:, 1] * q[:, 2]),
+                             1 - 2 * (q[:, 2] ** 2 + q[:, 3] ** 2))
+            new["attitude"][below] = np.column_stack(
+                [np.cos(yaw / 2), np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2)])
+        self.x = new
+        for e in events:
+            self.write(e)
+
+    def _faults(self, t):
+        if self.t_first_sp is None:
+            return
+        for d, flag, ev in ((self.silent, self.gone, "silent"),
+                            (self.stale, self.no_pose, "stale")):
+            for nm, after in d.items():
+                i = self.names.index(nm)
+                if not flag[i] and t - self.t_first_sp >= after:
+                    flag[i] = True
+                    self.write({"ev": ev, "vehicle": nm})
+
+    def publish(self, t, status=False):
+        q = self.x["attitude"] / np.linalg.norm(self.x["attitude"], axis=1, keepdims=True)
+        for i in range(self.n):
+            if self.gone[i]:
+                continue
+            if not self.no_pose[i]:
+                self.pose_pubs[i].put(_types.encode_pose(self.x["position"][i], q[i], t))
+            if status:
+                mode = self.mode[i]
+                bits = (CAN_FLY if mode != "locked" else IS_LOCKED) | (
+                    IS_FLYING if mode not in ("landed", "locked") else 0)
+                self.status_pubs[i].put(_types.encode_status(t, self.volts[i], bits))
+
+    def run(self, duration=None):
+        """Run until :meth:`stop` or ``duration`` seconds."""
+        k = 0
+        nxt = time.monotonic()
+        end = None if duration is None else nxt + duration
+        status_every = max(1, int(round(0.5 / self.h)))
+        while not self._stop.is_set() and (end is None or time.monotonic() < end):
+            t = self.now()
+            self._faults(t)
+            self.step(t)
+            if k % self.pose_every == 0:
+                self.publish(t, status=k % status_every == 0)
+            k += 1
+            nxt += self.h
+            delay = nxt - time.monotonic()
+            if delay > 0:
+                time.sleep(delay)
+            elif delay < -0.5:                  # far behind (a loaded machine): resync
+                nxt = time.monotonic()
+        self.write({"ev": "end", "position": self.x["position"].tolist(),
+                    "modes": list(self.mode)})
+
+    def stop(self):
+        self._stop.set()
+
+    def close(self):
+        self.link.close()
+        with self._lock:
+            if self._log is not None:
+                self._log.close()
+                self._log = None
+
+
+def read_log(path):
+    """The emulator's JSON-lines log as a list of dicts."""
+    with open(path) as f:
+        return [json.loads(s) for s in f if s.strip()]
+
+
+def _parse_at(items, what):
+    """``["cf2@3", "cf3@1.5s"]`` -> ``{"cf2": 3.0, "cf3": 1.5}``."""
+    out = {}
+    for it in items or []:
+        for part in str(it).split(","):
+            if not part.strip():
+                continue
+            if "@" not in part:
+                raise ParameterError(f"a {what} fault is NAME@SECONDS, e.g. cf2@3",
+                                     param=what, found=part)
+            nm, t = part.split("@", 1)
+            out[nm.strip()] = float(t.strip().rstrip("s"))
+    return out
+
+
+def _parse_eq(items, what):
+    """``["cf3=3.4"]`` -> ``{"cf3": 3.4}``."""
+    out = {}
+    for it in items or []:
+        for part in str(it).split(","):
+            if not part.strip():
+                continue
+            if "=" not in part:
+                raise ParameterError(f"{what} is NAME=VALUE, e.g. cf3=3.4", param=what,
+                                     found=part)
+            nm, v = part.split("=", 1)
+            out[nm.strip()] = float(v)
+    return out
+
+
+def main(args):
+    """``avblocks crazyflies emulate`` (see :func:`add_parser`)."""
+    import signal
+    names = _names(args.names)
+    p0 = json.loads(args.position0) if args.position0 else [
+        [0.0, -args.spacing * k, 0.0] for k in range(len(names))]
+    em = CrazyflieEmulator(names, p0, router=args.router, rate=args.rate,
+                           pose_rate=args.pose_rate, battery=_parse_eq(args.battery, "battery"),
+                           silent=_parse_at(args.silent, "silent"),
+                           stale=_parse_at(args.stale, "stale"), log=args.log,
+                           domain=args.domain)
+    signal.signal(signal.SIGTERM, lambda *a: em.stop())
+    print(f"emulating Crazyflies {','.join(em.names)} (Crazyswarm2 over rmw_zenoh) via "
+          f"{args.router}", flush=True)
+    try:
+        em.run(args.duration)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        em.close()
+    return 0
+
+
+def add_parser(sub):
+    """Add ``crazyflies emulate`` to the ``avblocks`` command's subparsers."""
+    r = sub.add_parser("crazyflies", help="Crazyflie tools (emulate a Crazyswarm2 fleet "
+                                          "over Zenoh)")
+    rs = r.add_subparsers(dest="crazyflies_command", required=True)
+    e = rs.add_parser("emulate", help="emulate Crazyflies behind a Crazyswarm2 server "
+                                      "(rmw_zenoh keys)")
+    e.add_argument("--names", required=True, help="vehicle names, e.g. cf1,cf2,cf3")
+    e.add_argument("--router", default="tcp/127.0.0.1:7447", help="Zenoh router endpoint")
+    e.add_argument("--position0", help="JSON list of [x, y, z] per vehicle")
+    e.add_argument("--spacing", type=float, default=0.5,
+                   help="without --position0: vehicles on a line this far apart [m]")
+    e.add_argument("--rate", type=float, default=100.0, help="physics rate [Hz]")
+    e.add_argument("--pose-rate", type=float, default=50.0, dest="pose_rate",
+                   help="/cfN/pose rate [Hz]")
+    e.add_argument("--battery", action="append", metavar="NAME=VOLTS",
+                   help="battery voltage of a vehicle (default 4.0 V)")
+    e.add_argument("--silent", action="append", metavar="NAME@T",
+                   help="vehicle NAME is gone T s after the first set-point")
+    e.add_argument("--stale", action="append", metavar="NAME@T",
+                   help="vehicle NAME's poses stop T s after the first set-point")
+    e.add_argument("--domain", type=int, default=None, help="ROS domain id")
+    e.add_argument("--duration", type=float, help="seconds to run (default: forever)")
+    e.add_argument("--log", help="JSON-lines log")
+    e.set_defaults(fn=main)
+    return r

@@ -332,8 +332,8 @@ class CrazyflieEmulator:
             on[i] = True
         return vref, on, events
 
-    def _rk4(self, vref, on):
-        quad, ctrl, h = self.quad, self.ctrl, self.h
+    def _rk4(self, vref, on, h):
+        quad, ctrl = self.quad, self.ctrl
         mask = on[:, None].astype(float)
 
         def f(x):
@@ -349,12 +349,14 @@ class CrazyflieEmulator:
         k4 = f({k: x[k] + h * k3[k] for k in x})
         return {k: x[k] + h / 6 * (k1[k] + 2 * k2[k] + 2 * k3[k] + k4[k]) for k in x}
 
-    def step(self, t):
-        """One physics tick at emulator time ``t``."""
+    def step(self, t, h=None):
+        """One physics step of ``h`` seconds (default ``1 / rate``) from
+        emulator time ``t``."""
+        h = self.h if h is None else float(h)
         with self._lock:
             vref, on, events = self._references(t)
             modes = list(self.mode)
-        new = self._rk4(vref, on)
+        new = self._rk4(vref, on, h)
         ground = np.array([m in ("landed", "locked") for m in modes])
         for k in new:                           # vehicles on the ground stay put
             new[k][ground] = self.x[k][ground]
@@ -363,15 +365,16 @@ class CrazyflieEmulator:
             with self._lock:
                 for i in np.nonzero(below)[0]:
                     mode = self.mode[i]
-                    if mode in ("falling", "drop") or (
-                            self.traj[i] is not None and self.traj[i]["kind"] == "land"):
+                    tr = self.traj[i]
+                    if mode in ("falling", "drop") or not self.crtp[i] and (
+                            tr is None or tr["kind"] == "land"):
                         events.append({"ev": "ground", "vehicle": self.names[i],
                                        "speed": float(-new["velocity"][i, 2]), "mode": mode})
                         self.mode[i] = "locked" if mode == "falling" else "landed"
                         self.traj[i] = None
                         self.crtp[i] = False
-                    # else: pressed against the floor (a takeoff starting, a set-point
-                    # pointing down): the floor holds it, the mode stays
+                    # else: pressed against the floor (a takeoff starting, a streamed
+                    # set-point pointing down): the floor holds it, the mode stays
             new["position"][below, 2] = 0.0
             new["velocity"][below] = 0.0
             new["rates"][below] = 0.0
@@ -409,15 +412,23 @@ class CrazyflieEmulator:
                 self.status_pubs[i].put(_types.encode_status(t, self.volts[i], bits))
 
     def run(self, duration=None):
-        """Run until :meth:`stop` or ``duration`` seconds."""
+        """Run until :meth:`stop` or ``duration`` seconds. The physics keeps
+        the wall clock: each tick integrates the time elapsed since the
+        last one in steps of at most ``1 / rate`` (late ticks on a loaded
+        machine catch up instead of slowing the vehicles' time)."""
         k = 0
         nxt = time.monotonic()
         end = None if duration is None else nxt + duration
         status_every = max(1, int(round(0.5 / self.h)))
+        t_sim = self.now()
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             t = self.now()
             self._faults(t)
-            self.step(t)
+            t_sim = max(t_sim, t - 0.5)         # never replay more than 0.5 s
+            while t_sim < t - 1e-9:
+                hh = min(self.h, t - t_sim)
+                self.step(t_sim + hh, hh)
+                t_sim += hh
             if k % self.pose_every == 0:
                 self.publish(t, status=k % status_every == 0)
             k += 1
@@ -425,7 +436,7 @@ class CrazyflieEmulator:
             delay = nxt - time.monotonic()
             if delay > 0:
                 time.sleep(delay)
-            elif delay < -0.5:                  # far behind (a loaded machine): resync
+            elif delay < -0.5:                  # far behind: resynchronize the ticks
                 nxt = time.monotonic()
         self.write({"ev": "end", "position": self.x["position"].tolist(),
                     "modes": list(self.mode)})

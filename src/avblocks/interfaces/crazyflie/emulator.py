@@ -11,7 +11,8 @@ block) and ``/cfN/status`` (Status: battery voltage, supervisor bits).
 Each vehicle is the library's own model: a
 :class:`~avblocks.vehicles.Quadrotor` (Crazyflie 2.1 mass and inertia)
 flown by :class:`~avblocks.vehicles.QuadrotorVelocityControl`, integrated
-with RK4 at ``rate`` Hz; a position loop ``v_ref = v_d + a_d / kv +
+with RK4 at ``rate`` Hz (the controller's wrench held over a step, as a
+discrete controller's is); a position loop ``v_ref = v_d + a_d / kv +
 kp (p_d - p)`` (``kv`` the controller's velocity gain) turns position
 set-points with their velocity and acceleration into its velocity
 set-point.
@@ -77,6 +78,8 @@ GAINS = {"kv": 4.0, "k_att": 12.0, "k_rate": 40.0}
 #: Supervisor timeouts of the firmware [s] (COMMANDER_WDT_TIMEOUT_STABILIZE,
 #: COMMANDER_WDT_TIMEOUT_SHUTDOWN in supervisor.c).
 WDT_LEVEL_OUT, WDT_SHUTDOWN = 0.5, 2.0
+#: Physics steps one loop iteration may take to catch up with the clock.
+MAX_STEPS = 4
 #: Status.supervisor_info bits (crazyflie_interfaces/msg/Status).
 CAN_FLY, IS_FLYING, IS_LOCKED = 8, 16, 64
 #: Vehicle modes of the emulator (``drop``: motors stopped at the end of a
@@ -125,7 +128,7 @@ class CrazyflieEmulator:
     rate : float
         Physics and watchdog rate [Hz].
     pose_rate : float
-        ``/cfN/pose`` rate [Hz] (a divisor of ``rate``).
+        ``/cfN/pose`` rate [Hz] (at most ``rate``); ``/cfN/status`` comes at 2 Hz.
     kp : float
         Position gain of the trajectory / full-state tracking [1/s].
     battery : dict, optional
@@ -151,7 +154,7 @@ class CrazyflieEmulator:
         self.ctrl = QuadrotorVelocityControl.for_quadrotor(self.quad, **GAINS)
         self.x = {k: np.array(v, float) for k, v in self.quad.initial_state().items()}
         self.h = 1.0 / float(rate)
-        self.pose_every = max(1, int(round(rate / pose_rate)))
+        self.pose_period = 1.0 / float(pose_rate)
         self.kp = float(kp)
         self.kv = float(self.ctrl.kv)
         volts = _per_name(battery, self.names, "battery")
@@ -333,16 +336,17 @@ class CrazyflieEmulator:
         return vref, on, events
 
     def _rk4(self, vref, on, h):
-        quad, ctrl = self.quad, self.ctrl
-        mask = on[:, None].astype(float)
+        """RK4 of the vehicles over ``h`` with the controller's wrench held
+        (the firmware's controller is discrete too: computed once a step)."""
+        quad, x = self.quad, self.x
+        w = self.ctrl.output(0.0, {}, {"velocity": vref, "measured_velocity": x["velocity"],
+                                       "attitude": x["attitude"], "rates": x["rates"]},
+                             np)["wrench"] * on[:, None]
+        u = {"wrench": w}
 
         def f(x):
-            w = ctrl.output(0.0, {}, {"velocity": vref, "measured_velocity": x["velocity"],
-                                      "attitude": x["attitude"], "rates": x["rates"]},
-                            np)["wrench"] * mask
-            return quad.derivative(0.0, x, {"wrench": w}, np)
+            return quad.derivative(0.0, x, u, np)
 
-        x = self.x
         k1 = f(x)
         k2 = f({k: x[k] + 0.5 * h * k1[k] for k in x})
         k3 = f({k: x[k] + 0.5 * h * k2[k] for k in x})
@@ -413,25 +417,28 @@ class CrazyflieEmulator:
 
     def run(self, duration=None):
         """Run until :meth:`stop` or ``duration`` seconds. The physics keeps
-        the wall clock: each tick integrates the time elapsed since the
-        last one in steps of at most ``1 / rate`` (late ticks on a loaded
-        machine catch up instead of slowing the vehicles' time)."""
-        k = 0
+        the wall clock: each tick integrates the time since the last one,
+        in up to :data:`MAX_STEPS` steps of at most ``2 / rate``; on a
+        machine too loaded even for that the vehicles' time slips behind
+        the clock (their integration stays stable)."""
         nxt = time.monotonic()
         end = None if duration is None else nxt + duration
-        status_every = max(1, int(round(0.5 / self.h)))
-        t_sim = self.now()
+        t_sim = t_pose = t_status = self.now()
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             t = self.now()
             self._faults(t)
-            t_sim = max(t_sim, t - 0.5)         # never replay more than 0.5 s
-            while t_sim < t - 1e-9:
-                hh = min(self.h, t - t_sim)
-                self.step(t_sim + hh, hh)
-                t_sim += hh
-            if k % self.pose_every == 0:
-                self.publish(t, status=k % status_every == 0)
-            k += 1
+            t_sim = max(t_sim, t - MAX_STEPS * 2 * self.h)
+            steps = min(MAX_STEPS, int(np.ceil((t - t_sim) / self.h - 1e-9)))
+            if steps > 0:
+                hh = (t - t_sim) / steps
+                for _ in range(steps):
+                    self.step(t_sim + hh, hh)
+                    t_sim += hh
+            if t - t_pose >= self.pose_period - 0.5 * self.h:
+                status = t - t_status >= 0.5
+                self.publish(t, status=status)
+                t_pose = t
+                t_status = t if status else t_status
             nxt += self.h
             delay = nxt - time.monotonic()
             if delay > 0:

@@ -110,12 +110,17 @@ class Fleet(Block):
         Flight limits (:class:`~avblocks.interfaces.flight.limits.FlightLimits`).
     battery_min : float
         Pre-flight: a reported charge below this fraction refuses the start.
+    battery_wait : float [s]
+        Pre-flight: once every pose is in, wait this long at most for every
+        vehicle's charge (vehicles that report none are not held to it).
     timeout : float [s]
         ``fresh`` is false for a pose older than this.
     stale_timeout : float [s]
-        In flight, a pose older than this lands the fleet (fail-safe).
+        In flight, a pose older than this lands the fleet (fail-safe; the
+        reason is "silent" when nothing else was heard either).
     link_timeout : float [s]
-        In flight, a vehicle not heard for this long lands the fleet.
+        In flight, a vehicle not heard for this long lands the fleet
+        (heartbeats count: for protocols with poses slower than heartbeats).
     stall_timeout : float [s]
         A watchdog thread lands the fleet if no command step happened for
         this long (the diagram hangs).
@@ -152,7 +157,7 @@ class Fleet(Block):
                  geofence=None, min_separation=0.0, lookahead=1.0, fence_margin=0.2,
                  battery_min=0.2, timeout=0.5, stale_timeout=1.0, link_timeout=2.0,
                  stall_timeout=1.0, wait=10.0, takeoff_timeout=30.0, land_wait=20.0,
-                 failsafe="land", log=None, period=None):
+                 failsafe="land", log=None, period=None, battery_wait=1.5):
         super().__init__()
         self.names = fleet_names(names)
         self.n = n = len(self.names)
@@ -166,7 +171,8 @@ class Fleet(Block):
         for name, v in (("takeoff_height", takeoff_height), ("timeout", timeout),
                         ("stale_timeout", stale_timeout), ("link_timeout", link_timeout),
                         ("stall_timeout", stall_timeout), ("wait", wait),
-                        ("takeoff_timeout", takeoff_timeout), ("land_wait", land_wait)):
+                        ("takeoff_timeout", takeoff_timeout), ("land_wait", land_wait),
+                        ("battery_wait", battery_wait)):
             if not (np.isfinite(v) and v >= 0):
                 raise ParameterError("must be a finite number >= 0", block=blk, param=name,
                                      found=v)
@@ -287,6 +293,11 @@ class Fleet(Block):
             if (tm.poses > 0).all() or time.monotonic() > deadline:
                 break
             time.sleep(0.02)
+        # batteries come slower than poses (1-2 Hz): give them battery_wait more
+        b_deadline = min(deadline, time.monotonic() + self.battery_wait)
+        while not np.isfinite(tm.battery).all() and time.monotonic() < b_deadline:
+            time.sleep(0.05)
+            tm = self.link.telemetry.snapshot()
         why = []
         for i, nm in enumerate(self.names):
             if not np.isfinite(tm.heard_age[i]):
@@ -338,6 +349,11 @@ class Fleet(Block):
             self._fail(t, "silent", who, f"nothing heard from {who} for more than "
                                          f"link_timeout={self.link_timeout:g} s")
         stale = tm.pose_age > self.stale_timeout
+        mute = stale & (tm.heard_age > self.stale_timeout)     # nothing at all: silent
+        if mute.any():
+            who = [nm for nm, s in zip(self.names, mute) if s]
+            self._fail(t, "silent", who, f"nothing heard from {who} for more than "
+                                         f"{self.stale_timeout:g} s (stale_timeout)")
         if stale.any():
             who = [nm for nm, s in zip(self.names, stale) if s]
             self._fail(t, "stale", who, f"no pose from {who} for more than "
@@ -380,7 +396,7 @@ class Fleet(Block):
 
     def stop_robots(self):
         """The signal guard's hook (``interfaces.flight._guard``): land all."""
-        if self.phase in ("mission", "takeoff", "preflight", "land"):
+        if self.phase in ("mission", "takeoff", "land"):   # preflight: nothing armed
             self.land_all("signal or exit")
 
     def _watchdog(self):
@@ -403,7 +419,7 @@ class Fleet(Block):
                     self._landing = True
                     link.land("land")
                     self._wait_landed()
-                elif not self._landing and self.phase in ("takeoff", "preflight"):
+                elif not self._landing and self.phase == "takeoff":
                     self.land_all(f"run ended during {self.phase}")
                 elif self._landing:
                     link.land(self.failsafe)     # once more, for lossy links

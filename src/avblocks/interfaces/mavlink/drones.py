@@ -21,7 +21,7 @@ the protocol:
   switches to OFFBOARD (``DO_SET_MODE``), arms and streams the position
   set-point ``takeoff_height`` above; ArduPilot switches to GUIDED, arms
   and sends ``NAV_TAKEOFF``; both wait until every vehicle is within
-  ``0.1 m`` of its height;
+  0.1 m of its height and climbs slower than 0.15 m/s;
 * mission: velocity set-points as ``SET_POSITION_TARGET_LOCAL_NED`` in
   ``MAV_FRAME_LOCAL_NED`` (type mask 1479: velocity and yaw rate 0 used);
 * land / fail-safe: ``NAV_LAND`` (or ``NAV_RETURN_TO_LAUNCH``) to every
@@ -240,13 +240,21 @@ class MavlinkLink(FleetLink):
 
     # -------------------------------------------------------------- phases
     def takeoff(self, height, timeout):
+        t_hb = time.monotonic() + 3.0          # the autopilot type comes with HEARTBEAT
+        while None in self.autopilot and time.monotonic() < t_hb:
+            time.sleep(0.02)
+        quiet = [nm for nm, a in zip(self.names, self.autopilot) if a is None]
+        if quiet:
+            raise FlightError(f"no HEARTBEAT from {quiet} (the autopilot type is "
+                              "unknown); nothing was armed", block="Drones")
         tm = self.telemetry.snapshot()
         start = tm.position.copy()
         goal = start + [0.0, 0.0, height]
         self._landing = False
-        for i in range(self.n):
+        for i in range(self.n):     # PX4: set-points must flow before OFFBOARD
             local = frames.position_to_local(start[i], self.origins[i])
-            self._sp[i] = (MASK_POSITION, local, time.monotonic())
+            self._sp[i] = (None if self.autopilot[i] == "ardupilot"
+                           else (MASK_POSITION, local, time.monotonic()))
         self._streaming = True
         self._hover = True      # re-send whatever the age while this phase runs
         time.sleep(0.6)         # set-points before OFFBOARD (PX4)
@@ -265,8 +273,8 @@ class MavlinkLink(FleetLink):
         while True:
             tm = self.telemetry.snapshot()
             err = np.abs(tm.position[:, 2] - goal[:, 2])
-            if np.all(err < 0.1):
-                break
+            if np.all(err < 0.1) and np.all(np.abs(tm.velocity[:, 2]) < 0.15):
+                break           # there and settled
             if time.monotonic() > deadline:
                 slow = [f"{nm} at z={z:.2f} m" for nm, z, e in
                         zip(self.names, tm.position[:, 2], err) if not e < 0.1]

@@ -401,7 +401,7 @@ class Emulator:
             if self.armed[i] and self.landed[i] and z > 0.05:
                 self.landed[i] = False
                 self.event(i, "airborne")
-            if self.armed[i] and not self.landed[i] and self.mode[i] == "land" and z < 0.02:
+            if self.armed[i] and self.mode[i] == "land" and z < 0.02:   # (or never left)
                 self.landed[i] = True
                 self.armed[i] = False
                 self.x["velocity"][i] = 0.0

@@ -1,0 +1,178 @@
+"""interfaces.mavlink.Drones against the MAVLink emulator over real UDP on
+loopback (no mocks). What the block sent is read back from the emulator's
+log of the raw bytes it received, parsed by pymavlink's own parser
+(``_mavlink.decode``), and compared with what the diagram computed after a
+hand-written ENU -> NED conversion."""
+
+import numpy as np
+import pytest
+
+from avblocks.blocks import Function
+from avblocks.core.diagram import Diagram
+from avblocks.core.frontend import simulate
+from avblocks.interfaces.flight import FailsafeError, FlightError, PreflightError
+from avblocks.interfaces.mavlink import Drones
+
+from ._mavlink import (
+    CMD_ARM,
+    CMD_LAND,
+    CMD_SET_MODE,
+    emulator,
+    events,
+    need_pymavlink,
+    received,
+    wait_landed,
+)
+
+
+def _flight(drones, targets, gain=0.5, nan_after=None, t_final=3.0):
+    """Fly ``drones`` toward ``targets`` (N, 3) with v = gain (target - p)."""
+    d = Diagram("mav")
+    fleet = d.add(drones, name="fleet")
+    n = drones.n
+
+    def law(t, p):
+        v = gain * (np.asarray(targets, float) - p)
+        if nan_after is not None and t >= nan_after:
+            v = v.copy()
+            v[-1, 0] = np.nan
+        return v
+    ctl = d.add(Function(law, inputs={"p": (n, 3)}, outputs={"v": (n, 3)}), name="ctl")
+    d.connect(fleet.position, ctl.p)
+    d.connect(ctl.v, fleet.velocity)
+    return simulate(d, t_final=t_final, dt=0.05, realtime=1.0, progress=False,
+                    log=["fleet.position", "ctl.v"])
+
+
+def _dedupe(rows):
+    out = []
+    for r in rows:
+        if not out or not np.array_equal(out[-1], r):
+            out.append(r)
+    return out
+
+
+def test_setpoints_decoded_independently_equal_the_diagram_after_ned(tmp_path):
+    need_pymavlink()
+    pose0 = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]
+    targets = np.array([[1.0, 1.0, 1.5], [2.5, -1.0, 0.8]])
+    with emulator(tmp_path, 2, "--origin", "start", pose0=pose0) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, origins=pose0,
+                        takeoff_height=1.0, speed_max=2.0)
+        res = _flight(drones, targets)
+        landed = wait_landed(log, 2)
+    assert sorted(landed) == [1, 2]
+    cmds = np.asarray(res["ctl.v"], np.float32)          # (T, 2, 3), ENU
+    assert np.abs(cmds).max() > 0.1
+    for i in range(2):
+        sps = [m for _, m in received(log, i + 1, "SET_POSITION_TARGET_LOCAL_NED")]
+        assert all(m.coordinate_frame == 1 and m.target_system == i + 1 for m in sps)
+        vel = [m for m in sps if m.type_mask == 1479]
+        assert len(vel) > 40
+        got = np.array([[m.vx, m.vy, m.vz] for m in vel], np.float32)
+        # hand-written ENU -> NED: north = y, east = x, down = -z
+        want = np.stack([cmds[:, i, 1], cmds[:, i, 0], -cmds[:, i, 2]], axis=-1)
+        got_seq = _dedupe([g for g in got if np.any(g != 0)])
+        want_seq = _dedupe(list(want))
+        assert len(got_seq) >= len(want_seq) - 1
+        np.testing.assert_array_equal(np.array(got_seq), np.array(want_seq[:len(got_seq)]))
+        # the takeoff set-points: position 1 m above the start, local frame of
+        # the vehicle (origin at its start): NED (0, 0, -1)
+        pos = [m for m in sps if m.type_mask == 1528]
+        assert pos and np.allclose([pos[-1].x, pos[-1].y, pos[-1].z], [0, 0, -1.0])
+    # the flown positions came back through LOCAL_POSITION_NED + origins: the
+    # vehicles moved toward their targets (world frame, ENU)
+    p = res["fleet.position"]
+    assert np.all(np.linalg.norm(p[-1] - targets, axis=1)
+                  < np.linalg.norm(p[0] - targets, axis=1) - 0.3)
+
+
+def test_preflight_refusals_name_each_vehicle_and_reason_nothing_sent(tmp_path):
+    need_pymavlink()
+    pose0 = [[-5.0, 0.0, 0.0], [0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]
+    with emulator(tmp_path, 3, "--battery", "[1.0, 0.1, 1.0]", "--no-pose", "3",
+                  pose0=pose0) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=3, wait=2.0,
+                        geofence=(-3, 5, -3, 3, -0.5, 3))
+        with pytest.raises(PreflightError) as e:
+            _flight(drones, np.zeros((3, 3)))
+    msg = str(e.value)
+    assert "uav1 at (-5.00, 0.00, 0.00) is outside the geofence" in msg
+    assert "uav2: battery low (10 % < battery_min 20 %)" in msg
+    assert "uav3: reports no pose" in msg
+    for sid in (1, 2, 3):
+        types = {r["type"] for r, _ in received(log, sid)}
+        assert types <= {"HEARTBEAT"}, types          # nothing was commanded
+    assert any(ev["ev"] == "preflight_refused" for ev in drones.events)
+
+
+def test_arming_refused_by_the_vehicle_names_it_and_lands_the_others(tmp_path):
+    need_pymavlink()
+    with emulator(tmp_path, 2, "--battery", "[1.0, 0.15]") as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, battery_min=0.1)
+        with pytest.raises(FlightError, match=r"uav2 refused ARM: DENIED \('Arming denied: "
+                                              r"battery 15% low'\)"):
+            _flight(drones, np.zeros((2, 3)))
+        landed = wait_landed(log, 1)
+    acks = {(r["sysid"], r["command"], r["result"]) for r in events(log, "ack")}
+    assert (2, CMD_ARM, 2) in acks and (1, CMD_ARM, 0) in acks
+    # uav1 was armed and climbing: it got NAV_LAND and landed
+    lands = [m for _, m in received(log, 1, "COMMAND_LONG") if m.command == CMD_LAND]
+    assert lands and 1 in landed
+
+
+@pytest.mark.parametrize("fault, reason, who", [("--silent", "silent", ["uav2"]),
+                                                ("--stale", "stale", ["uav1"])])
+def test_silent_vehicle_or_stale_pose_lands_every_vehicle_and_keeps_the_log(
+        tmp_path, fault, reason, who):
+    need_pymavlink()
+    sysid = 2 if who == ["uav2"] else 1
+    with emulator(tmp_path, 2, fault, f"{sysid}@1.0") as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, link_timeout=0.8,
+                        stale_timeout=0.6, log=str(tmp_path / "flight.jsonl"))
+        with pytest.raises(FailsafeError) as e:
+            _flight(drones, [[1.0, 1.0, 1.2], [2.0, 1.0, 1.2]], t_final=20.0)
+        landed = wait_landed(log, 2)
+    assert e.value.reason == reason and e.value.vehicles == who
+    assert e.value.results is not None and len(e.value.results.t) > 10
+    assert e.value.results.t[-1] < 6.0
+    for sid in (1, 2):          # every vehicle got NAV_LAND (decoded independently)
+        assert any(m.command == CMD_LAND for _, m in received(log, sid, "COMMAND_LONG"))
+    assert sorted(landed) == [1, 2]
+    import json
+    recs = [json.loads(s) for s in open(tmp_path / "flight.jsonl")]
+    fs = [r for r in recs if r["ev"] == "failsafe"]
+    assert fs and fs[0]["reason"] == reason and recs[-1]["ev"] == "end"
+
+
+def test_nan_command_lands_every_vehicle(tmp_path):
+    need_pymavlink()
+    with emulator(tmp_path, 2) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2)
+        with pytest.raises(FailsafeError, match=r"NaN or infinite for \['uav2'\]") as e:
+            _flight(drones, [[0.0, 1.0, 1.2], [2.0, 1.0, 1.2]], nan_after=1.0, t_final=10)
+        landed = wait_landed(log, 2)
+    assert e.value.reason == "nan" and sorted(landed) == [1, 2]
+    # no set-point with a NaN ever left the block
+    for sid in (1, 2):
+        for _, m in received(log, sid, "SET_POSITION_TARGET_LOCAL_NED"):
+            assert np.isfinite([m.vx, m.vy, m.vz, m.x, m.y, m.z]).all()
+
+
+def test_ardupilot_guided_takeoff_and_land(tmp_path):
+    need_pymavlink()
+    with emulator(tmp_path, 2, "--flavor", "ardupilot") as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, takeoff_height=1.2)
+        res = _flight(drones, [[0.5, 0.5, 1.2], [2.5, 0.5, 1.2]], t_final=2.0)
+        landed = wait_landed(log, 2)
+    assert sorted(landed) == [1, 2]
+    for sid in (1, 2):
+        cmds = [m for _, m in received(log, sid, "COMMAND_LONG")]
+        modes = [m.param2 for m in cmds if m.command == CMD_SET_MODE]
+        assert modes[0] == 4                               # GUIDED (ArduCopter)
+        take = [m for m in cmds if m.command == 22]
+        assert take and take[0].param7 == pytest.approx(1.2)
+        # no set-point before the takeoff ended (ArduPilot climbs on its own)
+        sps = received(log, sid, "SET_POSITION_TARGET_LOCAL_NED")
+        assert sps and all(m.type_mask == 1479 for _, m in sps)
+    assert np.all(np.abs(res["fleet.position"][0, :, 2] - 1.2) < 0.12)

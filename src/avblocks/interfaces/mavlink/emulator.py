@@ -5,7 +5,7 @@ on ``udpin:127.0.0.1:<base_port + i>`` (it answers whoever talks to it,
 as PX4 SITL does on its offboard port). Each vehicle is the library's
 quadrotor model (:class:`~avblocks.vehicles.Quadrotor` flown by
 :class:`~avblocks.vehicles.QuadrotorVelocityControl`, integrated with RK4
-in steps of at most ``dt`` (20 ms) to keep up with the wall clock) under a
+in steps of at most ``dt`` (40 ms) to keep up with the wall clock) under a
 small "firmware" that turns the mode into a velocity set-point for that
 controller:
 
@@ -28,7 +28,7 @@ controller:
   ``guided_timeout`` in GUIDED -> stop and hold, and no GCS heartbeat for
   ``gcs_timeout`` while armed -> ``gcs_loss_action`` (``FS_GCS_ENABLE``);
 * **telemetry**: ``HEARTBEAT`` (1 Hz), ``LOCAL_POSITION_NED`` and
-  ``ATTITUDE_QUATERNION`` (``rate`` Hz, NED/FRD through
+  ``ATTITUDE_QUATERNION`` (``rate`` Hz, 30 by default, NED/FRD through
   :mod:`.frames`), ``EXTENDED_SYS_STATE`` (landed state), ``SYS_STATUS``
   and ``BATTERY_STATUS`` (2 Hz; the charge drains at ``drain`` per armed
   second).
@@ -92,7 +92,7 @@ class Emulator:
     """N emulated MAVLink multicopters (see the module docstring)."""
 
     def __init__(self, n=None, pose0=None, *, flavor="px4", base_port=14540,
-                 host="127.0.0.1", dt=0.02, rate=50.0, battery=1.0, drain=0.0005,
+                 host="127.0.0.1", dt=0.04, rate=30.0, battery=1.0, drain=0.0005,
                  arm_battery_min=0.2, offboard_timeout=0.5, offboard_loss_action="land",
                  guided_timeout=3.0, gcs_timeout=5.0, gcs_loss_action="land",
                  land_speed=0.7, climb_speed=1.0, speed_max=3.0, origin="world",
@@ -158,6 +158,8 @@ class Emulator:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self.t0 = time.monotonic()
+        #: Wall seconds not integrated (ticks later than 5 dt on a busy machine).
+        self.lost = 0.0
         self.write({"ev": "start", "n": n, "flavor": flavor, "ports": self.ports,
                     "pose0": p0.tolist(), "origin": self.origin.tolist()})
 
@@ -449,6 +451,7 @@ class Emulator:
                 self._receive(i)
             t = self.now()
             el = min(t - t_prev, 5 * self.dt)
+            self.lost += max(t - t_prev - el, 0.0)
             t_prev = t
             vref = self._vref(t)
             nsub = max(1, int(np.ceil(el / self.dt - 1e-9)))
@@ -464,7 +467,8 @@ class Emulator:
             lag = t + self.dt - self.now()
             if lag > 0:
                 time.sleep(lag)
-        self.write({"ev": "end", "positions": self.x["position"].tolist(),
+        self.write({"ev": "end", "lost_s": round(self.lost, 3),
+                    "positions": self.x["position"].tolist(),
                     "armed": self.armed.tolist(), "landed": self.landed.tolist(),
                     "modes": list(self.mode)})
 

@@ -82,7 +82,9 @@ def test_a_stale_pose_lands_every_vehicle_and_ends_the_run_with_its_log(router, 
     from avblocks.interfaces.flight import FailsafeError
     with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0,
                      "--stale", "cf2@1.0") as log:
-        d, fleet = _drive(router, stale_timeout=0.4, log=str(tmp_path / "flight.jsonl"))
+        # stale_timeout above the status period (0.5 s): the vehicle is heard, so
+        # the flight layer calls its missing poses stale, not silent
+        d, fleet = _drive(router, stale_timeout=0.8, log=str(tmp_path / "flight.jsonl"))
         with pytest.raises(FailsafeError) as e:
             av.simulate(d, t_final=30.0, dt=0.05, realtime=1.0, log=["fleet.position"],
                         progress=False)
@@ -96,7 +98,7 @@ def test_a_stale_pose_lands_every_vehicle_and_ends_the_run_with_its_log(router, 
     flight = [json.loads(s) for s in (tmp_path / "flight.jsonl").read_text().splitlines()]
     (fs,) = [r for r in flight if r["ev"] == "failsafe"]
     assert fs["reason"] == "stale" and fs["vehicles"] == ["cf2"]
-    assert 0.4 < fs["wall"] - t_stale < 1.0
+    assert 0.8 < fs["wall"] - t_stale < 1.4
     assert flight[-1]["ev"] == "end"
 
 
@@ -199,3 +201,28 @@ def test_sigkill_leaves_every_vehicle_to_the_firmware_watchdog(router, tmp_path)
     fl = [json.loads(s) for s in flight.read_text().splitlines()]
     assert any(r["ev"] == "phase" and r["phase"] == "mission" for r in fl)
     assert sum(r["ev"] == "cmd" for r in fl) >= 15
+
+
+def test_a_second_commander_of_the_same_vehicles_is_refused_before_sending(router, tmp_path):
+    from avblocks.interfaces.flight import PreflightError
+    with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0) as log:
+        p, _, _ = _commander(router, tmp_path)
+        try:
+            _wait_started(p)
+            n_before = len(read_log(log))
+            d, _ = _drive(router, ("cf3",), wait=2.0)
+            t0 = time.time()
+            with pytest.raises(PreflightError) as e:
+                av.simulate(d, t_final=1.0, dt=0.05, realtime=1.0, progress=False)
+            t1 = time.time()
+        finally:
+            p.send_signal(signal.SIGTERM)
+            p.communicate(timeout=30)
+    assert "['cf3'] are already commanded by another avblocks process" in str(e.value)
+    recs = read_log(log)
+    assert n_before > 0
+    # nothing from the refused run: cf3's services are the first commander's only
+    # (its takeoff before, its landing after the SIGTERM), no set-point but 0.1 m/s
+    assert [x["service"] for x in events(recs, "service", "cf3")
+            if t0 <= x["wall"] <= t1] == []
+    assert all(s["vel"] == [0.1, 0.0, 0.0] for s in events(recs, "setpoint", "cf3"))

@@ -33,6 +33,10 @@ PAGES = [
     ("sweep", "avblocks.sweep", "Parameter sweeps and Monte Carlo on Dask."),
     ("rl", "avblocks.rl", "Learning: diagrams as PettingZoo/Gymnasium environments, PPO, APG."),
     ("ros2", "avblocks.interfaces.ros2", "ROS 2 robots over Zenoh."),
+    ("flight", "avblocks.interfaces.flight",
+     "Flying drone fleets: flight phases, limits, fail-safe (protocol-free)."),
+    ("mavlink", "avblocks.interfaces.mavlink",
+     "PX4 and ArduPilot drones over MAVLink, and their emulator."),
     ("mujoco", "avblocks.interfaces.mujoco", "MuJoCo physics world and cameras."),
     ("vision", "avblocks.interfaces.vision", "OpenCV colour-blob tracking and pinhole cameras."),
 ]

@@ -2,14 +2,17 @@
 world (robots, physics engines, cameras). Each family is an optional extra
 and is imported only when used: ``avblocks.interfaces.ros2`` needs
 ``pip install avblocks[ros2]``, ``avblocks.interfaces.mujoco`` needs
-``avblocks[mujoco]``, ``avblocks.interfaces.vision`` needs ``avblocks[vision]``.
+``avblocks[mujoco]``, ``avblocks.interfaces.vision`` needs ``avblocks[vision]``,
+``avblocks.interfaces.mavlink`` (PX4/ArduPilot drones) needs
+``avblocks[mavlink]``; ``avblocks.interfaces.flight`` is the protocol-free
+flight layer (phases, limits, fail-safe) the drone interfaces share.
 """
 
 from __future__ import annotations
 
 import importlib
 
-__all__ = ["ros2", "mujoco", "vision"]
+__all__ = ["ros2", "mujoco", "vision", "flight", "mavlink"]
 
 
 def __getattr__(name):

@@ -79,7 +79,8 @@ from .limits import FlightLimits
 from .swap import find_flyer, replace_block
 from .telemetry import Telemetry, TelemetryBuffer
 
+# PreflightError, RobotError, RobotLinkError, RobotWarning are importable
+# from here too; they are documented with interfaces.ros2, which exports them.
 __all__ = ["Fleet", "FleetLink", "FlightLimits", "Telemetry", "TelemetryBuffer",
-           "PHASES", "FailsafeError", "FlightError", "LimitError", "PreflightError",
-           "RobotError", "RobotLinkError", "RobotWarning", "fleet_names", "quat_yaw",
-           "find_flyer", "replace_block", "register", "unregister"]
+           "PHASES", "FailsafeError", "FlightError", "LimitError", "fleet_names",
+           "quat_yaw", "find_flyer"]

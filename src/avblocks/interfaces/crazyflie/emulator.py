@@ -168,6 +168,8 @@ class CrazyflieEmulator:
         self.gone = np.zeros(n, bool)          # silent fault active
         self.no_pose = np.zeros(n, bool)       # stale fault active
         self.t_first_sp = None
+        #: Seconds of wall time the physics could not keep up with (slipped).
+        self.lost = 0.0
         self._lock = threading.RLock()
         self._log = open(log, "a", buffering=1) if log else None
         self._stop = threading.Event()
@@ -420,14 +422,18 @@ class CrazyflieEmulator:
         the wall clock: each tick integrates the time since the last one,
         in up to :data:`MAX_STEPS` steps of at most ``2 / rate``; on a
         machine too loaded even for that the vehicles' time slips behind
-        the clock (their integration stays stable)."""
+        the clock (their integration stays stable; :attr:`lost` adds it up,
+        and the log's ``end`` record has it)."""
         nxt = time.monotonic()
         end = None if duration is None else nxt + duration
         t_sim = t_pose = t_status = self.now()
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             t = self.now()
             self._faults(t)
-            t_sim = max(t_sim, t - MAX_STEPS * 2 * self.h)
+            behind = t - t_sim - MAX_STEPS * 2 * self.h
+            if behind > 0:                      # the vehicles' time slips by this
+                self.lost += behind
+                t_sim += behind
             steps = min(MAX_STEPS, int(np.ceil((t - t_sim) / self.h - 1e-9)))
             if steps > 0:
                 hh = (t - t_sim) / steps
@@ -446,7 +452,7 @@ class CrazyflieEmulator:
             elif delay < -0.5:                  # far behind: resynchronize the ticks
                 nxt = time.monotonic()
         self.write({"ev": "end", "position": self.x["position"].tolist(),
-                    "modes": list(self.mode)})
+                    "modes": list(self.mode), "lost_s": round(self.lost, 6)})
 
     def stop(self):
         self._stop.set()

@@ -41,3 +41,9 @@ def test_bad_limits():
         FlightLimits(2, geofence=(1, 0, 0, 1))
     with pytest.raises(ParameterError, match="speed_max"):
         FlightLimits(2, speed_max=0.0)
+
+
+def test_breaching_marks_the_vehicles_the_messages_name():
+    lim = FlightLimits(4, geofence=(-1, 1, -1, 1), min_separation=0.5, fence_margin=0.2)
+    p = np.array([[0.0, 0.0, 1.0], [0.3, 0.0, 1.0], [1.1, 0.0, 1.0], [-1.3, 0.5, 1.0]])
+    assert lim.breaching(p).tolist() == [True, True, False, True]

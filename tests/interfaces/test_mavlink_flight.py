@@ -176,3 +176,38 @@ def test_ardupilot_guided_takeoff_and_land(tmp_path):
         sps = received(log, sid, "SET_POSITION_TARGET_LOCAL_NED")
         assert sps and all(m.type_mask == 1479 for _, m in sps)
     assert np.all(np.abs(res["fleet.position"][0, :, 2] - 1.2) < 0.12)
+
+
+def test_geofence_cut_stops_a_vehicle_at_the_face(tmp_path):
+    need_pymavlink()
+    with emulator(tmp_path, 1, pose0=[[0.0, 0.0, 0.0]]) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=1, takeoff_height=1.0,
+                        geofence=(-1.0, 1.0, -1.0, 1.0, 0.0, 2.0), lookahead=1.0)
+        d = Diagram("fence")
+        fleet = d.add(drones, name="fleet")
+        c = d.add(Function(lambda t: np.array([[0.8, 0.0, 0.0]]), outputs={"v": (1, 3)}),
+                  name="c")
+        d.connect(c.v, fleet.velocity)
+        res = simulate(d, t_final=6.0, dt=0.05, realtime=1.0, progress=False,
+                       log=["fleet.position"])
+        wait_landed(log, 1)
+    east = np.array([m.vy for _, m in received(log, 1, "SET_POSITION_TARGET_LOCAL_NED")
+                     if m.type_mask == 1479])
+    x = res["fleet.position"][:, 0, 0]
+    # the wanted 0.8 m/s east is cut to (1 - x) / 1 s: never more than the
+    # distance left, down to a crawl at the face, and the vehicle stays inside
+    assert east.max() <= 0.8 + 1e-6 and east[-5:].max() < 0.15
+    assert 0.8 < x[-1] <= 1.0 + 0.05
+
+
+def test_separation_breach_lands_every_vehicle_with_a_limit_error(tmp_path):
+    need_pymavlink()
+    from avblocks.interfaces.flight import LimitError
+    with emulator(tmp_path, 2, pose0=[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, min_separation=0.8)
+        with pytest.raises(LimitError, match=r"uav1-uav2 0\.[0-7]\d m apart "
+                                             r"\(min_separation 0\.8 m\)") as e:
+            _flight(drones, [[1.6, 0.0, 1.0], [0.4, 0.0, 1.0]], gain=0.8, t_final=20)
+        landed = wait_landed(log, 2)
+    assert e.value.reason == "limit" and e.value.vehicles == ["uav1", "uav2"]
+    assert sorted(landed) == [1, 2]

@@ -64,8 +64,8 @@ process (SIGKILL) sends nothing: the vehicles' own set-point timeout
 (:data:`~.cli.FLEETS`, one entry per protocol).
 """
 
-from ._guard import register, unregister
-from .errors import (
+from ._guard import register, unregister  # noqa: F401  (the signal guard's hooks)
+from .errors import (  # noqa: F401  (the robot errors: documented with interfaces.ros2)
     FailsafeError,
     FlightError,
     LimitError,
@@ -76,7 +76,7 @@ from .errors import (
 )
 from .fleet import PHASES, Fleet, FleetLink, fleet_names, quat_yaw
 from .limits import FlightLimits
-from .swap import find_flyer, replace_block
+from .swap import find_flyer, replace_block  # noqa: F401  (documented with ros2)
 from .telemetry import Telemetry, TelemetryBuffer
 
 # PreflightError, RobotError, RobotLinkError, RobotWarning are importable

@@ -31,11 +31,6 @@ class FlightError(RobotError):
     reason the vehicle gave."""
 
 
-class LimitError(RobotError):
-    """A flight limit was broken in flight (a vehicle outside the geofence,
-    two vehicles closer than the minimum separation); names the vehicles."""
-
-
 class FailsafeError(SimulationError, RobotError):
     """The fail-safe ended the run: every vehicle was commanded to land
     (LAND/RTL) first, then the run stopped. ``reason`` says why (a NaN in
@@ -47,3 +42,9 @@ class FailsafeError(SimulationError, RobotError):
         super().__init__(message, **kw)
         self.reason = reason
         self.vehicles = list(vehicles)
+
+
+class LimitError(FailsafeError):
+    """The fail-safe ended the run because a flight limit was broken in
+    flight (a vehicle outside the geofence by more than the margin, two
+    vehicles closer than the minimum separation); names the vehicles."""

@@ -12,7 +12,7 @@ import numpy as np
 from ...core.block import Block
 from ...core.errors import ParameterError
 from . import _guard
-from .errors import FailsafeError, PreflightError
+from .errors import FailsafeError, LimitError, PreflightError
 from .limits import FlightLimits
 
 #: The phases a run goes through, in order (``failsafe`` can follow any).
@@ -360,7 +360,9 @@ class Fleet(Block):
                                         f"stale_timeout={self.stale_timeout:g} s")
         breach = self.limits.breaches(self.names, tm.position)
         if breach:
-            self._fail(t, "limit", [], "a flight limit was broken: " + "; ".join(breach))
+            who = [nm for nm, b in zip(self.names, self.limits.breaching(tm.position)) if b]
+            self._fail(t, "limit", who, "a flight limit was broken: " + "; ".join(breach),
+                       LimitError)
         dt = 0.0 if self._t_prev is None else now - self._t_prev
         c = self.limits.shape(v, self._v_prev, dt, tm.position)
         self.link.send_velocity(c)
@@ -369,9 +371,9 @@ class Fleet(Block):
         self.steps_sent += 1
         self.record("cmd", t=float(t), v=np.round(c, 6).tolist())
 
-    def _fail(self, t, reason, vehicles, what):
+    def _fail(self, t, reason, vehicles, what, cls=FailsafeError):
         self.land_all(reason, vehicles)
-        raise FailsafeError(f"{what}; every vehicle was commanded to "
+        raise cls(f"{what}; every vehicle was commanded to "
                             f"{self.failsafe.upper()} and the run ended",
                             reason=reason, vehicles=vehicles, block=type(self).__name__,
                             time=t, hint="the log up to now is in err.results (and the "

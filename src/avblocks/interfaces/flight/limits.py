@@ -128,3 +128,18 @@ class FlightLimits:
         too close), as messages naming the vehicles."""
         return self.outside(names, position, self.fence_margin) + \
             self.too_close(names, position)
+
+    def breaching(self, position):
+        """(N,) bool: the vehicles in a breach (see :meth:`breaches`)."""
+        p = np.asarray(position, float)
+        bad = np.zeros(len(p), bool)
+        if self.geofence is not None:
+            m = self.fence_margin
+            lo, hi = self.geofence[0::2] - m, self.geofence[1::2] + m
+            bad |= ~np.all((p >= lo) & (p <= hi), axis=1)
+        if self.min_separation > 0 and len(p) > 1:
+            dist = np.linalg.norm(p[:, None] - p[None], axis=-1)
+            close = dist < self.min_separation
+            np.fill_diagonal(close, False)
+            bad |= close.any(axis=1)
+        return bad

@@ -41,7 +41,7 @@ def _flight(drones, targets, gain=0.5, nan_after=None, t_final=3.0):
     d.connect(fleet.position, ctl.p)
     d.connect(ctl.v, fleet.velocity)
     return simulate(d, t_final=t_final, dt=0.05, realtime=1.0, progress=False,
-                    log=["fleet.position", "ctl.v"])
+                    log=["fleet.position", "fleet.pose", "fleet.attitude", "ctl.v"])
 
 
 def _dedupe(rows):
@@ -211,3 +211,22 @@ def test_separation_breach_lands_every_vehicle_with_a_limit_error(tmp_path):
         landed = wait_landed(log, 2)
     assert e.value.reason == "limit" and e.value.vehicles == ["uav1", "uav2"]
     assert sorted(landed) == [1, 2]
+
+
+@pytest.mark.parametrize("message", ["local", "odometry"])
+def test_positions_and_heading_from_local_position_or_odometry(tmp_path, message):
+    """The block's outputs against the emulator's own (ENU) state, logged
+    when the LAND command arrives right after the run: positions within
+    a few cm, and the heading east of the emulated vehicles is yaw 0."""
+    need_pymavlink()
+    with emulator(tmp_path, 2, "--pose-message", message,
+                  pose0=[[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]) as (log, port):
+        drones = Drones(f"udpout:127.0.0.1:{port}+", n=2, takeoff_height=1.0)
+        res = _flight(drones, [[0.5, 1.0, 1.5], [2.5, -1.0, 0.8]], t_final=4.0)
+        wait_landed(log, 2)
+    for sid in (1, 2):
+        truth = [e for e in events(log, "mode", sid) if e["to"] == "land"][0]["pos"]
+        np.testing.assert_allclose(res["fleet.position"][-1, sid - 1], truth, atol=0.06)
+    q = res["fleet.attitude"][-1]
+    assert np.all(np.abs(q[:, 0]) > 0.99)                   # level, facing east
+    assert np.all(np.abs(res["fleet.pose"][-1, :, 2]) < 0.05)

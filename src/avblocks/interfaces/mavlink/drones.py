@@ -152,12 +152,11 @@ class MavlinkLink(FleetLink):
             elif typ == "LOCAL_POSITION_NED":
                 tb.pose(i, frames.position_to_world([msg.x, msg.y, msg.z], self.origins[i]),
                         frames.ned_to_enu([msg.vx, msg.vy, msg.vz]), now)
-            elif typ == "ODOMETRY" and msg.frame_id == 1:         # MAV_FRAME_LOCAL_NED
+            elif typ == "ODOMETRY" and msg.frame_id == 1:         # pose in MAV_FRAME_LOCAL_NED
                 q = frames.quat_to_enu(np.asarray(msg.q, float))
                 v = np.array([msg.vx, msg.vy, msg.vz])
-                if msg.child_frame_id != 1:      # body-frame velocity (FRD)
-                    R = _rotmat(np.asarray(msg.q, float))
-                    v = R @ v
+                if msg.child_frame_id != 1:      # velocity in the body frame (BODY_FRD, 12)
+                    v = _rotmat(np.asarray(msg.q, float)) @ v
                 tb.pose(i, frames.position_to_world([msg.x, msg.y, msg.z], self.origins[i]),
                         frames.ned_to_enu(v), now)
                 tb.attitude(i, q)

@@ -29,8 +29,10 @@ controller:
   ``gcs_timeout`` while armed -> ``gcs_loss_action`` (``FS_GCS_ENABLE``);
 * **telemetry**: ``HEARTBEAT`` (1 Hz), ``LOCAL_POSITION_NED`` and
   ``ATTITUDE_QUATERNION`` (``rate`` Hz, 30 by default, NED/FRD through
-  :mod:`.frames`), ``EXTENDED_SYS_STATE`` (landed state), ``SYS_STATUS``
-  and ``BATTERY_STATUS`` (2 Hz; the charge drains at ``drain`` per armed
+  :mod:`.frames`; or ``ODOMETRY`` with ``pose_message="odometry"``, pose
+  in LOCAL_NED and velocity in BODY_FRD as PX4 sends it),
+  ``EXTENDED_SYS_STATE`` (landed state), ``SYS_STATUS`` and
+  ``BATTERY_STATUS`` (2 Hz; the charge drains at ``drain`` per armed
   second).
 
 Faults to test against (keyed by system id): ``silent`` (``{sysid: t}``:
@@ -96,7 +98,8 @@ class Emulator:
                  arm_battery_min=0.2, offboard_timeout=0.5, offboard_loss_action="land",
                  guided_timeout=3.0, gcs_timeout=5.0, gcs_loss_action="land",
                  land_speed=0.7, climb_speed=1.0, speed_max=3.0, origin="world",
-                 silent=None, stale=None, no_pose=(), log=None, mass=1.0):
+                 silent=None, stale=None, no_pose=(), log=None, mass=1.0,
+                 pose_message="local"):
         from ...vehicles import Quadrotor, QuadrotorVelocityControl
         if flavor not in FLAVORS:
             raise ParameterError("unknown autopilot flavor", param="flavor",
@@ -116,6 +119,10 @@ class Emulator:
         if p0.shape[1] == 2:
             p0 = np.column_stack([p0, np.zeros(len(p0))])
         self.n = n = len(p0)
+        if pose_message not in ("local", "odometry"):
+            raise ParameterError("unknown pose message", param="pose_message",
+                                 expected=["local", "odometry"], found=pose_message)
+        self.pose_message = pose_message
         self.flavor, self.dt, self.rate = flavor, float(dt), float(rate)
         self.quad = Quadrotor(p0, mass=mass)
         self.ctrl = QuadrotorVelocityControl.for_quadrotor(self.quad)
@@ -427,9 +434,17 @@ class Emulator:
         if not self._muted(i, "pose"):
             p = frames.position_to_local(self.x["position"][i], self.origin[i])
             v = frames.enu_to_ned(self.x["velocity"][i])
-            mav.local_position_ned_send(ms, *p, *v)
             q = frames.quat_to_ned(self.quad.output(0.0, self.x, {}, np)["attitude"][i])
-            mav.attitude_quaternion_send(ms, *q, *frames.enu_to_ned(self.x["rates"][i]))
+            w_frd = self.x["rates"][i] * [1.0, -1.0, -1.0]      # body FLU -> FRD
+            if self.pose_message == "odometry":
+                # as PX4 sends it: pose in LOCAL_NED, velocity in BODY_FRD
+                v_body = _rotmat(q).T @ v
+                nan21 = [float("nan")] + [0.0] * 20
+                mav.odometry_send(ms * 1000, 1, 12, *p, list(q), *v_body, *w_frd, nan21,
+                                  nan21)
+            else:
+                mav.local_position_ned_send(ms, *p, *v)
+                mav.attitude_quaternion_send(ms, *q, *w_frd)
         ls = (LANDED_ON_GROUND if self.landed[i] else LANDED_LANDING
               if self.mode[i] == "land" else LANDED_IN_AIR)
         mav.extended_sys_state_send(0, ls)
@@ -483,6 +498,14 @@ class Emulator:
             self._log = None
 
 
+def _rotmat(q):
+    """Rotation matrix of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(q, float) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
 def read_log(path):
     """The emulator's JSON-lines log as a list of dicts."""
     with open(path) as f:
@@ -520,7 +543,7 @@ def main(args):
                   gcs_loss_action=args.gcs_loss_action, origin=args.origin,
                   silent=_parse_faults(args.silent), stale=_parse_faults(args.stale),
                   no_pose=[int(s) for s in (args.no_pose or "").split(",") if s.strip()],
-                  log=args.log)
+                  log=args.log, pose_message=args.pose_message)
     signal.signal(signal.SIGTERM, lambda *a: em.stop())
     print(f"emulating {em.n} {args.flavor} vehicle(s) on udp 127.0.0.1:"
           f"{em.ports[0]}..{em.ports[-1]}", flush=True)
@@ -565,6 +588,9 @@ def add_parser(sub):
                    help="the vehicle stops sending positions T s after its first set-point")
     e.add_argument("--no-pose", dest="no_pose", metavar="SYSID,...",
                    help="vehicles that never send a position")
+    e.add_argument("--pose-message", default="local", choices=["local", "odometry"],
+                   dest="pose_message", help="LOCAL_POSITION_NED + ATTITUDE_QUATERNION, "
+                                             "or ODOMETRY (velocity in the body frame)")
     e.add_argument("--duration", type=float, help="seconds to run (default: forever)")
     e.add_argument("--log", help="JSON-lines log (raw received messages, events)")
     e.set_defaults(fn=main)

@@ -163,6 +163,8 @@ class Emulator:
         self.ports = [base_port + i for i in range(n)]
         self._log = open(log, "a", buffering=1) if log else None
         self._lock = threading.Lock()
+        #: Events (every log record but the received messages), in order.
+        self.events = []
         self._stop = threading.Event()
         self.t0 = time.monotonic()
         #: Wall seconds not integrated (ticks later than 5 dt on a busy machine).
@@ -175,9 +177,13 @@ class Emulator:
         return time.monotonic() - self.t0
 
     def write(self, rec):
-        if self._log is not None:
-            rec = {"wall": time.time(), "t": round(self.now(), 4), **rec}
-            with self._lock:
+        """Log ``rec`` (a dict with ``ev``); events other than ``rx`` are
+        also kept in :attr:`events`."""
+        rec = {"wall": time.time(), "t": round(self.now(), 4), **rec}
+        with self._lock:
+            if rec["ev"] != "rx":
+                self.events.append(rec)
+            if self._log is not None:
                 self._log.write(json.dumps(rec) + "\n")
 
     def event(self, i, ev, **kw):
@@ -233,10 +239,9 @@ class Emulator:
             typ = msg.get_type()
             if typ == "BAD_DATA":
                 continue
-            rec = {"ev": "rx", "sysid": i + 1, "type": typ,
-                   "hex": bytes(msg.get_msgbuf()).hex()}
-            if typ != "HEARTBEAT" or self._log is not None:
-                self.write(rec)
+            if self._log is not None:
+                self.write({"ev": "rx", "sysid": i + 1, "type": typ,
+                            "hex": bytes(msg.get_msgbuf()).hex()})
             if typ == "HEARTBEAT":
                 self.t_gcs[i] = self.now()
             elif typ == "SET_POSITION_TARGET_LOCAL_NED":

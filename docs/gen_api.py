@@ -37,6 +37,8 @@ PAGES = [
      "Flying drone fleets: flight phases, limits, fail-safe (protocol-free)."),
     ("mavlink", "avblocks.interfaces.mavlink",
      "PX4 and ArduPilot drones over MAVLink, and their emulator."),
+    ("crazyflie", "avblocks.interfaces.crazyflie",
+     "Crazyflies through Crazyswarm2's ROS 2 interface over Zenoh, and their emulator."),
     ("mujoco", "avblocks.interfaces.mujoco", "MuJoCo physics world and cameras."),
     ("vision", "avblocks.interfaces.vision", "OpenCV colour-blob tracking and pinhole cameras."),
 ]

@@ -210,6 +210,9 @@ PRODUCERS = {
     "robots-wiring": (_script([sys.executable, "docs/images/robots_wiring.py"]), False),
     "robots-formation-diagram": (_script([sys.executable, "docs/images/robots_wiring.py",
                                           "--formation"]), False),
+    # flown on the Crazyflie emulator in real time (about 80 s)
+    "drones-formation-crazyflie": (_script([sys.executable, "docs/images/drones_crazyflie.py",
+                                            "{images}/drones-formation-crazyflie.png"]), True),
     "scaling": (_script([sys.executable, "benchmarks/scaling.py",
                          "--out", "{images}/scaling.png"]), True),
     "scaling_backends": (_script([sys.executable, "benchmarks/scaling.py", "--backend", "jax",

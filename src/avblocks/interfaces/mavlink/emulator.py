@@ -399,7 +399,8 @@ class Emulator:
         k3 = self._rhs({k: x[k] + h / 2 * k2[k] for k in x}, vref)
         k4 = self._rhs({k: x[k] + h * k3[k] for k in x}, vref)
         new = {k: x[k] + h / 6 * (k1[k] + 2 * k2[k] + 2 * k3[k] + k4[k]) for k in x}
-        fly = self.armed & ~(self.landed & (vref[:, 2] <= 0.0))
+        on_ground = x["position"][:, 2] - self.ground < 0.02
+        fly = self.armed & ~(on_ground & (vref[:, 2] <= 0.0))
         for k in x:
             new[k] = np.where(fly[:, None], new[k], x[k])
         # the ground: no vehicle goes below it

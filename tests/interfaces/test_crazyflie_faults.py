@@ -226,3 +226,44 @@ def test_a_second_commander_of_the_same_vehicles_is_refused_before_sending(route
     assert [x["service"] for x in events(recs, "service", "cf3")
             if t0 <= x["wall"] <= t1] == []
     assert all(s["vel"] == [0.1, 0.0, 0.0] for s in events(recs, "setpoint", "cf3"))
+
+
+def test_with_the_guard_running_a_sigkilled_commanders_vehicles_land(router, tmp_path):
+    glog = tmp_path / "guard.jsonl"
+    with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0) as log:
+        g = subprocess.Popen([sys.executable, "-m", "avblocks", "crazyflies", "guard",
+                              "--names", ",".join(NAMES), "--router", router, "--log",
+                              str(glog), "--land-duration", "1.5"], env=env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            lines = [g.stdout.readline()]
+            while "guarding" not in lines[-1] and lines[-1]:
+                lines.append(g.stdout.readline())
+            assert "guarding" in lines[-1], lines
+            p, flight, _ = _commander(router, tmp_path)
+            try:
+                _wait_started(p)
+                time.sleep(1.0)
+                t_kill = time.time()
+                p.send_signal(signal.SIGKILL)
+                p.wait(10)
+            finally:
+                if p.poll() is None:
+                    p.kill()
+            recs = wait_for(log, _all_down(NAMES), timeout=15)
+        finally:
+            g.terminate()
+            g.wait(10)
+    # the guard saw each vehicle's commander go and landed it before the
+    # firmware's watchdog would have levelled it out (0.5 s after the last
+    # set-point: _landed_softly checks that no watchdog event happened)
+    _landed_softly(recs, NAMES, after=t_kill)
+    for nm in NAMES:
+        t_land = [x["wall"] for x in events(recs, "service", nm) if x["wall"] > t_kill][0]
+        assert t_land - events(recs, "setpoint", nm)[-1]["wall"] < 0.5, nm
+        assert events(recs, "wdt_motors_off", nm) == []
+    gl = [json.loads(s) for s in glog.read_text().splitlines()]
+    gone = [r for r in gl if r["ev"] == "commander_gone"]
+    assert sorted(r["vehicle"] for r in gone) == list(NAMES) and all(r["flying"] for r in gone)
+    assert sorted(r["vehicle"] for r in gl if r["ev"] == "landed_by_guard" and r["ok"]) == \
+        list(NAMES)

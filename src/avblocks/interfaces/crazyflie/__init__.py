@@ -8,12 +8,15 @@ rmw_zenoh: set-points on ``/cfN/cmd_full_state`` (or
 through the services, poses from ``/cfN/pose``; flight phases, limits and
 the fail-safe come from :mod:`avblocks.interfaces.flight`.
 ``CrazyflieEmulator`` (``avblocks crazyflies emulate``) stands in for the
-server and the vehicles. The message and service definitions are those of
-Crazyswarm2 1.0.5's ``crazyflie_interfaces`` (see :mod:`._types`).
+server and the vehicles; ``Guard`` (``avblocks crazyflies guard``), run
+beside the server, lands the vehicles of a commander that dies. The
+message and service definitions are those of Crazyswarm2 1.0.5's
+``crazyflie_interfaces`` (see :mod:`._types`).
 """
 
 from .block import Crazyflies
 from .emulator import CrazyflieEmulator
+from .guard import Guard
 from .link import CrazyflieLink, battery_fraction
 
-__all__ = ["Crazyflies", "CrazyflieEmulator", "CrazyflieLink", "battery_fraction"]
+__all__ = ["Crazyflies", "CrazyflieEmulator", "CrazyflieLink", "Guard", "battery_fraction"]

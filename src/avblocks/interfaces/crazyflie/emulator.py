@@ -549,4 +549,6 @@ def add_parser(sub):
     e.add_argument("--duration", type=float, help="seconds to run (default: forever)")
     e.add_argument("--log", help="JSON-lines log")
     e.set_defaults(fn=main)
+    from .guard import add_parser as add_guard
+    add_guard(rs)
     return r

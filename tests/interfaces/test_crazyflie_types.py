@@ -127,3 +127,38 @@ def test_smooth7_is_rest_to_rest_to_third_order():
     e = 1e-3
     assert smooth7(np.array([e]))[2][0] / e < 1.0
     assert abs(smooth7(np.array([1 - e]))[2][0]) / e < 1.0
+
+
+def test_malformed_pose_payloads_are_dropped_counted_and_warned(router):
+    _need("zenoh")
+    import time
+    import warnings
+
+    from avblocks.interfaces.crazyflie import CrazyflieLink
+    from avblocks.interfaces.crazyflie import _types as T
+    from avblocks.interfaces.crazyflie._link import CfLink
+    from avblocks.interfaces.flight import RobotWarning
+    link = CrazyflieLink(["cf1", "cf2"], router, exclusive=False)
+    link.open()
+    peer = CfLink(router, node="peer")
+    try:
+        pub1 = peer.publisher("/cf1/pose", T.POSE_STAMPED)
+        pub2 = peer.publisher("/cf2/pose", T.POSE_STAMPED)
+        time.sleep(0.5)
+        good = T.encode_pose((1.0, 2.0, 0.5), (1.0, 0.0, 0.0, 0.0), 10.0)
+        pub1.put(good)
+        pub2.put(good[:20])                                     # truncated
+        pub2.put(T.encode_pose((np.nan, 0, 0), (1, 0, 0, 0), 10.1))  # NaN
+        pub2.put(T.encode_pose((0, 0, 0), (0, 0, 0, 0), 10.2))      # no rotation
+        time.sleep(0.5)
+        tm = link.telemetry.snapshot()
+        assert tm.position[0].tolist() == [1.0, 2.0, 0.5] and tm.poses.tolist() == [1, 0]
+        assert link.malformed == {"/cf2/pose": 3}
+    finally:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            link.close()
+        peer.close()
+    (w,) = [c for c in caught if issubclass(c.category, RobotWarning)]
+    assert "'cf2': 3 malformed payload(s) on '/cf2/pose'" in str(w.message)
+    assert "not a PoseStamped" in str(w.message)

@@ -35,7 +35,7 @@ import time
 
 import numpy as np
 
-from ..flight import FleetLink, FlightError, PreflightError, TelemetryBuffer
+from ..flight import FleetLink, FlightError, PreflightError, RobotWarning, TelemetryBuffer
 from . import _types
 
 #: The firmware's typical LiPo charge curve (crazyflie-firmware 2026.08,
@@ -100,21 +100,33 @@ class CrazyflieLink(FleetLink):
         self._p_ref = None
         self._t_sent = None
         self._pending = []
+        self._bad = np.zeros(n, np.int64)
+        self._bad_why = [None] * n
         #: Set-points sent at the last step: (N, 3) velocities and, for
         #: ``full_state``, the (N, 3) reference positions.
         self.last_velocity = None
         self.last_position = None
 
     # ---------------------------------------------------------------- receive
+    def _reject(self, i, why):
+        with self._lock:
+            self._bad[i] += 1
+            if self._bad_why[i] is None:
+                self._bad_why[i] = why
+
     def _on_pose(self, i, data, now):
+        # malformed payloads are counted and dropped (the vehicle counts as
+        # silent until valid poses come); close() warns with the counts
         try:
             x, y, z, qw, qx, qy, qz, stamp = _types.decode_pose(data)
-        except Exception:  # noqa: BLE001 - malformed: the vehicle counts as silent
-            return
+        except Exception as e:  # noqa: BLE001 - any decoding failure is bad input
+            return self._reject(i, f"not a PoseStamped ({type(e).__name__})")
         vals = np.array([x, y, z, qw, qx, qy, qz, stamp])
         nq = float(np.linalg.norm(vals[3:7]))
-        if not np.isfinite(vals).all() or not 0.5 <= nq <= 1.5:
-            return
+        if not np.isfinite(vals).all():
+            return self._reject(i, "non-finite values")
+        if not 0.5 <= nq <= 1.5:
+            return self._reject(i, f"orientation quaternion of norm {nq:.3g}")
         with self._lock:
             prev = self._prev[i].copy()
             self._prev[i] = (x, y, z, stamp)
@@ -258,7 +270,22 @@ class CrazyflieLink(FleetLink):
             self.record("land_sent", unanswered=out)
         threading.Thread(target=collect, daemon=True, name="avblocks-cf-land").start()
 
+    @property
+    def malformed(self):
+        """``{pose topic: payloads dropped}`` (vehicles with any)."""
+        with self._lock:
+            bad = self._bad.copy()
+        return {f"/{nm}/pose": int(c) for nm, c in zip(self.names, bad) if c}
+
     def close(self):
+        import warnings
+        with self._lock:
+            bad, why = self._bad.copy(), list(self._bad_why)
+        for i in np.nonzero(bad)[0]:
+            self.record("malformed", vehicle=self.names[i], count=int(bad[i]), first=why[i])
+            warnings.warn(RobotWarning(
+                f"vehicle '{self.names[i]}': {bad[i]} malformed payload(s) on "
+                f"'/{self.names[i]}/pose' ignored (first: {why[i]})"), stacklevel=2)
         link, self._link = self._link, None
         pend, self._pending = self._pending, []
         deadline = time.monotonic() + self.land_ack_wait

@@ -44,8 +44,13 @@ def _landed_softly(recs, names, after):
     lossy links; the emulator's service threads may log a repeat out of order),
     nothing else; touch-down slower than 0.5 m/s."""
     for nm in names:
-        srv = [e["service"] for e in events(recs, "service", nm) if e["wall"] >= after]
+        got = [e for e in events(recs, "service", nm) if e["wall"] >= after]
+        srv = [e["service"] for e in got]
         assert srv[0] == "land" and set(srv) == {"land", "notify_setpoints_stop"}, (nm, srv)
+        # the arguments as the emulator decoded them: to the floor in 1.5 s, all groups
+        assert got[0]["request"] == {"group_mask": 0, "height": 0.0, "duration": 1.5}
+        assert [e["request"] for e in got if e["service"] == "notify_setpoints_stop"][0] == {
+            "group_mask": 0, "remain_valid_millisecs": 100}
         (g,) = [e for e in events(recs, "ground", nm) if e["wall"] >= after]
         assert g["mode"] in ("hl", "drop") and g["speed"] < 0.5, (nm, g)
         assert events(recs, "wdt_level_out", nm) == []

@@ -50,7 +50,9 @@ set-points and answers no service, so its own watchdog runs) and
 ``stale`` (``{name: t}``: its pose publications stop, as when motion
 capture loses it; it still answers). ``battery`` (``{name: volts}``).
 
-The log (JSON lines; ``wall`` = ``time.time()``, ``t`` = emulator seconds)
+The log (JSON lines; ``wall`` = ``time.time()``, ``t`` = emulator seconds
+when written; the firmware's events also carry ``at``, the physics time
+they happened at, on the same clock)
 records every set-point received (accepted or refused), every service
 request with its arguments, the planner's trajectories, the watchdog's
 transitions, ground contacts and the final positions.
@@ -363,6 +365,8 @@ class CrazyflieEmulator:
             vref, on, events = self._references(t)
             modes = list(self.mode)
         new = self._rk4(vref, on, h)
+        for e in events:                        # the physics time of the event
+            e["at"] = round(t, 6)
         ground = np.array([m in ("landed", "locked") for m in modes])
         for k in new:                           # vehicles on the ground stay put
             new[k][ground] = self.x[k][ground]
@@ -375,7 +379,8 @@ class CrazyflieEmulator:
                     if mode in ("falling", "drop") or not self.crtp[i] and (
                             tr is None or tr["kind"] == "land"):
                         events.append({"ev": "ground", "vehicle": self.names[i],
-                                       "speed": float(-new["velocity"][i, 2]), "mode": mode})
+                                       "speed": float(-new["velocity"][i, 2]), "mode": mode,
+                                       "at": round(t + h, 6)})
                         self.mode[i] = "locked" if mode == "falling" else "landed"
                         self.traj[i] = None
                         self.crtp[i] = False

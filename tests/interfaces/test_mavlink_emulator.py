@@ -165,3 +165,27 @@ def test_land_descends_at_land_speed(fleet):
     slope = np.polyfit([t for t, _ in mid], [z for _, z in mid], 1)[0]
     assert slope == pytest.approx(-0.7, rel=0.1)
     assert zs[-1][1] < 0.03 and not em.armed[0]
+
+
+def test_ardupilot_gcs_heartbeat_loss_lands(fleet):
+    em, cl = fleet(flavor="ardupilot", gcs_timeout=1.0, gcs_loss_action="land")
+    stop = threading.Event()
+
+    def beat():
+        while not stop.is_set():
+            cl.c.mav.heartbeat_send(6, 8, 0, 0, 4)
+            time.sleep(0.2)
+    threading.Thread(target=beat, daemon=True).start()
+    assert cl.command(176, 1, 4) == 0            # GUIDED
+    assert cl.command(400, 1) == 0               # ARM
+    assert cl.command(22, 0, 0, 0, 0, 0, 0, 1.0) == 0      # NAV_TAKEOFF 1 m
+    time.sleep(3.0)
+    assert abs(cl.last("LOCAL_POSITION_NED").z + 1.0) < 0.1
+    t_stop = time.monotonic()
+    stop.set()                                   # the GCS goes quiet
+    time.sleep(4.5)
+    loss = [e for e in em.events if e["ev"] == "gcs_loss"]
+    assert loss and loss[0]["wall"] - time.time() + time.monotonic() - t_stop \
+        == pytest.approx(1.0, abs=0.35)          # FS_GCS_TIMEOUT after the last beat
+    assert 9 in [m.custom_mode for t, m in cl.series("HEARTBEAT", t_stop)]   # LAND
+    assert abs(cl.last("LOCAL_POSITION_NED").z) < 0.03 and not em.armed[0]

@@ -80,6 +80,17 @@ def test_setpoints_decoded_independently_equal_the_diagram_after_ned(tmp_path):
         # the vehicle (origin at its start): NED (0, 0, -1)
         pos = [m for m in sps if m.type_mask == 1528]
         assert pos and np.allclose([pos[-1].x, pos[-1].y, pos[-1].z], [0, 0, -1.0])
+        # streamed as PX4 requires: from the first set-point to the LAND
+        # command, never a gap of 0.5 s (> 2 Hz), on the wire
+        t_sp = [r["wall"] for r, _ in received(log, i + 1, "SET_POSITION_TARGET_LOCAL_NED")]
+        t_land = min(r["wall"] for r, m in received(log, i + 1, "COMMAND_LONG")
+                     if m.command == CMD_LAND)
+        gaps = np.diff([t for t in t_sp if t <= t_land] + [t_land])
+        assert gaps.max() < 0.5, gaps.max()
+        # heartbeats both ways: the block's, as a GCS, about 1 Hz
+        hb = [(r["wall"], m) for r, m in received(log, i + 1, "HEARTBEAT")]
+        assert all(m.type == 6 for _, m in hb) and len(hb) >= 4
+        assert np.median(np.diff([t for t, _ in hb])) == pytest.approx(1.0, abs=0.2)
     # the flown positions came back through LOCAL_POSITION_NED + origins: the
     # vehicles moved toward their targets (world frame, ENU)
     p = res["fleet.position"]

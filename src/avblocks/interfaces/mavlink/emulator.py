@@ -364,9 +364,12 @@ class Emulator:
                         v[i] = self.sp[i]
                 elif self.sp_kind[i] == "pos":
                     v[i] = self._goto(p[i], self.sp[i], self.speed_max)
+                else:                       # no set-point yet: hold (after a takeoff)
+                    v[i] = self._goto(p[i], self.target[i], self.climb_speed)
             elif md in ("hold", "loiter", "stabilize", "takeoff"):
                 v[i] = self._goto(p[i], self.target[i], self.climb_speed)
-                if md == "takeoff" and abs(p[i, 2] - self.target[i, 2]) < 0.05:
+                if md == "takeoff" and abs(p[i, 2] - self.target[i, 2]) < 0.05 \
+                        and abs(self.x["velocity"][i, 2]) < 0.1:
                     self.set_mode(i, "guided", "takeoff done")
             elif md == "rtl":
                 d = self.target[i] - p[i]

@@ -88,8 +88,9 @@ def test_a_stale_pose_lands_every_vehicle_and_ends_the_run_with_its_log(router, 
     with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0,
                      "--stale", "cf2@1.0") as log:
         # stale_timeout above the status period (0.5 s): the vehicle is heard, so
-        # the flight layer calls its missing poses stale, not silent
-        d, fleet = _drive(router, stale_timeout=0.8, log=str(tmp_path / "flight.jsonl"))
+        # the flight layer calls its missing poses stale, not silent (and above the
+        # half second a loaded machine can hold every pose back)
+        d, fleet = _drive(router, stale_timeout=1.2, log=str(tmp_path / "flight.jsonl"))
         with pytest.raises(FailsafeError) as e:
             av.simulate(d, t_final=30.0, dt=0.05, realtime=1.0, log=["fleet.position"],
                         progress=False)
@@ -103,7 +104,7 @@ def test_a_stale_pose_lands_every_vehicle_and_ends_the_run_with_its_log(router, 
     flight = [json.loads(s) for s in (tmp_path / "flight.jsonl").read_text().splitlines()]
     (fs,) = [r for r in flight if r["ev"] == "failsafe"]
     assert fs["reason"] == "stale" and fs["vehicles"] == ["cf2"]
-    assert 0.8 < fs["wall"] - t_stale < 1.4
+    assert 1.2 < fs["wall"] - t_stale < 2.0
     assert flight[-1]["ev"] == "end"
 
 
@@ -112,7 +113,8 @@ def test_a_vehicle_gone_silent_lands_the_others_and_falls_by_its_own_watchdog(
     from avblocks.interfaces.flight import FailsafeError
     with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0,
                      "--silent", "cf2@1.0") as log:
-        d, fleet = _drive(router, stale_timeout=5.0, link_timeout=0.5,
+        # link_timeout 1 s: a loaded machine can hold every pose back for half a second
+        d, fleet = _drive(router, stale_timeout=5.0, link_timeout=1.0,
                           log=str(tmp_path / "flight.jsonl"))
         with pytest.raises(FailsafeError) as e:
             av.simulate(d, t_final=30.0, dt=0.05, realtime=1.0, progress=False)

@@ -210,6 +210,12 @@ PRODUCERS = {
     "robots-wiring": (_script([sys.executable, "docs/images/robots_wiring.py"]), False),
     "robots-formation-diagram": (_script([sys.executable, "docs/images/robots_wiring.py",
                                           "--formation"]), False),
+    # the drone case study in simulation, and flown on the emulators in real time
+    "drones-formation-sim": (_script([sys.executable, "-m", "avblocks", "run",
+                                      "drone_formation", "--out", "{tmp}", "--quiet"],
+                                     made="paths.png"), True),
+    "drones-formation-mavlink": (_script([sys.executable, "docs/images/drones_mavlink.py",
+                                          "{images}/drones-formation-mavlink.png"]), True),
     # flown on the Crazyflie emulator in real time (about 80 s)
     "drones-formation-crazyflie": (_script([sys.executable, "docs/images/drones_crazyflie.py",
                                             "{images}/drones-formation-crazyflie.png"]), True),

@@ -28,6 +28,7 @@ import numpy as np
 
 from ..block import Block as _Block
 
+
 class _Mode(threading.local):
     strip = False       # plan_key: leave the searches' plans out
 

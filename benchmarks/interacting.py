@@ -32,6 +32,26 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py --n 1000000 --engines jax,numba \
         --steps-scale 10 --rounds 1                   # on a GPU machine
     python benchmarks/interacting.py --alternate --rounds 7   # NumPy / Numba, one process
+    python benchmarks/interacting.py --long --n 1000 10000    # 4 s runs: jax / Numba
+    python benchmarks/interacting.py --long --n 100000 --numba2   # jax / two-thread Numba
+    python benchmarks/interacting.py --float32 --n 1000       # float32 error, flocking
+    python benchmarks/interacting.py --gpu --out-dir OUT      # the GPU rows (one call)
+
+``--long`` (issue 32; one process, so the ratios share the machine's
+state): the flock over ``--seconds`` (4) s contracts towards the target,
+so the search's plan made at t0 overflows and grows. Rows: the Numba loop
+(first call compiles it, then timed); the first ``simulate(backend="jax")``
+of the diagram (plan, overflow, re-plan, compile twice); the second
+``simulate`` of a *rebuilt* diagram of the same structure (the kept plan,
+no trace, no compile); the compiled runner's second call; each ratio to
+the Numba loop timed next to it (``--numba2``: the two-thread loop).
+
+``--gpu`` writes ``gpu_issue32.md`` (and ``.json``) into ``--out-dir``: on
+JAX's default device, flocking at N = 10^6 (RK4, dt 0.02, float64 and
+float32: ms per step, plan + compile seconds, peak device memory) and
+N = 10^7 (float32 and float64: plan + compile seconds, 10 steps, ms per
+step, memory), each in a child process with a time limit
+(``--limit``, 240 s).
 
 On an accelerator the ``jax`` column runs there (JAX's default device,
 printed first); ``numpy`` and ``numba`` always run on the host's CPU.
@@ -388,6 +408,151 @@ def ensemble(runs, numpy_runs):
           f"runs 0..{numpy_runs - 1} agree to {err:.1e} m; load {os.getloadavg()[0]:.1f}")
 
 
+def _timed(fn):
+    t = time.perf_counter()
+    out = fn()
+    return time.perf_counter() - t, out
+
+
+def long_runs(ns, seconds, rounds, two_threads=False):
+    """Issue 32's long rows (see the module docstring), one process per N."""
+    import warnings
+
+    import avblocks as av
+    from avblocks.core.compiled import cache_info
+    steps = int(round(seconds / DT))
+    kind = "numba2" if two_threads else "numba"
+    run = numba_kernels(parallel=two_threads)
+    if two_threads:
+        import numba as nb
+        nb.set_num_threads(min(2, nb.config.NUMBA_NUM_THREADS))
+    tv = np.array([2.0, 1.0])
+    kw = dict(dt=DT, log=["flock.position"], log_every=steps)
+    print(f"flocking over {seconds:g} s ({steps} RK4 steps of {DT} s), K = {K}; "
+          f"load {os.getloadavg()[0]:.1f}; jax device "
+          f"{__import__('jax').devices()[0].platform}")
+    print(f"\n| N | {kind} s | 1st simulate s | 2nd simulate (rebuilt) s | / {kind} | "
+          f"runner s | / {kind} | plan (capacity, hits) | re-plans 1st / 2nd | "
+          f"traces, XLA compiles in 2nd |")
+    print("|---:|---:|---:|---:|---:|---:|---:|---|---|---|")
+    for n in ns:
+        p0, v0, centre = initial(n)
+        run(p0, v0, 1, DT, centre, tv)                      # compile the loop
+
+        def loop(p0=p0, v0=v0, centre=centre):
+            return _timed(lambda: run(p0, v0, steps, DT, centre, tv))[0]
+
+        def sim(n=n):
+            with warnings.catch_warnings(record=True) as w:
+                warnings.simplefilter("always")
+                el, res = _timed(lambda: av.simulate(diagram(n), seconds, backend="jax",
+                                                     **kw))
+            return el, res, sum("re-planned" in str(x.message) for x in w)
+        first, _, rp1 = sim()
+        c0 = cache_info()
+        sims, loops, runs, rp2 = [], [], [], 0
+        for _ in range(rounds):
+            el, res, r = sim()
+            rp2 += r
+            sims.append(el)
+            loops.append(loop())
+        c1 = cache_info()
+        runner = av.compile(diagram(n), seconds, **kw)
+        runner()
+        rl = []
+        for _ in range(rounds):
+            runs.append(_timed(runner)[0])
+            rl.append(loop())
+        plan = next(iter(runner.plans.values()))
+        sim_r = float(np.median(np.divide(sims, loops)))
+        run_r = float(np.median(np.divide(runs, rl)))
+        print(f"| {n} | {np.median(loops + rl):.3f} | {first:.2f} | {np.median(sims):.3f} | "
+              f"{sim_r:.2f} | {np.median(runs):.3f} | {run_r:.2f} | "
+              f"{plan.capacity}, {plan.hits} | {rp1} / {rp2} | "
+              f"{c1['traces'] - c0['traces']}, {c1['xla_compiled'] - c0['xla_compiled']} |",
+              flush=True)
+
+
+def float32_error(n, seconds):
+    """Positions of the flock after ``seconds`` in float32 against float64
+    (both compiled, same diagram and initial state)."""
+    import avblocks as av
+    steps = int(round(seconds / DT))
+    out = {}
+    for dt in ("float64", "float32"):
+        res = av.simulate(diagram(n), seconds, dt=DT, backend="jax", dtype=dt,
+                          log=["flock.position", "flock.velocity"], log_every=steps)
+        out[dt] = (np.asarray(res["flock.position"][-1], float),
+                   np.asarray(res["flock.velocity"][-1], float))
+    dp = np.linalg.norm(out["float32"][0] - out["float64"][0], axis=1)
+    dv = np.linalg.norm(out["float32"][1] - out["float64"][1], axis=1)
+    print(f"flocking N = {n}, {seconds:g} s ({steps} RK4 steps), float32 vs float64: "
+          f"position max {dp.max():.3g} m, median {np.median(dp):.3g} m; velocity max "
+          f"{dv.max():.3g} m/s, median {np.median(dv):.3g} m/s; device "
+          f"{__import__('jax').devices()[0].platform}")
+
+
+def gpu_child(n, dtype, steps):
+    """One GPU row (in its own process): plan + compile, then ``steps`` steps."""
+    import jax
+
+    import avblocks as av
+    t = time.perf_counter()
+    runner = av.compile(diagram(n), steps * DT, dt=DT, log=["flock.position"],
+                        log_every=steps, dtype=dtype)
+    plan_compile = time.perf_counter() - t      # planning (XLA compiles at the first call)
+    t = time.perf_counter()
+    runner()                                        # first call (re-plan if needed)
+    first = time.perf_counter() - t
+    t = time.perf_counter()
+    runner()
+    wall = time.perf_counter() - t
+    dev = jax.devices()[0]
+    stats = dev.memory_stats() or {}
+    return {"n": n, "dtype": dtype, "steps": steps, "device": str(dev),
+            "plan_compile_s": plan_compile, "first_call_s": first,
+            "ms_per_step": 1e3 * wall / steps, "realtime_factor": DT * steps / wall,
+            "peak_device_mib": stats.get("peak_bytes_in_use", 0) / 2**20,
+            "plan": str(next(iter(runner.plans.values())))}
+
+
+def gpu(out_dir, limit):
+    """The GPU rows of issue 32, each in a child process with a time limit;
+    tables written to ``out_dir``."""
+    rows = []
+    cases = [(10**6, "float64", 50), (10**6, "float32", 50), (10**7, "float32", 10),
+             (10**7, "float64", 10)]
+    for n, dt, steps in cases:
+        try:
+            out = subprocess.run([sys.executable, __file__, "--gpu-one", str(n), dt,
+                                  str(steps)], capture_output=True, text=True,
+                                 timeout=limit)
+            r = json.loads(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 \
+                else {"n": n, "dtype": dt, "error": out.stderr.strip()[-300:]}
+        except subprocess.TimeoutExpired:
+            r = {"n": n, "dtype": dt, "error": f"over {limit} s"}
+        rows.append(r)
+        print(json.dumps(r), flush=True)
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "gpu_issue32.json"), "w") as f:
+        json.dump(rows, f, indent=1)
+    lines = ["| N | dtype | ms per step | real-time factor | plan s | "
+             "first call (compile, re-plans, run) s | peak device MiB | plan |", "|---:|---|---:|---:|---:|---:|---:|---|"]
+    for r in rows:
+        if "error" in r:
+            lines.append(f"| {r['n']} | {r['dtype']} | failed: {r['error'][-80:]} |||||")
+        else:
+            lines.append(f"| {r['n']} | {r['dtype']} | {r['ms_per_step']:.2f} | "
+                         f"{r['realtime_factor']:.2f} | {r['plan_compile_s']:.1f} | "
+                         f"{r['first_call_s']:.1f} | {r['peak_device_mib']:.0f} | "
+                         f"{r['plan']} |")
+    dev = next((r["device"] for r in rows if "device" in r), "?")
+    text = f"device {dev}; flocking, K = {K}, RK4, dt = {DT} s\n\n" + "\n".join(lines)
+    with open(os.path.join(out_dir, "gpu_issue32.md"), "w") as f:
+        f.write(text + "\n")
+    print(text)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N up to 1e4")
@@ -402,9 +567,34 @@ def main(argv=None):
                     help="multiply the steps timed at each N")
     ap.add_argument("--alternate", action="store_true",
                     help="NumPy / Numba alternating in one process (--n, --rounds)")
+    ap.add_argument("--long", action="store_true",
+                    help="issue 32's long runs: 2nd simulate of a rebuilt diagram and "
+                         "the runner against the Numba loop, one process per N")
+    ap.add_argument("--seconds", type=float, default=4.0, help="--long: simulated time")
+    ap.add_argument("--numba2", action="store_true",
+                    help="--long: against the two-thread Numba loop")
+    ap.add_argument("--float32", action="store_true",
+                    help="float32 against float64 positions after --seconds (--n)")
+    ap.add_argument("--gpu", action="store_true", help="the GPU rows, tables to --out-dir")
+    ap.add_argument("--out-dir", default=".", dest="out_dir")
+    ap.add_argument("--limit", type=float, default=240.0, help="--gpu: seconds per row")
     ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
                     help=argparse.SUPPRESS)
+    ap.add_argument("--gpu-one", nargs=3, dest="gpu_one", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
+    if a.gpu_one:
+        print(json.dumps(gpu_child(int(a.gpu_one[0]), a.gpu_one[1], int(a.gpu_one[2]))))
+        return
+    if a.gpu:
+        gpu(a.out_dir, a.limit)
+        return
+    if a.long:
+        long_runs(a.n or [1000, 10000], a.seconds, a.rounds, a.numba2)
+        return
+    if a.float32:
+        for n in a.n or [1000]:
+            float32_error(n, a.seconds)
+        return
     if a.one:
         print(json.dumps(one(a.one[0], int(a.one[1]), int(a.one[2]))))
         return

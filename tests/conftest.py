@@ -4,3 +4,20 @@ import matplotlib
 
 matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+import sys  # noqa: E402
+
+import pytest  # noqa: E402
+
+
+@pytest.fixture(autouse=True)
+def _no_kept_plans():
+    """Each test starts with an empty plan book of the compiled engine (a
+    plan grown in one test must not change what another one sees: see
+    avblocks.core.compiled.plans)."""
+    plans = sys.modules.get("avblocks.core.compiled.plans")
+    if plans is not None:
+        plans.forget_plans()
+    yield
+

@@ -7,9 +7,10 @@
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
     avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
+    avblocks cache clear
     avblocks --version
 
-Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep) and the
+Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, cache) and the
 ROS 2 commands (:mod:`avblocks.interfaces.ros2.cli`).
 """
 
@@ -19,6 +20,7 @@ import argparse
 import os
 import sys
 
+from .commands import cache as _cache
 from .commands import diagram as _diagram
 from .commands import listing as _listing
 from .commands import run as _run
@@ -45,6 +47,7 @@ def build_parser():
     _listing.add_parser(sub)
     _diagram.add_parser(sub)
     _sweep.add_parser(sub)                                   # `avblocks sweep` (issue 14)
+    _cache.add_parser(sub)                                   # `avblocks cache` (issue 32)
     return ap
 
 

@@ -47,6 +47,10 @@ def add_parser(sub):
     r.add_argument("--live-port", type=int, default=0, help="port for --live (0: free)")
     r.add_argument("--backend", choices=("numpy", "jax"),
                    help="engine: numpy (default) or jax (compiled; pure blocks only)")
+    r.add_argument("--no-cache", action="store_true", dest="no_cache",
+                   help="jax: neither read nor write the compiled programs and plans "
+                        "in the cache folder (also AVBLOCKS_CACHE=off; see "
+                        "`avblocks cache`)")
     r.set_defaults(fn=cmd_run)
     return r
 
@@ -102,6 +106,7 @@ def _guarded_run(args, guard, load_any):
         check_movie_path(movie_path)           # suffix and extra, before simulating
         prepare_output(movie_path.parent)
     check_memory(d, sim)
+    cache = _compile_cache(args, sim)
     t0 = time.perf_counter()
     failed = None
     res = None
@@ -183,6 +188,8 @@ def _guarded_run(args, guard, load_any):
         summary["on_stop_errors"] = failed.on_stop_errors
     if write_errors:
         summary["write_errors"] = write_errors
+    if cache is not None:
+        summary["compile"] = cache.summary()
     if summary["simulated_s"] and wall > 0:
         summary["realtime_factor"] = round(summary["simulated_s"] / wall, 1)
     if res is not None and "overruns" in res.meta:
@@ -201,6 +208,8 @@ def _guarded_run(args, guard, load_any):
     print(f"wall time     {wall:.3g} s")
     if summary["realtime_factor"] is not None:
         print(f"real-time x   {summary['realtime_factor']}")
+    if cache is not None:
+        print(f"compiled program: {cache.line()}")
     if res is not None and "overruns" in res.meta:
         from ..interfaces.ros2.cli import report as _pace_report
         print(_pace_report(res))
@@ -234,3 +243,48 @@ def _guarded_run(args, guard, load_any):
                 + (", ".join(str(f) for f in files) or "nothing"))
         return 3
     return 0
+
+
+class _CompileCount:
+    """What a compiled run of ``avblocks run`` compiled, read from the cache
+    folder, or reused (``compiled program:`` in the output)."""
+
+    def __init__(self, root):
+        from ..core.compiled.program import COMPILES
+        self.root = root
+        self.counts = COMPILES
+        self.before = dict(COMPILES)
+
+    def summary(self):
+        d = {k: self.counts[k] - self.before[k] for k in ("compiled", "from_disk")}
+        d["seconds"] = round(self.counts["seconds"] - self.before["seconds"], 3)
+        d["cache_dir"] = None if self.root is None else str(self.root)
+        return d
+
+    def line(self):
+        s = self.summary()
+        where = "cache off" if self.root is None else f"cache {self.root}"
+        if s["compiled"] == 0 and s["from_disk"]:
+            return (f"from cache ({s['from_disk']} read, 0 compiled, "
+                    f"{s['seconds']:.2f} s; {where})")
+        if s["compiled"] == 0:
+            return "none needed"
+        return (f"compiled ({s['compiled']} compiled, {s['from_disk']} read from "
+                f"cache, {s['seconds']:.2f} s; {where})")
+
+
+def _compile_cache(args, sim):
+    """For ``--backend jax``: turn on the persistent compilation cache and the
+    plan store in the user's cache folder (unless ``--no-cache`` or
+    ``AVBLOCKS_CACHE=off``); a counter of the compilations to report."""
+    if sim.get("backend") != "jax":
+        return None
+    from ..core.compiled.program import cache_dir, cache_disabled, enable_persistent_cache
+    root = None
+    if not (getattr(args, "no_cache", False) or cache_disabled()):
+        try:
+            root = enable_persistent_cache(cache_dir())
+        except OSError as e:             # an unwritable cache folder: run without it
+            from .._runio import say
+            say(f"avblocks: the cache folder cannot be used ({e}); compiling afresh")
+    return _CompileCount(root)

@@ -24,7 +24,9 @@ body carries the tally through it as well: :func:`held` before, the body
 traced under :func:`resumed`, :func:`absorb` of what comes out (the
 Verlet list rebuild of :mod:`avblocks.utility.spatial.verlet` does).
 Code that traces blocks without a tally (the reinforcement-learning
-environments step the engine themselves) gets no reports and no cost.
+environments step the engine themselves) gets no reports and no cost; a
+search that would cut its selection short to a plan is exact there
+(:func:`kept`), so no caller needs a special case.
 """
 
 from __future__ import annotations
@@ -46,15 +48,24 @@ def block(name, obj):
         _CURRENT.reset(tok)
 
 
+_VMAPPED: contextvars.ContextVar = contextvars.ContextVar("avblocks_vmapped", default=False)
+
+
 @contextlib.contextmanager
-def unreported():
-    """Trace without overflow reports: :func:`report` does nothing inside
-    (its searches must then be exact or planned with headroom)."""
-    tok = _CURRENT.set(None)
+def vmapped():
+    """The compiled engine is tracing a ``vmap``ped run (an ensemble): code
+    that would branch on a value (``lax.switch``) takes one branch for all
+    runs instead (under ``vmap`` a branch on a batched value runs them all)."""
+    tok = _VMAPPED.set(True)
     try:
         yield
     finally:
-        _CURRENT.reset(tok)
+        _VMAPPED.reset(tok)
+
+
+def is_vmapped() -> bool:
+    """True inside :func:`vmapped`."""
+    return _VMAPPED.get()
 
 
 class Tally:

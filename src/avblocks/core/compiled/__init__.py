@@ -13,8 +13,16 @@ diagram's structure. See docs/compiled.md.
 
 from ._jax import jax as require_jax
 from .build import compile, grad, simulate_compiled
-from .program import cache_info, clear_cache, enable_persistent_cache
+from .plans import get_plans, load_plans, save_plans, set_plans
+from .program import (
+    cache_dir,
+    cache_info,
+    clear_cache,
+    clear_persistent_cache,
+    enable_persistent_cache,
+)
 from .runner import Runner
 
 __all__ = ["compile", "grad", "Runner", "simulate_compiled", "cache_info", "clear_cache",
-           "enable_persistent_cache", "require_jax"]
+           "enable_persistent_cache", "clear_persistent_cache", "cache_dir", "get_plans",
+           "set_plans", "save_plans", "load_plans", "require_jax"]

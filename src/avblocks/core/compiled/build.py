@@ -240,7 +240,14 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
                              expected=f"<= {max_log_bytes / 1e9:.2f} GB",
                              found=f"{len(runner.specs)} signals x {p.nlog} samples",
                              hint="log fewer signals or decimate with log_every")
-    return runner(params=params, x0=x0, seed=seed)
+    res = runner(params=params, x0=x0, seed=seed)
+    last = _LAST.get(diagram) if isinstance(diagram, Diagram) else None
+    if last is not None and last[4] is runner and last[2] != runner.struct:
+        # the run grew a plan (a new structure): the next call reuses the
+        # runner as it is now
+        _LAST[diagram] = (settings, diagram._stamp, runner.struct,
+                          Snapshot(runner.compiled), runner)
+    return res
 
 
 def grad(cost, diagram, wrt, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,

@@ -33,17 +33,38 @@ An ensemble's need is the largest over its runs.
 A block whose state shapes follow its plans (the Verlet list of
 ``environment.Neighbors``) defines ``searches_planned()``; it is called after
 every planning and growing, before the program is built.
+
+Plans are kept
+--------------
+A plan grown after an overflow is kept in a *plan book* under the
+diagram's structure without its plans (:func:`~.structure.plan_key`:
+block types, wiring, shapes, dtypes and structural values, not numeric
+parameters or initial states). Step 1 takes a search's plan from the book
+before planning from ``t0``, so a second compile of the same structure
+(the same diagram object or one built anew) starts from the grown plan:
+no re-plan, and the program the first run compiled after growing. Read,
+set and save them with :func:`get_plans`, :func:`set_plans`,
+:func:`save_plans` and :func:`load_plans`. With a plan store
+(:func:`use_plan_store`, turned on with the persistent compilation cache:
+:func:`~avblocks.core.compiled.enable_persistent_cache`, and by the
+``avblocks`` command) grown plans are also written to disk, one JSON file
+per structure in a folder named after the avblocks and JAX versions, and
+read back by later processes.
 """
 
 from __future__ import annotations
 
+import json
+import threading
 import warnings
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 
 from .. import diagnostics
 from ..errors import ParameterError, SimulationError
+from .structure import plan_key, stable_digest
 
 MODES = ("replan", "raise")
 
@@ -69,12 +90,17 @@ def owned(cd):
 
 
 def plan_searches(cd, *, dt, t0=0.0, seed=0, x0=None):
-    """Plan every search of ``cd`` not fixed by its user, from the NumPy
-    engine's block inputs at ``t0``. Returns the number planned."""
+    """Plan every search of ``cd`` not fixed by its user: from the plan
+    book when it holds a plan of this structure (a grown one), else from
+    the NumPy engine's block inputs at ``t0``. Returns the number planned
+    from ``t0``."""
+    searches = owned(cd)
+    if searches:
+        adopt(cd)
     # a search planned before keeps its plan: a run that outgrows it is caught
     # after the run and re-planned (step 3), so a second compile of the same
     # blocks (every ``simulate(backend="jax")`` call) needs no NumPy evaluation
-    todo = [(i, s) for i, _, s in owned(cd)
+    todo = [(i, s) for i, _, s in searches
             if not getattr(s, "fixed", False) and getattr(s, "cells", None) is None]
     if not todo:
         _planned(cd)
@@ -148,6 +174,7 @@ def settle(runner, over, rerun):
     for _, s, need, _ in over:
         s.cells = s.cells.grown(need, s.headroom)
     _planned(runner.compiled)
+    record(runner.compiled)
     warnings.warn(f"compiled run re-planned after a neighbour search overflow: {names}; "
                   "compiling again and repeating the run", RuntimeWarning, stacklevel=3)
     runner._rebuild_program()
@@ -156,3 +183,272 @@ def settle(runner, over, rerun):
         return rerun()
     finally:
         runner._replanned = rounds
+
+
+# ------------------------------------------------------------ the plan book
+
+_BOOK: dict = {}            # plan_key -> {(block name, search number): CellList}
+_BOOK_LOCK = threading.Lock()
+_STORE = {"path": None}     # the folder of the on-disk plans, or None
+#: plans adopted from the book / read from the store / written to it
+STATS = {"adopted": 0, "read": 0, "written": 0}
+
+
+def _versions():
+    from importlib.metadata import PackageNotFoundError, version
+    try:
+        __version__ = version("avblocks")
+    except PackageNotFoundError:        # pragma: no cover - run from a source tree
+        __version__ = "unknown"
+    try:
+        import jax
+        jv = jax.__version__
+    except ImportError:                 # pragma: no cover - the jax extra
+        jv = "none"
+    return f"avblocks-{__version__}_jax-{jv}"
+
+
+def use_plan_store(path=None):
+    """Keep grown plans on disk under ``path`` (a folder; ``False`` or
+    None: memory only), in a sub-folder named after the avblocks and JAX
+    versions (a new version starts empty). Returns that sub-folder."""
+    if not path:
+        _STORE["path"] = None
+        return None
+    p = Path(path) / _versions()
+    p.mkdir(parents=True, exist_ok=True)
+    _STORE["path"] = p
+    return p
+
+
+def plan_store():
+    """The folder plans are written to and read from, or None."""
+    return _STORE["path"]
+
+
+def _to_dict(c):
+    return {"reach": c.reach, "capacity": c.capacity, "hits": c.hits, "box": c.box,
+            "dim": c.dim, "split": c.split}
+
+
+def _from_dict(d, search):
+    """A plan of ``search``'s class (``type(search).plan_type``: core does
+    not import the spatial utilities) from a dict of its fields."""
+    d = {"reach": search.reach, "box": search.box, "dim": search.dim, **d}
+    box = d.get("box")
+    return type(search).plan_type(
+        float(d["reach"]), None if d.get("capacity") is None else int(d["capacity"]),
+        None, None if box is None else tuple(box), int(d.get("dim", 2)),
+        None if d.get("hits") is None else int(d["hits"]), int(d.get("split", 2)))
+
+
+def _as_plan(p, search):
+    return _from_dict(p, search) if isinstance(p, dict) else p
+
+
+def _file(key):
+    root = _STORE["path"]
+    if root is None:
+        return None
+    digest = stable_digest(key)
+    return None if digest is None else root / f"{digest}.json"
+
+
+def _entry(key):
+    """The book's plans of structure ``key`` (read from the store the first
+    time), or an empty dict."""
+    with _BOOK_LOCK:
+        got = _BOOK.get(key)
+    if got:
+        return got
+    f = _file(key)
+    got = {}
+    if f is not None and f.is_file():
+        try:
+            data = json.loads(f.read_text())
+            got = {_parse_name(n): dict(v) for n, v in data["plans"].items()}
+            STATS["read"] += 1
+        except (OSError, ValueError, KeyError, TypeError, ParameterError):
+            got = {}                    # a damaged file: planned afresh
+    if not got and _LOADED:
+        got = dict(_LOADED.get(stable_digest(key), {}))
+    if not got:
+        return {}                       # nothing kept (looked for again next time)
+    with _BOOK_LOCK:
+        _BOOK.setdefault(key, got)
+        return _BOOK[key]
+
+
+def _parse_name(name):
+    block, _, j = str(name).rpartition("/")
+    return (block, int(j)) if block and j.isdigit() else (str(name), 0)
+
+
+def _name(block, j):
+    return f"{block}/{j}"
+
+
+def _fits(plan, s):
+    return (plan.reach == s.reach and plan.dim == s.dim
+            and (plan.box is None) == (s.box is None)
+            and (s.box is None or tuple(plan.box) == tuple(float(b) for b in s.box)))
+
+
+def _larger(a, b):
+    """Plan ``a`` has room for everything ``b`` has (and differs)."""
+    def ge(x, y):
+        return x is None or (y is not None and x >= y)
+    return a != b and ge(a.capacity, b.capacity) and ge(a.hits, b.hits)
+
+
+def adopt(cd):
+    """Give each search of ``cd`` not fixed by its user the book's plan of
+    its structure when the book has one with at least its room. Returns
+    the number adopted."""
+    key = plan_key(cd)
+    entry = _entry(key)
+    n = 0
+    if entry:
+        for i, j, s in owned(cd):
+            p = entry.get((cd.names[i], j))
+            if p is None or getattr(s, "fixed", False):
+                continue
+            try:
+                p = _as_plan(p, s)
+            except (ParameterError, KeyError, TypeError, ValueError):
+                continue                # a damaged entry: planned afresh
+            if not _fits(p, s):
+                continue
+            if s.cells is None or _larger(p, s.cells):
+                s.cells = p
+                n += 1
+        if n:
+            _planned(cd)
+            STATS["adopted"] += n
+    return n
+
+
+def record(cd):
+    """Put the current plans of ``cd``'s searches in the book (and the
+    store, when one is in use)."""
+    key = plan_key(cd)
+    entry = {(cd.names[i], j): s.cells for i, j, s in owned(cd)
+             if s.cells is not None and not getattr(s, "fixed", False)}
+    if not entry:
+        return
+    with _BOOK_LOCK:
+        _BOOK[key] = {**_BOOK.get(key, {}), **entry}
+        full = dict(_BOOK[key])
+    f = _file(key)
+    if f is not None:
+        from ..atomic import atomic_path
+        try:
+            with atomic_path(f) as tmp:
+                Path(tmp).write_text(json.dumps({
+                    "versions": _versions(),
+                    "plans": {_name(*k): (v if isinstance(v, dict) else _to_dict(v))
+                              for k, v in sorted(full.items())}},
+                    indent=1))
+            STATS["written"] += 1
+        except Exception as e:   # noqa: BLE001 - a cache never fails a run
+            warnings.warn(f"could not store the grown plans in {f.parent}: {e}",
+                          RuntimeWarning, stacklevel=3)
+
+
+def forget_plans():
+    """Empty this process's plan book (plans loaded with :func:`load_plans`
+    included; the store on disk and the plans the searches hold are kept)."""
+    with _BOOK_LOCK:
+        _BOOK.clear()
+        _LOADED.clear()
+
+
+def _compiled_of(diagram):
+    from ..diagram import CompiledDiagram, Diagram
+    if isinstance(diagram, CompiledDiagram):
+        return diagram
+    if isinstance(diagram, Diagram):
+        return diagram.build()
+    runner = getattr(diagram, "compiled", None)        # a Runner
+    if isinstance(runner, CompiledDiagram):
+        return runner
+    raise ParameterError("expected a Diagram, a compiled diagram or a Runner",
+                         param="diagram", found=type(diagram).__name__)
+
+
+def get_plans(diagram) -> dict:
+    """The plans of a diagram's neighbour searches: ``{"block/j": CellList}``
+    (``j`` numbers the block's searches from 0), each the search's own plan
+    or, where it has none yet, the book's for this structure (None when
+    neither: planned at the next compile). ``diagram``: a ``Diagram``,
+    its compiled form or a ``Runner``."""
+    cd = _compiled_of(diagram)
+    entry = _entry(plan_key(cd))
+    out = {}
+    for i, j, s in owned(cd):
+        p = s.cells if s.cells is not None else entry.get((cd.names[i], j))
+        out[_name(cd.names[i], j)] = None if p is None else _as_plan(p, s)
+    return out
+
+
+def set_plans(diagram, new):
+    """Set the plans of a diagram's searches, ``{"block/j": plan}`` (or
+    ``"block"`` for its first search), where a plan is a ``CellList`` or a
+    dict with ``capacity`` and/or ``hits`` (the rest from the search). They
+    are also put in the book (and the store), so every diagram of this
+    structure compiles with them. A search keeps them until an overflow
+    grows them (the user's fixed ``capacity=`` searches cannot be set)."""
+    cd = _compiled_of(diagram)
+    by_name = {(cd.names[i], j): s for i, j, s in owned(cd)}
+    for name, p in dict(new).items():
+        k = _parse_name(name)
+        s = by_name.get(k)
+        if s is None:
+            raise ParameterError("no such neighbour search", param="plans",
+                                 expected=sorted(_name(*k) for k in by_name), found=name)
+        if getattr(s, "fixed", False):
+            raise ParameterError("this search's capacity was fixed by its block's "
+                                 "capacity=", block=k[0], param="plans", found=name)
+        if isinstance(p, dict):
+            cur = s.cells
+            d = _to_dict(cur) if cur is not None else {}
+            d.update(p)
+            p = _from_dict(d, s)
+        if not _fits(p, s):
+            raise ParameterError("the plan is for another search (reach, box or dim "
+                                 "differ)", block=k[0], param="plans",
+                                 expected=f"reach {s.reach}, box {s.box}, dim {s.dim}",
+                                 found=f"reach {p.reach}, box {p.box}, dim {p.dim}")
+        s.cells = p
+    _planned(cd)
+    record(cd)
+
+
+def save_plans(path):
+    """Write every plan of the book (this process's, and those read from
+    the store) to the JSON file ``path``; structures that cannot be named
+    across processes (a ``lambda`` in a block) are left out."""
+    out = {}
+    with _BOOK_LOCK:
+        items = list(_BOOK.items())
+    for key, entry in items:
+        digest = stable_digest(key)
+        if digest is not None and entry:
+            out[digest] = {_name(*k): (v if isinstance(v, dict) else _to_dict(v))
+                           for k, v in sorted(entry.items())}
+    Path(path).write_text(json.dumps({"versions": _versions(), "structures": out},
+                                     indent=1))
+    return len(out)
+
+
+def load_plans(path):
+    """Read plans written by :func:`save_plans`: a diagram whose structure
+    is among them compiles with its plan. Returns the number of structures."""
+    data = json.loads(Path(path).read_text())
+    with _BOOK_LOCK:
+        _LOADED.update({d: {_parse_name(n): dict(v) for n, v in e.items()}
+                        for d, e in data.get("structures", {}).items()})
+    return len(data.get("structures", {}))
+
+
+_LOADED: dict = {}          # stable digest -> plans, from load_plans()

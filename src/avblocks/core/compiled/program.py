@@ -50,8 +50,10 @@ _TRACE_LOCK = threading.RLock()
 
 def cache_info() -> dict:
     """Counters of the compile cache: ``traces`` (Python traces of a run =
-    compilations), ``hits``/``misses`` of the structure cache, ``size``."""
-    return {**_STATS, "size": len(_CACHE)}
+    compilations), ``hits``/``misses`` of the structure cache, ``size``;
+    ``xla_compiled`` / ``xla_from_disk`` (programs XLA built, or read
+    from the persistent cache) and ``xla_seconds``."""
+    return {**_STATS, "size": len(_CACHE), **{f"xla_{k}": v for k, v in COMPILES.items()}}
 
 
 def clear_cache():
@@ -60,18 +62,87 @@ def clear_cache():
         _CACHE.clear()
 
 
-def enable_persistent_cache(path=None, *, min_compile_time_s=0.0):
-    """Turn on JAX's persistent compilation cache (off by default), so a new
-    Python process reuses compiled programs from ``path`` (default
-    ``~/.cache/avblocks/jax``). This sets JAX's global configuration."""
+def cache_dir():
+    """The user's cache folder of avblocks: ``$AVBLOCKS_CACHE_DIR``, else
+    ``$XDG_CACHE_HOME/avblocks``, else ``~/.cache/avblocks`` (on Windows
+    ``%LOCALAPPDATA%/avblocks``). Compiled programs go in ``jax/``, grown
+    neighbour-search plans in ``plans/``."""
+    import os
     from pathlib import Path
+    if os.environ.get("AVBLOCKS_CACHE_DIR"):
+        return Path(os.environ["AVBLOCKS_CACHE_DIR"]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or (
+        os.environ.get("LOCALAPPDATA") if os.name == "nt" else None)
+    return (Path(base) if base else Path.home() / ".cache") / "avblocks"
+
+
+def cache_disabled() -> bool:
+    """True when ``$AVBLOCKS_CACHE`` says off (``0``, ``off``, ``no``, ``false``)."""
+    import os
+    return os.environ.get("AVBLOCKS_CACHE", "").strip().lower() in ("0", "off", "no",
+                                                                     "false")
+
+
+def enable_persistent_cache(path=None, *, min_compile_time_s=0.0):
+    """Turn on JAX's persistent compilation cache (off by default for the
+    library; the ``avblocks`` command turns it on), so a new Python process
+    reuses compiled programs from ``path/jax`` (default :func:`cache_dir`),
+    and keep grown neighbour-search plans in ``path/plans`` (see
+    :func:`avblocks.core.compiled.plans.use_plan_store`), so that process
+    traces the same program as the last one did. This sets JAX's global
+    configuration. Returns the folder."""
+    from pathlib import Path
+
+    from . import plans as _plans
     jax = _jax.jax()
-    p = Path(path) if path is not None else Path.home() / ".cache" / "avblocks" / "jax"
+    root = Path(path) if path is not None else cache_dir()
+    p = root / "jax"
     p.mkdir(parents=True, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", str(p))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_s))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
-    return p
+    _plans.use_plan_store(root / "plans")
+    _listen()
+    return root
+
+
+def clear_persistent_cache(path=None):
+    """Delete the compiled programs and stored plans under ``path``
+    (default :func:`cache_dir`); returns the bytes freed. (Programs already
+    loaded in this process stay; :func:`clear_cache` forgets those.)"""
+    import shutil
+    from pathlib import Path
+    root = Path(path) if path is not None else cache_dir()
+    freed = 0
+    for sub in ("jax", "plans"):
+        d = root / sub
+        if d.is_dir():
+            freed += sum(f.stat().st_size for f in d.rglob("*") if f.is_file())
+            shutil.rmtree(d)
+    from . import plans as _plans
+    with _plans._BOOK_LOCK:
+        _plans._BOOK.clear()
+    return freed
+
+
+#: XLA compilations of this process: ``compiled`` (built by XLA) and
+#: ``from_disk`` (read from JAX's persistent cache), with XLA's seconds
+COMPILES = {"compiled": 0, "from_disk": 0, "seconds": 0.0}
+_EVENTS = {"hits": 0}
+_LISTENING = [False]
+
+
+def _listen():
+    """Count JAX's persistent-cache hits (its monitoring events)."""
+    if _LISTENING[0]:
+        return
+    _LISTENING[0] = True
+    import jax.monitoring as mon
+
+    def on_event(event, **_kw):
+        if event == "/jax/compilation_cache/cache_hits":
+            _EVENTS["hits"] += 1
+    mon.register_event_listener(on_event)
 
 
 def compiler_options() -> dict:
@@ -93,7 +164,20 @@ _OPTIONS_OK = {"cpu": True}
 
 def compile_lowered(lowered):
     """``lowered.compile(compiler_options())``, falling back to XLA's own
-    defaults (once per process) where this jaxlib rejects an option."""
+    defaults (once per process) where this jaxlib rejects an option;
+    counted in :data:`COMPILES` (built, or read from the persistent cache)."""
+    import time
+    hits, t = _EVENTS["hits"], time.perf_counter()
+    exe = _compile_lowered(lowered)
+    if _EVENTS["hits"] > hits:
+        COMPILES["from_disk"] += 1
+    else:
+        COMPILES["compiled"] += 1
+    COMPILES["seconds"] += time.perf_counter() - t
+    return exe
+
+
+def _compile_lowered(lowered):
     opts = compiler_options()
     if not opts:
         return lowered.compile()
@@ -152,6 +236,9 @@ class Program:
         #: the rows of the needs tally the run returns (core.diagnostics)
         self.need_rows = _diagnostics.rows_of(compiled.blocks, compiled.names)
         self.traces = 0
+        #: the uses ("run", "ensemble") whose split XLA partitioned with
+        #: communication between devices: runners compile them for one device
+        self.one_device = set()
         self._step_bytes = None
         self._exe = {}
         self._lock = threading.Lock()

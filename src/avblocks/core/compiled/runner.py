@@ -10,6 +10,7 @@ import time
 
 import numpy as np
 
+from .. import diagnostics as _diagnostics
 from .. import rng as _rng
 from ..block import Block as _Block
 from ..errors import ParameterError
@@ -73,6 +74,12 @@ class Runner:
     @property
     def compilations(self) -> int:
         return self.program.traces
+
+    @property
+    def plans(self) -> dict:
+        """The plans of the neighbour searches it runs, ``{"block/j":
+        CellList}`` (see :func:`avblocks.core.compiled.get_plans`)."""
+        return _plans.get_plans(self.compiled)
 
     def __repr__(self):
         p = self.program
@@ -188,16 +195,20 @@ class Runner:
         every stage, so it is compiled for one device instead (waypoints,
         300 agents: 3.5 s split, 0.2 s on one device)."""
         prog = self.program
-        with _jax.x64(prog.x64):
-            placed = place(args)
-        exe, spent = prog.executable(key + (place.key,), build, placed, self.compiled)
-        if place.split is not None and _devices.communicates(exe):
-            place = _devices.Placement(self.devices[:1])
+        spent = 0.0
+        if place.split is not None and key[0] not in prog.one_device:
             with _jax.x64(prog.x64):
                 placed = place(args)
-            exe, more = prog.executable(key + (place.key,), build, placed, self.compiled)
-            spent += more
-        return exe, spent, place, placed
+            exe, spent = prog.executable(key + (place.key,), build, placed, self.compiled)
+            if not _devices.communicates(exe):
+                return exe, spent, place, placed
+            prog.one_device.add(key[0])     # it communicates: known for every runner
+        if place.split is not None:
+            place = _devices.Placement(self.devices[:1])
+        with _jax.x64(prog.x64):
+            placed = place(args)
+        exe, more = prog.executable(key + (place.key,), build, placed, self.compiled)
+        return exe, spent + more, place, placed
 
     #: what a run does when a neighbour search overflows its plan
     #: (:mod:`avblocks.core.compiled.plans`): "replan" or "raise"
@@ -208,11 +219,15 @@ class Runner:
         searches were re-planned: see :mod:`avblocks.core.compiled.plans`)."""
         jax = _jax.jax()
         p, cd = self.program, self.compiled
+        one = set(p.one_device)
         key = (diagram_key(cd), p.nsteps, p.log_every, tuple(self.names),
                _solver_key(p.solver), p.dt, p.t0, p.x64, str(jax.default_backend()))
         self.program = get_program(key, lambda: Program(
             cd, dt=p.dt, t0=p.t0, nsteps=p.nsteps, log_every=p.log_every,
             log_idx=p.log_idx, solver=p.solver, x64=p.x64))
+        # a grown plan does not change whether the agents interact
+        self.program.one_device |= one
+        self.struct = key[0]
         self._run_exe = None
 
     def __call__(self, params=None, x0=None, seed=None):
@@ -336,7 +351,12 @@ class Runner:
             return part
 
         def build():
-            return jax.vmap(prog.run, in_axes=(t_axes, x_axes), axis_size=chunk)
+            batched = jax.vmap(prog.run, in_axes=(t_axes, x_axes), axis_size=chunk)
+
+            def run(theta, X0):
+                with _diagnostics.vmapped():     # no branch on a batched value
+                    return batched(theta, X0)
+            return run
 
         exe, compile_s, wall, needs = None, 0.0, 0.0, None
         for c in range(nchunks):

@@ -20,10 +20,24 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import operator
+import threading
 import types
 import weakref
 
 import numpy as np
+
+from ..block import Block as _Block
+
+
+class _Mode(threading.local):
+    strip = False       # plan_key: leave the searches' plans out
+
+    def __init__(self):
+        self.visiting = set()   # ids of the blocks being fingerprinted
+
+
+_MODE = _Mode()
+
 
 _MAX_DEPTH = 6
 _PLAIN = (type(None), bool, int, float, complex, str, bytes)
@@ -125,9 +139,20 @@ def fingerprint(obj, depth=0):
         slots = (slots,) if isinstance(slots, str) else slots
         return (type(obj).__qualname__,
                 tuple((s, fingerprint(getattr(obj, s, None), depth + 1)) for s in slots))
+    if isinstance(obj, _Block):
+        # a block held by another (a helper's back-reference to its owner):
+        # its structure as a block's, numeric parameters as shapes; a block
+        # met again inside itself by its type
+        if id(obj) in _MODE.visiting:
+            return ("block-ref", type(obj).__module__, type(obj).__qualname__)
+        return block_fingerprint(obj)
     if depth < _MAX_DEPTH and hasattr(obj, "__dict__"):
+        attrs = vars(obj)
+        if _MODE.strip and getattr(t, "neighbor_search", False) and \
+                not getattr(obj, "fixed", False):
+            attrs = {k: v for k, v in attrs.items() if k != "cells"}   # the plan
         return (type(obj).__module__, type(obj).__qualname__,
-                fingerprint(vars(obj), depth + 1))
+                fingerprint(attrs, depth + 1))
     try:
         hash(obj)
         return ("obj", obj)
@@ -147,6 +172,17 @@ def block_fingerprint(b):
     """Structure of one block: its attributes, with numeric parameters and
     initial state values reduced to shapes and dtypes (they are data) and
     memo attributes (``*_cache``) left out."""
+    visiting = _MODE.visiting
+    if id(b) in visiting:
+        return ("block-ref", type(b).__module__, type(b).__qualname__)
+    visiting.add(id(b))
+    try:
+        return _block_fingerprint(b)
+    finally:
+        visiting.discard(id(b))
+
+
+def _block_fingerprint(b):
     params = b._params
     items = []
     for k, v in vars(b).items():
@@ -159,8 +195,9 @@ def block_fingerprint(b):
             # trace sees each parameter's name and shape
             items.append((k, tuple((n, p.shape) for n, p in v.items())))
         elif k == "_init":
-            items.append((k, tuple(sorted((n, np.asarray(a).dtype.str, np.shape(a))
-                                          for n, a in v.items()))))
+            items.append((k, tuple(sorted(
+                (n, np.asarray(a).dtype.str) + (() if _MODE.strip else (np.shape(a),))
+                for n, a in v.items()))))
         else:
             items.append((k, fingerprint(v, 1)))
     items.sort(key=lambda kv: kv[0])
@@ -172,6 +209,63 @@ def diagram_key(compiled):
     return (tuple(compiled.names),
             tuple(tuple(sorted(s.items())) for s in compiled.sources),
             tuple(block_fingerprint(b) for b in compiled.blocks))
+
+
+
+
+def plan_key(compiled):
+    """The structure of a compiled diagram *without* the plans of its
+    neighbour searches (:mod:`avblocks.core.compiled.plans`): the key under
+    which a grown plan is kept, the same before planning and after growing.
+    The plans a user fixed (``capacity=``) are kept in it; the shapes of
+    the states are left out (a block may size a state by its plan, the
+    Verlet list of ``environment.Neighbors``), their names and dtypes kept."""
+    _MODE.strip = True
+    try:
+        return diagram_key(compiled)
+    finally:
+        _MODE.strip = False
+
+
+class Unstable(Exception):
+    """A key holds something that has no meaning in another process."""
+
+
+def stable_digest(key) -> str | None:
+    """A hex digest of ``key`` (from :func:`diagram_key` or :func:`plan_key`)
+    that is the same in every process, or None when the key holds
+    something that is not (an object known by its identity only, a
+    ``lambda``): such a structure is not stored on disk."""
+    h = hashlib.blake2b(digest_size=20)
+    try:
+        _feed(h, key)
+    except Unstable:
+        return None
+    return h.hexdigest()
+
+
+def _feed(h, v):
+    t = type(v)
+    if t is tuple or t is list:
+        h.update(b"(")
+        for x in v:
+            _feed(h, x)
+        h.update(b")")
+    elif t in _PLAIN_TYPES or isinstance(v, (np.generic, np.dtype)):
+        h.update(f"{t.__name__}:{v!r};".encode())
+    elif isinstance(v, types.FunctionType):
+        if v.__name__ == "<lambda>" or "<locals>" in v.__qualname__:
+            raise Unstable(v)
+        h.update(f"fn:{v.__module__}.{v.__qualname__};".encode())
+    elif isinstance(v, type):
+        h.update(f"type:{v.__module__}.{v.__qualname__};".encode())
+    elif isinstance(v, (types.BuiltinFunctionType, types.ModuleType)):
+        h.update(f"ref:{getattr(v, '__module__', '')}.{v.__name__};".encode())
+    else:
+        r = repr(v)
+        if " at 0x" in r or " object at " in r:
+            raise Unstable(v)
+        h.update(f"{t.__module__}.{t.__qualname__}:{r};".encode())
 
 
 def _stable(v):

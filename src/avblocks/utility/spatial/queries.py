@@ -370,6 +370,44 @@ def _smallest_np(d2, idx, k, n):
     return sel, od
 
 
+#: the narrowest width class of a traced search (candidates per row)
+MIN_WIDTH = 16
+
+
+def width_classes(cap):
+    """Candidate widths a traced :func:`nearest` chooses from per chunk of
+    rows (per step when the rows fit one chunk): ``cap``, ``cap / 2`` and
+    ``cap / 4`` rounded up to multiples of 8, none below :data:`MIN_WIDTH`
+    (ascending). A chunk takes the smallest that holds its most crowded
+    row, so its work follows its own crowding, not the plan's worst point."""
+    out = {int(cap)}
+    for div in (2, 4):
+        w = -(-int(cap) // div)
+        w = -(-w // 8) * 8
+        if MIN_WIDTH <= w < cap:
+            out.add(w)
+    return tuple(sorted(out))
+
+
+def _batched(arrays):
+    """True while the compiled engine traces a ``vmap``ped run (an
+    ensemble; :func:`avblocks.core.diagnostics.vmapped`) or when a value
+    is batched where it is traced (``vmap`` of a step, as the
+    reinforcement-learning environments do): there a ``lax.switch`` on a
+    batched index would run every branch, so one width (the plan's) serves.
+    Inside a ``lax.scan`` under a ``vmap`` the engine does not know of, a
+    batched value looks like any other: every branch runs (the same
+    results, more work)."""
+    from ...core import diagnostics
+    if diagnostics.is_vmapped():
+        return True
+    try:
+        from jax._src.interpreters.batching import BatchTracer
+    except ImportError:             # pragma: no cover - another JAX layout
+        return False
+    return any(isinstance(a, BatchTracer) for a in arrays)
+
+
 def _pad_cols(a, k, fill, xp):
     if a.shape[1] >= k:
         return a[:, :k]
@@ -461,7 +499,10 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
         fin = xp.isfinite(od)
         return xp.where(fin, oi, -1), od
 
-    def row(*args):
+    def make_row(f):
+        return lambda *args: row(f, *args)
+
+    def row(f, *args):
         idx, _, val, d2, cnt = f(*args)
         d2 = xp.where(val, d2, xp.inf)
         if xp is np and k > 0 and not cells.brute:
@@ -486,7 +527,26 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
         od = xp.where(fin, xp.sqrt(xp.where(fin, od, 1.0)), xp.inf)
         return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
 
-    oi, od, cnt = _rowmap(row, _args(query, heading, xp), xp)
+    args = _args(query, heading, xp)
+    widths = () if (xp is np or cells.brute) else width_classes(cap)
+    if len(widths) > 1 and not _batched(args):
+        # the smallest width class that holds the chunk's (or, at most
+        # TRACED_CHUNK agents, the step's) most crowded row: crowding in
+        # one place or at one time does not widen every row of every step
+        import jax
+        rows = [make_row(_chunk_fn(cells, ps, order, w, radius, xp, fov=fov))
+                for w in widths]
+        nq = len(query.q)
+
+        def pick(*a):
+            nr = (len(a) - 2 - nq) // 2
+            lo, hi = a[2 + nq:2 + nq + nr], a[2 + nq + nr:]
+            most = xp.max(sum(h - l for l, h in zip(lo, hi)))
+            c = sum((most > w).astype(np.int32) for w in widths[:-1])
+            return jax.lax.switch(c, rows, *a)
+        oi, od, cnt = _rowmap(pick, args, xp)
+    else:
+        oi, od, cnt = _rowmap(make_row(f), args, xp)
     oi, od = _unsort(query.rows, [oi, od], xp)
     # nearest keeps no row of hits, so hits are no limit of it (need 0)
     return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0, query.span)

@@ -44,6 +44,9 @@ class NeighborSearch:
 
     #: marks a search for :func:`avblocks.core.diagnostics.searches_of`
     neighbor_search = True
+    #: the class of its static plan (the compiled engine's plan book makes
+    #: plans through it: core does not import this package)
+    plan_type = CellList
 
     def __init__(self, reach, *, points="pose", capacity=None, box=None, dim=2,
                  headroom=2.0, table=None, hits=None):

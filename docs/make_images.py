@@ -219,6 +219,10 @@ PRODUCERS = {
     "plots_trajectories": (_page("plots-and-movies.md"), False),
     "plots_two_panels": (_page("plots-and-movies.md"), False),
     "plots_signals": (_page("plots-and-movies.md"), False),
+    "lab1_integration_error": (_page("labs/lab1.md"), False),
+    "lab2_look_ahead": (_page("labs/lab2.md"), False),
+    "lab3_gains": (_page("labs/lab3.md"), False),
+    "lab4_rings": (_page("labs/lab4.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),
     "uav3d": (draw_uav3d, False),
@@ -273,7 +277,7 @@ PRODUCERS = {
                                    made="sweep.zarr.time_to_done.png"), True),
 }
 
-_IMAGE_REF = re.compile(r"(?:\]\(|src=\")(?:docs/)?images/([\w.-]+)\.png")
+_IMAGE_REF = re.compile(r"(?:\]\(|src=\")(?:\.\./)*(?:docs/)?images/([\w.-]+)\.png")
 
 
 def referenced():

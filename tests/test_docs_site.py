@@ -163,7 +163,13 @@ def test_tutorial_notebooks_execute(page, tmp_path):
     assert not [o for o in outputs if o.get("output_type") == "error"]
     text = "\n".join(o.get("text", "") for o in outputs)
     expected = {"getting-started.md": "(1201, 20, 3)", "tutorial-diagram.md": "0.134 0.134",
-                "tutorial-scale.md": "N =  30000"}[page]
+                "tutorial-scale.md": "N =  30000",
+                # the labs: what each page's diagram measures
+                "labs/lab1.md": "rk4  : error after 10 s at dt = 0.1 s: 5.2e-09 m; order 4.0",
+                "labs/lab2.md": "d = 0.10 m: largest |omega|   10.0 rad/s",
+                "labs/lab3.md": "K = 2.0: distance error decays at 2.000 /s",
+                "labs/lab4.md": "N = 12: measured rate 0.2679 /s, K lambda_2 = 0.2679 /s",
+                }[page]
     assert expected in text
 
 

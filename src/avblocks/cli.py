@@ -7,6 +7,7 @@
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
     avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
+    avblocks lab check 1 my_unicycle.py
     avblocks --version
 
 Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep) and the
@@ -30,6 +31,7 @@ from .commands import listing as _listing
 from .commands import run as _run
 from .commands import sweep as _sweep
 from .core.errors import AvError
+from .labs import cli as _labs
 from .scenarios.targets import Loaded, load_any  # noqa: F401  (importable here as before)
 
 cmd_run = _run.cmd_run
@@ -66,6 +68,7 @@ def build_parser():
     _listing.add_parser(sub)
     _diagram.add_parser(sub)
     _sweep.add_parser(sub)                                   # `avblocks sweep` (issue 14)
+    _labs.add_parser(sub)                                    # `avblocks lab` (issue 34)
     return ap
 
 

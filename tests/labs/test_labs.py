@@ -1,0 +1,183 @@
+"""The lab course's grader: for every lab the reference solution passes
+``avblocks lab check``, the untouched template fails with a readable
+message, and deliberately wrong solutions (wrong sign, wrong port shape, an
+exception inside the student's code) get the right message and exit status
+1, never a traceback. The checks themselves compare against independent
+truth (closed forms, the library's blocks, closed-loop properties); see
+``avblocks/labs/labN_*.py``."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from avblocks.cli import main
+from avblocks.labs import get, labs
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+SOLUTIONS = HERE / "solutions"
+WRONG = HERE / "wrong"
+NUMBERS = [lab.number for lab in labs()]
+
+
+def check(capsys, number, path, *extra):
+    rc = main(["lab", "check", str(number), str(path), *extra])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.out + out.err
+    return rc, out.out, out.err
+
+
+def _solution(number):
+    return SOLUTIONS / get(number).template.name
+
+
+def test_every_lab_has_a_solution_wrong_solutions_a_template_and_a_page():
+    for lab in labs():
+        assert lab.template.is_file() and _solution(lab.number).is_file()
+        for kind in ("wrong_sign", "wrong_shape", "crash"):
+            assert (WRONG / f"lab{lab.number}_{kind}.py").is_file()
+        assert (ROOT / "docs" / "labs" / f"lab{lab.number}.md").is_file()
+        # the reference solution is not shipped in the template
+        assert "NotImplementedError" in lab.template.read_text()
+
+
+@pytest.mark.parametrize("number", NUMBERS)
+def test_the_reference_solution_passes(capsys, number):
+    rc, out, _ = check(capsys, number, _solution(number))
+    assert rc == 0, out
+    assert "FAIL" not in out and f"{len(get(number).checks)} of {len(get(number).checks)} " \
+        "checks passed" in out
+
+
+@pytest.mark.parametrize("number", NUMBERS)
+def test_the_untouched_template_fails_readably(capsys, number):
+    rc, out, _ = check(capsys, number, get(number).template)
+    assert rc == 1
+    assert "FAIL" in out and "not written yet: NotImplementedError: write" in out
+    # it names the line of the student's file
+    assert f"of {get(number).template.name}, in " in out
+
+
+def _line_of(path, text):
+    for i, ln in enumerate(Path(path).read_text().splitlines(), 1):
+        if text in ln:
+            return i
+    raise AssertionError(f"{text!r} not in {path}")
+
+
+#: (lab, kind) -> (check that must fail, what its message must say)
+WRONG_EXPECTED = {
+    (1, "wrong_sign"): ("derivative (eq. 1)", ["port `pose (its rate, derivative)`",
+                                               "expected [", "found ["]),
+    (1, "wrong_shape"): ("ports", ["input `cmd` of MyUnicycle: shape (4, 3), expected (4, 2)"]),
+    (1, "crash"): ("derivative (eq. 1)", ["your code raised IndexError",
+                                          "line {pose[:, 3]} of lab1_crash.py, in derivative"]),
+    (2, "wrong_sign"): ("the law (inverse map)", ["port `cmd`", "expected [", "found ["]),
+    (2, "wrong_shape"): ("the law (inverse map)", ["port `cmd`: shape (2, 6), expected (6, 2)"]),
+    (2, "crash"): ("saturation at v_max", ["your code raised ValueError: goal too far",
+                                           "line {goal too far} of lab2_crash.py, in output"]),
+    (3, "wrong_sign"): ("closed loop behind a turning leader",
+                        ["formation error (l, alpha)", "expected below 1e-6"]),
+    (3, "wrong_shape"): ("the law (eqs. 2-5)",
+                         ["port `cmd (follower_cmd)`: shape (2, 7), expected (7, 2)"]),
+    (3, "crash"): ("same as controllers.leader_follower_law",
+                   ["your code raised AssertionError: followers too close",
+                    "line {followers too close} of lab3_crash.py, in follower_cmd"]),
+    (4, "wrong_sign"): ("the law u = -K L x", ["port `velocity`", "expected [", "found ["]),
+    (4, "wrong_shape"): ("the law u = -K L x",
+                         ["port `velocity`: shape (12,), expected (6, 2)"]),
+    (4, "crash"): ("laplacian", ["your code raised IndexError",
+                                 "line {a[len(a)]} of lab4_crash.py, in laplacian"]),
+}
+
+
+@pytest.mark.parametrize("number,kind", sorted(WRONG_EXPECTED))
+def test_a_wrong_solution_gets_the_right_message(capsys, number, kind):
+    path = WRONG / f"lab{number}_{kind}.py"
+    rc, out, _ = check(capsys, number, path, "--json")
+    assert rc == 1
+    doc = json.loads(out)
+    assert doc["passed"] is False and doc["lab"] == number
+    name, needles = WRONG_EXPECTED[number, kind]
+    failed = {c["name"]: c["message"] for c in doc["checks"] if not c["passed"]}
+    assert name in failed, f"{name!r} did not fail: {doc['checks']}"
+    for needle in needles:
+        if "{" in needle:                   # a line number, found in the file
+            marker = needle[needle.index("{") + 1:needle.index("}")]
+            needle = needle.replace("{" + marker + "}", str(_line_of(path, marker)))
+        assert needle in failed[name], (needle, failed[name])
+
+
+@pytest.mark.parametrize("body,says", [
+    ("def broken(:\n", "the file does not parse: SyntaxError"),
+    ("import avblocks\nraise RuntimeError('at import')\n",
+     "loading the file: your code raised RuntimeError: at import (line 2 of"),
+    ("import sys\nsys.exit(3)\n", "loading the file: your code raised SystemExit: 3"),
+    ("x = 1\n", "the file defines no MyUnicycle, wheels_to_cmd"),
+])
+def test_a_file_that_does_not_load_is_one_readable_line(capsys, tmp_path, body, says):
+    f = tmp_path / "sub.py"
+    f.write_text(body)
+    rc, out, _ = check(capsys, 1, f)
+    assert rc == 1 and says in out
+
+
+def test_bad_lab_number_or_path_is_status_2(capsys, tmp_path):
+    assert main(["lab", "check", "99", str(_solution(1))]) == 2
+    assert "no such lab" in capsys.readouterr().err
+    assert main(["lab", "check", "1", str(tmp_path / "nothing.py")]) == 2
+    assert main(["lab", "check", "1", str(tmp_path)]) == 2      # an empty folder
+
+
+def test_start_copies_the_template_and_never_overwrites(capsys, tmp_path):
+    assert main(["lab", "start", "2", "--to", str(tmp_path)]) == 0
+    dst = tmp_path / "lab2_go_to_goal.py"
+    assert dst.read_text() == get(2).template.read_text()
+    dst.write_text("# my work\n")
+    assert main(["lab", "start", "2", "--to", str(tmp_path)]) == 2
+    assert "not overwriting" in capsys.readouterr().err
+    assert dst.read_text() == "# my work\n"
+    assert main(["lab", "start", "2", "--to", str(tmp_path), "--force"]) == 0
+    assert dst.read_text() == get(2).template.read_text()
+
+
+def test_list_json(capsys):
+    assert main(["lab", "list", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["number"] for r in rows] == NUMBERS
+    assert rows[0]["template"] == "lab1_kinematics.py"
+
+
+def _cmd():
+    exe = shutil.which("avblocks", path=str(Path(sys.executable).parent))
+    return [exe] if exe else [sys.executable, "-m", "avblocks"]
+
+
+def test_grading_a_folder_as_csv_through_a_pipe(tmp_path):
+    """What an instructor runs: a folder of submissions, a CSV on stdout,
+    status 1 because one submission fails."""
+    for name in ("alice.py", "bob.py"):
+        shutil.copyfile(_solution(1), tmp_path / name)
+    shutil.copyfile(WRONG / "lab1_wrong_sign.py", tmp_path / "carol.py")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path), "--csv"],
+                       capture_output=True, text=True, env=env, timeout=600)
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert [r["file"] for r in rows] == ["alice.py", "bob.py", "carol.py"]
+    assert [r["passed"] for r in rows] == ["yes", "yes", "no"]
+    assert rows[2]["checks_passed"] == "2" and "derivative (eq. 1)" in rows[2]["failed"]
+    # the table form says the same
+    p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path)], capture_output=True,
+                       text=True, env=env, timeout=600)
+    assert p.returncode == 1 and "2 of 3 submissions pass every check" in p.stdout

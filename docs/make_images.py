@@ -223,6 +223,7 @@ PRODUCERS = {
     "lab2_look_ahead": (_page("labs/lab2.md"), False),
     "lab3_gains": (_page("labs/lab3.md"), False),
     "lab4_rings": (_page("labs/lab4.md"), False),
+    "lab5_swap": (_page("labs/lab5.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),
     "uav3d": (draw_uav3d, False),

@@ -97,6 +97,13 @@ WRONG_EXPECTED = {
                          ["port `velocity`: shape (12,), expected (6, 2)"]),
     (4, "crash"): ("laplacian", ["your code raised IndexError",
                                  "line {a[len(a)]} of lab4_crash.py, in laplacian"]),
+    (5, "wrong_sign"): ("two agents swap without contact",
+                        ["the two agents came", "the safety radius is 1.0 m"]),
+    (5, "wrong_shape"): ("the projection",
+                         ["port `velocity (safety_filter_pair)`: shape (12, 1), expected (12, 2)"]),
+    (5, "crash"): ("the barrier constraint",
+                   ["your code raised KeyError: 'agent without a neighbour'",
+                    "line {agent without a neighbour} of lab5_crash.py, in safety_filter_pair"]),
 }
 
 

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from ..core.errors import ParameterError
-from . import lab1_kinematics, lab2_go_to_goal, lab3_formation, lab4_consensus
+from . import lab1_kinematics, lab2_go_to_goal, lab3_formation, lab4_consensus, lab5_safety
 from .grading import Lab
 
 #: the labs, in order
 LABS: tuple[Lab, ...] = (lab1_kinematics.LAB, lab2_go_to_goal.LAB, lab3_formation.LAB,
-                          lab4_consensus.LAB)
+                          lab4_consensus.LAB, lab5_safety.LAB)
 
 
 def labs() -> list[Lab]:

@@ -170,6 +170,7 @@ def test_tutorial_notebooks_execute(page, tmp_path):
                 "labs/lab3.md": "K = 2.0: distance error decays at 2.000 /s",
                 "labs/lab4.md": "N = 12: measured rate 0.2679 /s, K lambda_2 = 0.2679 /s",
                 "labs/lab5.md": "through the safety filter : closest pair 0.728 m",
+                "labs/lab6.md": "'tb2', 'stale')]",
                 }[page]
     assert expected in text
 

@@ -29,7 +29,16 @@ WRONG = HERE / "wrong"
 NUMBERS = [lab.number for lab in labs()]
 
 
+def _needs_zenoh(number):
+    """Lab 6 drives the robot emulator over Zenoh: skip without the ros2
+    extra on a user's machine, never in CI."""
+    if number == 6 and not os.environ.get("CI"):
+        pytest.importorskip("zenoh", reason="lab 6 needs the ros2 extra")
+        pytest.importorskip("rosbags", reason="lab 6 needs the ros2 extra")
+
+
 def check(capsys, number, path, *extra):
+    _needs_zenoh(number)
     rc = main(["lab", "check", str(number), str(path), *extra])
     out = capsys.readouterr()
     assert "Traceback" not in out.out + out.err
@@ -101,6 +110,14 @@ WRONG_EXPECTED = {
                         ["the two agents came", "the safety radius is 1.0 m"]),
     (5, "wrong_shape"): ("the projection",
                          ["port `velocity (safety_filter_pair)`: shape (12, 1), expected (12, 2)"]),
+    (6, "wrong_sign"): ("the law and the group hold",
+                        ["port `cmd` with robot 0 silent (fresh false): every robot held",
+                         "expected [0., 0.]"]),
+    (6, "wrong_shape"): ("the law and the group hold",
+                         ["port `cmd`: shape (2, 5), expected (5, 2)"]),
+    (6, "crash"): ("the law and the group hold",
+                   ["your code raised RuntimeError: a robot is silent",
+                    "line {a robot is silent} of lab6_crash.py, in output"]),
     (5, "crash"): ("the barrier constraint",
                    ["your code raised KeyError: 'agent without a neighbour'",
                     "line {agent without a neighbour} of lab5_crash.py, in safety_filter_pair"]),

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from ..core.errors import ParameterError
-from . import lab1_kinematics, lab2_go_to_goal, lab3_formation, lab4_consensus, lab5_safety
+from . import (lab1_kinematics, lab2_go_to_goal, lab3_formation, lab4_consensus, lab5_safety,
+               lab6_robots)
 from .grading import Lab
 
 #: the labs, in order
 LABS: tuple[Lab, ...] = (lab1_kinematics.LAB, lab2_go_to_goal.LAB, lab3_formation.LAB,
-                          lab4_consensus.LAB, lab5_safety.LAB)
+                          lab4_consensus.LAB, lab5_safety.LAB, lab6_robots.LAB)
 
 
 def labs() -> list[Lab]:

@@ -43,7 +43,8 @@ def run_reader_gone(args, timeout=120):
 
 @pytest.mark.parametrize("args", [["list"], ["list", "--blocks"], ["list", "--json"],
                                   ["list", "--blocks", "--json"], ["--help"],
-                                  ["list", "--help"], ["--version"]])
+                                  ["list", "--help"], ["--version"], ["lab", "list"],
+                                  ["lab", "list", "--json"]])
 def test_a_command_ends_quietly_when_its_reader_has_gone(args):
     p = run_reader_gone(args)
     assert "Traceback" not in p.stderr and "BrokenPipe" not in p.stderr, p.stderr

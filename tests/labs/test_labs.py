@@ -205,3 +205,113 @@ def test_grading_a_folder_as_csv_through_a_pipe(tmp_path):
     p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path)], capture_output=True,
                        text=True, env=env, timeout=600)
     assert p.returncode == 1 and "2 of 3 submissions pass every check" in p.stdout
+
+
+# ---------------------------------------------------------------- a guarded child
+def _variant(tmp_path, name, before="", after=""):
+    """Lab 1's reference solution with code put before or after it."""
+    f = tmp_path / name
+    f.write_text(before + _solution(1).read_text() + after)
+    return f
+
+
+LOOP = "\n\ndef wheels_to_cmd(*args, **kwargs):\n    while True:\n        pass\n"
+SLEEP = "import time\ntime.sleep(1000)\n"
+SPAM_BEFORE = ("import os, sys\nfor i in range(3000):\n    print('spam {', i)\n"
+               "    sys.stderr.write('noise\\n')\nos.write(1, b'raw bytes [')\n")
+SPAM_AFTER = ("\n_wheels = wheels_to_cmd\n\n\ndef wheels_to_cmd(*args, **kwargs):\n"
+              "    print('}]} spam')\n    os.write(1, b'\"not json')\n"
+              "    os.write(2, b'Traceback (most recent call last):')\n"
+              "    return _wheels(*args, **kwargs)\n")
+MEMORY = "\n\ndef wheels_to_cmd(*args, **kwargs):\n    import numpy\n" \
+         "    return numpy.ones(2 * 10**8)\n"            # 1.6 GB, over --memory 512
+
+
+def _run_cli(*args):
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    return subprocess.run(_cmd() + ["lab", *args], capture_output=True, text=True, env=env,
+                          timeout=600)
+
+
+def test_an_endless_loop_in_a_check_times_out_and_the_rest_is_reported(tmp_path):
+    f = _variant(tmp_path, "loop.py", after=LOOP)
+    p = _run_cli("check", "1", str(f), "--timeout", "3")
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stderr
+    line = [ln for ln in p.stdout.splitlines() if "timed out" in ln]
+    assert line == ["  FAIL  differential drive: wheels_to_cmd: timed out after 3 s in check "
+                    "'differential drive: wheels_to_cmd' of lab 1: the check was stopped (an "
+                    "endless loop, or a step far too slow?); raise the limit with --timeout "
+                    "SECONDS"], p.stdout
+    assert "4 of 5 checks passed" in p.stdout            # the checks before it ran
+
+
+def test_a_timeout_stops_the_check_and_the_next_ones_are_not_run(tmp_path):
+    # a loop in the first check: the others are reported as not run
+    f = _variant(tmp_path, "loop.py", after="\n\nclass MyUnicycle:\n    def __init__(self, "
+                 "*a, **k):\n        while True:\n            pass\n")
+    from avblocks.labs import run_checks
+    r = run_checks(get(1), f, timeout=2)
+    assert not r.passed and r.score == (0, 5)
+    assert r.checks[0].name == "ports" and r.checks[0].message.startswith(
+        "timed out after 2 s in check 'ports' of lab 1")
+    assert [c.message for c in r.checks[1:]] == ["not run: check 'ports' timed out"] * 4
+
+
+def test_a_sleep_while_loading_times_out(capsys, tmp_path):
+    f = _variant(tmp_path, "sleep.py", before=SLEEP)
+    rc, out, _ = check(capsys, 1, f, "--timeout", "2", "--json")
+    doc = json.loads(out)
+    assert rc == 1 and doc["passed"] is False and doc["checks_total"] == 1
+    assert doc["checks"][0]["name"] == "load"
+    assert doc["checks"][0]["message"].startswith(
+        "timed out after 2 s while loading the file of lab 1")
+
+
+def test_prints_from_the_student_never_reach_json_or_csv(tmp_path):
+    f = _variant(tmp_path, "spam.py", before=SPAM_BEFORE, after=SPAM_AFTER)
+    p = _run_cli("check", "1", str(f), "--json")
+    assert p.returncode == 0, p.stdout + p.stderr
+    doc = json.loads(p.stdout)                 # nothing but the report on stdout
+    assert doc["passed"] is True and doc["checks_passed"] == 5
+    assert p.stderr == ""
+    p = _run_cli("check", "1", str(tmp_path), "--csv")
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert p.returncode == 0 and [(r["file"], r["passed"]) for r in rows] == [("spam.py", "yes")]
+
+
+def test_a_huge_allocation_is_a_readable_memory_error(capsys, tmp_path):
+    f = _variant(tmp_path, "mem.py", after=MEMORY)
+    rc, out, _ = check(capsys, 1, f, "--memory", "512", "--json")
+    doc = json.loads(out)
+    msg = {c["name"]: c["message"] for c in doc["checks"]}["differential drive: wheels_to_cmd"]
+    assert rc == 1 and msg.startswith("your code raised MemoryError") and \
+        "(the grader allows 512 MiB: --memory)" in msg, msg
+
+
+def test_os_exit_in_the_student_code_is_reported(capsys, tmp_path):
+    f = _variant(tmp_path, "exit.py", after="\n\ndef wheels_to_cmd(*a, **k):\n"
+                 "    import os\n    os._exit(7)\n")
+    rc, out, _ = check(capsys, 1, f)
+    assert rc == 1 and "the process running your code ended (exit status 7) in check " \
+        "'differential drive: wheels_to_cmd' of lab 1" in out
+
+
+def test_a_folder_goes_on_after_a_timeout(tmp_path):
+    shutil.copyfile(_solution(1), tmp_path / "alice.py")
+    _variant(tmp_path, "bob.py", before=SLEEP)
+    shutil.copyfile(_solution(1), tmp_path / "carol.py")
+    p = _run_cli("check", "1", str(tmp_path), "--csv", "--timeout", "2")
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert [(r["file"], r["passed"]) for r in rows] == [("alice.py", "yes"), ("bob.py", "no"),
+                                                        ("carol.py", "yes")]
+    assert rows[1]["failed"].startswith("load: timed out after 2 s while loading the file")
+    p = _run_cli("check", "1", str(tmp_path), "--timeout", "2")
+    assert "bob.py    FAIL  0/1  load: timed out after 2 s" in p.stdout
+    assert "2 of 3 submissions pass every check" in p.stdout
+
+
+def test_a_negative_limit_is_status_2(capsys):
+    assert main(["lab", "check", "1", str(_solution(1)), "--timeout", "-1"]) == 2
+    assert "a negative limit" in capsys.readouterr().err

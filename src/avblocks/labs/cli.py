@@ -4,9 +4,17 @@
     avblocks lab start N [--force]          # copies the template here
     avblocks lab check N FILE [--json]      # exit 0 only when every check passes
     avblocks lab check N DIR [--csv | --json]
+        [--timeout SECONDS] [--memory MIB]
 
-Exit status: 0 every check passed; 1 a check failed (for a folder: in at
-least one submission); 2 bad input (no such lab, file or folder, a file
+The student's code runs in a child process: each check (and loading the
+file) may take ``--timeout`` seconds (default 60; 0: no limit), after which
+it is stopped and reported as timed out; its address space is limited to
+``--memory`` MiB (default 4096; 0: no limit) where the platform allows;
+what it prints is discarded.
+
+Exit status: 0 every check passed; 1 a check failed, timed out or the
+student's code ended the process (for a folder: in at least one
+submission); 2 bad input (no such lab, file or folder, a file
 that ``start`` would overwrite).
 """
 
@@ -19,7 +27,7 @@ import sys
 from pathlib import Path
 
 from ..core.errors import ParameterError
-from .grading import run_checks
+from .grading import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT, run_checks
 from .registry import get, labs
 
 
@@ -43,6 +51,12 @@ def add_parser(sub):
     fmt.add_argument("--json", action="store_true", help="print one JSON document")
     fmt.add_argument("--csv", action="store_true",
                      help="one CSV row per submission (file, passed, score, failed checks)")
+    ch.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT, metavar="SECONDS",
+                    help=f"time limit of each check of a submission (default "
+                         f"{DEFAULT_TIMEOUT:g}; 0: none); a check past it fails as timed out")
+    ch.add_argument("--memory", type=int, default=DEFAULT_MEMORY_MB, metavar="MIB",
+                    help=f"address-space limit of the process running the student's code "
+                         f"(default {DEFAULT_MEMORY_MB}; 0: none)")
     ch.set_defaults(fn=cmd_check)
     return p
 
@@ -88,7 +102,11 @@ def cmd_check(args):
     else:
         raise ParameterError("no such file or folder", param="path",
                              expected="a .py file or a folder of them", found=str(path))
-    reports = [run_checks(lab, f) for f in files]
+    if args.timeout < 0 or args.memory < 0:
+        raise ParameterError("a negative limit", param="--timeout/--memory",
+                             expected=">= 0 (0: no limit)",
+                             found=f"{args.timeout:g} s, {args.memory} MiB")
+    reports = [run_checks(lab, f, timeout=args.timeout, memory_mb=args.memory) for f in files]
     if args.json:
         doc = reports[0].as_dict() if path.is_file() else [r.as_dict() for r in reports]
         print(json.dumps(doc, indent=1))

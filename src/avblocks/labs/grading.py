@@ -7,14 +7,26 @@ Anything else the student's code raises inside a check (or while the file
 is loaded) is caught and reported as one readable line: the exception, its
 message and the line of the student's file it came from. A check never
 ends the grader with a traceback.
+
+:func:`run_checks` runs the student's code in a child process (started
+with ``spawn``), so that it cannot hang or corrupt the grader: every check
+(and the loading of the file) has a time limit, after which the child is
+killed and the check reported as timed out; the child's stdout and stderr
+go to the null device (a print cannot break ``--json`` or ``--csv``); and
+on Linux/macOS its address space is limited (``RLIMIT_AS``), so a huge
+allocation ends as a ``MemoryError`` reported like any other exception.
+:func:`run_checks_here` runs the same checks in this process, unguarded.
 """
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import io
-import contextlib
+import multiprocessing
+import os
 import sys
+import time
 import traceback
 import uuid
 from dataclasses import asdict, dataclass, field
@@ -153,31 +165,182 @@ def load(path):
     return mod, None
 
 
-def run_checks(lab, path) -> Report:
-    """Load ``path`` and run every check of ``lab`` on it."""
+#: the default time limit of one check of a student's file [s]
+DEFAULT_TIMEOUT = 60.0
+#: the default limit of the child's address space [MiB] (``RLIMIT_AS``)
+DEFAULT_MEMORY_MB = 4096
+#: how long the child may take to start and import avblocks before the
+#: first limit starts counting [s] (not the student's time)
+STARTUP_ALLOWANCE = 300.0
+
+
+def run_checks_here(lab, path, emit=None) -> Report:
+    """Load ``path`` and run every check of ``lab`` on it in this process
+    (no time or memory limit: :func:`run_checks` is the guarded form).
+
+    ``emit(kind, value)``, when given, is told ``("start", check name)``
+    before each check (``"load"`` first) and ``("result", CheckResult)``
+    after it."""
+    emit = emit or (lambda kind, value: None)
     report = Report(lab=lab.number, file=str(path))
+
+    def add(result):
+        report.checks.append(result)
+        emit("result", result)
+
+    emit("start", "load")
     mod, err = load(path)
     if mod is None:
-        report.checks.append(CheckResult("load", False, err))
+        add(CheckResult("load", False, err))
         return report
     missing = [n for n in lab.names if not hasattr(mod, n)]
     if missing:
-        report.checks.append(CheckResult(
+        add(CheckResult(
             "load", False, f"the file defines no {', '.join(missing)} (expected: "
             f"{', '.join(lab.names)}, as in the template `avblocks lab start {lab.number}`)"))
         return report
     for name, fn in lab.checks:
+        emit("start", name)
         try:
             with np.errstate(all="ignore"), contextlib.redirect_stdout(io.StringIO()):
                 note = fn(mod)
-            report.checks.append(CheckResult(name, True, note or ""))
+            add(CheckResult(name, True, note or ""))
         except Failed as e:
-            report.checks.append(CheckResult(name, False, str(e)))
+            add(CheckResult(name, False, str(e)))
         except KeyboardInterrupt:
             raise
         except BaseException as e:  # noqa: BLE001 -- the student's code: report, never crash
-            report.checks.append(CheckResult(name, False, _error_message(e, path)))
+            add(CheckResult(name, False, _error_message(e, path)))
     return report
+
+
+def _child(conn, lab, path, memory_mb):
+    """The child process of :func:`run_checks`: output to the null device,
+    address space limited, results sent over ``conn`` as they come."""
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 1)
+    os.dup2(null, 2)
+    if memory_mb:
+        try:
+            import resource
+            limit = int(memory_mb) * 2 ** 20
+            _, hard = resource.getrlimit(resource.RLIMIT_AS)
+            if hard != resource.RLIM_INFINITY:
+                limit = min(limit, hard)
+            resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
+        except (ImportError, ValueError, OSError):   # Windows, or not allowed: no limit
+            pass
+    conn.send(("ready", None))
+    try:
+        run_checks_here(lab, path, emit=lambda kind, value: conn.send((kind, value)))
+    except KeyboardInterrupt:
+        return
+    conn.send(("done", None))
+
+
+def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_MB) -> Report:
+    """Load ``path`` and run every check of ``lab`` on it, in a child process.
+
+    Parameters
+    ----------
+    lab : Lab
+        The lab whose checks run.
+    path : str or Path
+        The student's file.
+    timeout : float or None
+        Seconds allowed to loading the file and to each check (``None`` or 0:
+        no limit). A check that runs longer is stopped (the child is killed)
+        and fails with ``timed out after ... s in check '...'``; the checks
+        after it are reported as not run.
+    memory_mb : int or None
+        The child's address-space limit in MiB (``RLIMIT_AS``, where the
+        platform has it; ``None`` or 0: no limit). A larger allocation raises
+        ``MemoryError`` in the student's code, reported like any exception.
+
+    Returns
+    -------
+    Report
+        Every check's verdict. The child's prints are discarded.
+    """
+    timeout = float(timeout) if timeout else None
+    report = Report(lab=lab.number, file=str(path))
+    ctx = multiprocessing.get_context("spawn")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_child, args=(send, lab, str(path), memory_mb), daemon=True,
+                       name=f"avblocks-lab{lab.number}-check")
+    proc.start()
+    send.close()
+    current, started = None, False
+    deadline = time.monotonic() + STARTUP_ALLOWANCE
+    try:
+        while True:
+            left = None if (started and timeout is None) else max(0.0, deadline - time.monotonic())
+            if not recv.poll(left):
+                _stop(proc)
+                if not started:
+                    report.checks.append(CheckResult("load", False, (
+                        f"the grader's child process did not start within "
+                        f"{STARTUP_ALLOWANCE:g} s")))
+                else:
+                    _timed_out(report, lab, current, timeout)
+                break
+            try:
+                kind, value = recv.recv()
+            except (EOFError, OSError):
+                proc.join(5)
+                _died(report, lab, current, proc.exitcode)
+                break
+            if kind == "ready":
+                started = True
+            elif kind == "start":
+                current = value
+                if timeout is not None:
+                    deadline = time.monotonic() + timeout
+            elif kind == "result":
+                if "MemoryError" in value.message and memory_mb:
+                    value.message += (f" (the grader allows {int(memory_mb)} MiB: "
+                                      f"--memory)")
+                report.checks.append(value)
+            else:                                            # done
+                break
+    finally:
+        recv.close()
+        if proc.is_alive():
+            proc.join(5)
+        _stop(proc)
+    return report
+
+
+def _stop(proc):
+    if proc.is_alive():
+        proc.kill()
+    proc.join()
+
+
+def _not_run(report, lab, after, why):
+    done = {c.name for c in report.checks}
+    if after == "load":
+        return
+    for name, _ in lab.checks:
+        if name not in done:
+            report.checks.append(CheckResult(name, False, f"not run: {why}"))
+
+
+def _timed_out(report, lab, current, timeout):
+    where = "while loading the file" if current == "load" else f"in check '{current}'"
+    report.checks.append(CheckResult(current, False, (
+        f"timed out after {timeout:g} s {where} of lab {lab.number}: the "
+        f"check was stopped (an endless loop, or a step far too slow?); "
+        f"raise the limit with --timeout SECONDS")))
+    _not_run(report, lab, current, f"check '{current}' timed out")
+
+
+def _died(report, lab, current, code):
+    how = (f"signal {-code}" if code is not None and code < 0 else f"exit status {code}")
+    report.checks.append(CheckResult(current or "load", False, (
+        f"the process running your code ended ({how}) in check '{current}' of lab "
+        f"{lab.number}: a call to os._exit, a crash in compiled code, or out of memory")))
+    _not_run(report, lab, current, f"the process ended in check '{current}'")
 
 
 def _error_message(e, path) -> str:

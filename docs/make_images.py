@@ -224,6 +224,7 @@ PRODUCERS = {
     "lab3_gains": (_page("labs/lab3.md"), False),
     "lab4_rings": (_page("labs/lab4.md"), False),
     "lab5_swap": (_page("labs/lab5.md"), False),
+    "lab5_flock": (_page("labs/lab5.md"), False),
     "lab6_watchdog": (_page("labs/lab6.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),

@@ -118,10 +118,27 @@ WRONG_EXPECTED = {
     (6, "crash"): ("the law and the group hold",
                    ["your code raised RuntimeError: a robot is silent",
                     "line {a robot is silent} of lab6_crash.py, in output"]),
+    (5, "flock_wrong_sign"): ("flocking: eq. (23) pair by pair",
+                              ["port `accel (flocking_alpha)` at 10 agents", "eq. (23), agent",
+                               "expected [", "found ["]),
+    (5, "flock_wrong_shape"): ("flocking: same as controllers.flocking_law",
+                               ["port `accel (flocking_alpha)`: shape (3, 9), expected (9, 3)"]),
+    (5, "flock_crash"): ("flocking: eq. (23) pair by pair",
+                         ["your code raised ValueError: range too short for a flock",
+                          "line {range too short} of lab5_flock_crash.py, in flocking_alpha"]),
     (5, "crash"): ("the barrier constraint",
                    ["your code raised KeyError: 'agent without a neighbour'",
                     "line {agent without a neighbour} of lab5_crash.py, in safety_filter_pair"]),
 }
+
+
+def test_the_flocking_wrong_sign_breaks_the_flock(capsys):
+    """The closed-loop property, not only the pointwise comparison, catches
+    attraction in place of separation."""
+    rc, out, _ = check(capsys, 5, WRONG / "lab5_flock_wrong_sign.py", "--json")
+    failed = {c["name"]: c["message"] for c in json.loads(out)["checks"] if not c["passed"]}
+    assert rc == 1 and "flocking: a flock forms" in failed
+    assert "expected at least 0.35 d = 0.35 m" in failed["flocking: a flock forms"]
 
 
 @pytest.mark.parametrize("number,kind", sorted(WRONG_EXPECTED))

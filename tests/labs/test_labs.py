@@ -332,3 +332,18 @@ def test_a_folder_goes_on_after_a_timeout(tmp_path):
 def test_a_negative_limit_is_status_2(capsys):
     assert main(["lab", "check", "1", str(_solution(1)), "--timeout", "-1"]) == 2
     assert "a negative limit" in capsys.readouterr().err
+
+
+def test_run_checks_from_a_script_read_on_stdin():
+    """The child is a fresh interpreter, not a multiprocessing spawn (which
+    re-imports the caller's ``__main__`` and fails for ``python -`` or a
+    notebook, and re-runs an unguarded script)."""
+    script = ("from avblocks.labs import get, run_checks\n"
+              f"r = run_checks(get(4), {str(_solution(4))!r}, timeout=120)\n"
+              "print('PASSED' if r.passed else r.text())\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.run([sys.executable, "-"], input=script, capture_output=True, text=True,
+                       env=env, timeout=600)
+    assert p.returncode == 0 and p.stdout.strip() == "PASSED", p.stdout + p.stderr
+    assert p.stderr == ""

@@ -8,8 +8,8 @@ is loaded) is caught and reported as one readable line: the exception, its
 message and the line of the student's file it came from. A check never
 ends the grader with a traceback.
 
-:func:`run_checks` runs the student's code in a child process (started
-with ``spawn``), so that it cannot hang or corrupt the grader: every check
+:func:`run_checks` runs the student's code in a child process (a fresh
+``python``, fed the lab over a pipe), so that it cannot hang or corrupt the grader: every check
 (and the loading of the file) has a time limit, after which the child is
 killed and the check reported as timed out; the child's stdout and stderr
 go to the null device (a print cannot break ``--json`` or ``--csv``); and
@@ -23,7 +23,6 @@ from __future__ import annotations
 import contextlib
 import importlib.util
 import io
-import multiprocessing
 import os
 import sys
 import time
@@ -214,9 +213,16 @@ def run_checks_here(lab, path, emit=None) -> Report:
     return report
 
 
-def _child(conn, lab, path, memory_mb):
-    """The child process of :func:`run_checks`: output to the null device,
-    address space limited, results sent over ``conn`` as they come."""
+def _child():
+    """The child process of :func:`run_checks` (``python -c``): reads
+    ``(lab, path, memory_mb)`` pickled from stdin, sends its results over
+    the stdout it was started with, then points fds 1 and 2 at the null
+    device (the student's prints go nowhere) and limits its address space."""
+    import pickle
+    from multiprocessing.connection import Connection
+
+    lab, path, memory_mb = pickle.load(sys.stdin.buffer)
+    conn = Connection(os.dup(1), readable=False)
     null = os.open(os.devnull, os.O_WRONLY)
     os.dup2(null, 1)
     os.dup2(null, 2)
@@ -236,6 +242,29 @@ def _child(conn, lab, path, memory_mb):
     except KeyboardInterrupt:
         return
     conn.send(("done", None))
+
+
+def _start_child(lab, path, memory_mb):
+    """A ``python -c`` child running :func:`_child` (not multiprocessing:
+    its spawn re-imports the caller's ``__main__``, which fails for a script
+    read from stdin and re-runs an unguarded script), and the connection its
+    results come on."""
+    import pickle
+    import subprocess
+    from multiprocessing.connection import Connection
+
+    src = str(Path(__file__).resolve().parents[2])        # the folder holding avblocks
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([src] + [p for p in (env.get("PYTHONPATH"),) if p])
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from avblocks.labs.grading import _child; _child()"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
+    try:
+        proc.stdin.write(pickle.dumps((lab, str(path), memory_mb)))
+        proc.stdin.close()
+    except OSError:
+        pass
+    return proc, Connection(os.dup(proc.stdout.fileno()), writable=False)
 
 
 def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_MB) -> Report:
@@ -264,12 +293,7 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
     """
     timeout = float(timeout) if timeout else None
     report = Report(lab=lab.number, file=str(path))
-    ctx = multiprocessing.get_context("spawn")
-    recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_child, args=(send, lab, str(path), memory_mb), daemon=True,
-                       name=f"avblocks-lab{lab.number}-check")
-    proc.start()
-    send.close()
+    proc, recv = _start_child(lab, path, memory_mb)
     current, started = None, False
     deadline = time.monotonic() + STARTUP_ALLOWANCE
     try:
@@ -287,8 +311,11 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
             try:
                 kind, value = recv.recv()
             except (EOFError, OSError):
-                proc.join(5)
-                _died(report, lab, current, proc.exitcode)
+                try:
+                    code = proc.wait(5)
+                except Exception:      # noqa: BLE001 -- still running: stopped below
+                    code = None
+                _died(report, lab, current, code)
                 break
             if kind == "ready":
                 started = True
@@ -305,16 +332,19 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
                 break
     finally:
         recv.close()
-        if proc.is_alive():
-            proc.join(5)
+        proc.stdout.close()
+        try:
+            proc.wait(5)
+        except Exception:              # noqa: BLE001 -- still running: stop it
+            pass
         _stop(proc)
     return report
 
 
 def _stop(proc):
-    if proc.is_alive():
+    if proc.poll() is None:
         proc.kill()
-    proc.join()
+    proc.wait()
 
 
 def _not_run(report, lab, after, why):

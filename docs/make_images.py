@@ -8,7 +8,8 @@
 
 :data:`PRODUCERS` names what makes each picture: a case study's own figure
 (exactly what ``avblocks run NAME`` writes, copied to
-``scenario_NAME.png``), a docs page's own snippets, a drawing function in
+``scenario_NAME.png`` by ``docs/regenerate.py``, which also rewrites the
+numbers the pages quote from the same run), a docs page's own snippets, a drawing function in
 this file, or a script of the repository (benchmarks, examples, browser
 screenshots). ``tests/test_docs_site.py`` fails when a page names a picture
 that is not made here, or a picture here is named by no page.
@@ -67,6 +68,14 @@ def run_blocks(path, cwd):
 
 
 def make(name: str) -> Path:
+    """A case study's figure. For those of ``docs/regenerate.py`` this is
+    that script (the same run also rewrites the numbers the pages quote)."""
+    regen = _regenerate()
+    if name in regen.CASES:
+        problems = regen.regenerate([name])
+        if problems:
+            raise SystemExit("\n".join(problems))
+        return IMAGES / f"scenario_{name}.png"
     with tempfile.TemporaryDirectory() as tmp:
         rc = main(["run", name, "--out", tmp, "--quiet"])
         if rc != 0:
@@ -78,6 +87,14 @@ def make(name: str) -> Path:
         shutil.copyfile(src, dst)
     print(f"wrote {dst}")
     return dst
+
+
+def _regenerate():
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("regenerate", DOCS / "regenerate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
 
 
 def _page(page, *names):
@@ -202,6 +219,13 @@ PRODUCERS = {
     "plots_trajectories": (_page("plots-and-movies.md"), False),
     "plots_two_panels": (_page("plots-and-movies.md"), False),
     "plots_signals": (_page("plots-and-movies.md"), False),
+    "lab1_integration_error": (_page("labs/lab1.md"), False),
+    "lab2_look_ahead": (_page("labs/lab2.md"), False),
+    "lab3_gains": (_page("labs/lab3.md"), False),
+    "lab4_rings": (_page("labs/lab4.md"), False),
+    "lab5_swap": (_page("labs/lab5.md"), False),
+    "lab5_flock": (_page("labs/lab5.md"), False),
+    "lab6_watchdog": (_page("labs/lab6.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),
     "uav3d": (draw_uav3d, False),
@@ -265,7 +289,7 @@ PRODUCERS = {
                                    made="sweep.zarr.time_to_done.png"), True),
 }
 
-_IMAGE_REF = re.compile(r"(?:\]\(|src=\")(?:docs/)?images/([\w.-]+)\.png")
+_IMAGE_REF = re.compile(r"(?:\]\(|src=\")(?:\.\./)*(?:docs/)?images/([\w.-]+)\.png")
 
 
 def referenced():

@@ -16,7 +16,9 @@ from pathlib import Path
 DOCS = Path(__file__).resolve().parent
 
 #: the pages that are also notebooks
-PAGES = ["getting-started.md", "tutorial-diagram.md", "tutorial-scale.md"]
+PAGES = ["getting-started.md", "tutorial-diagram.md", "tutorial-scale.md",
+         "labs/lab1.md", "labs/lab2.md", "labs/lab3.md", "labs/lab4.md",
+         "labs/lab5.md", "labs/lab6.md"]
 
 
 def notebook(page: str):

@@ -280,6 +280,8 @@ class CollisionAvoidance(Block):
     iterations, tol : the ADMM budget and stopping tolerance (relative to
         ``1 + max |u_nominal|``).
 
+    Notes
+    -----
     ``radius``, ``gamma``, ``right_hand`` (2-D) and ``sensing_range`` (when
     given) are numeric parameters; the rest are structural.
     """

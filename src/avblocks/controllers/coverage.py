@@ -192,6 +192,8 @@ class Coverage(Block):
     density : callable ``phi(x, y)``, optional — importance density
         ("grid" only; default uniform).
 
+    Notes
+    -----
     ``gain`` is a numeric parameter; the polygon, method, resolution and
     density are structural.
 

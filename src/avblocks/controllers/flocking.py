@@ -340,6 +340,8 @@ class Flocking(Block):
     within ``r`` inside the block (compiles: ``utility.spatial``); ``adjacency``
     a fixed graph.
 
+    Notes
+    -----
     ``d``, ``r``, ``eps``, ``a``, ``b``, ``h``, ``c1``, ``c2``, ``target``,
     ``target_velocity`` (both (N, D)), ``c1_gamma`` and ``c2_gamma`` are
     numeric parameters (``"flock.c1"``...; the constraints ``r > d`` and

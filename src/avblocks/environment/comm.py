@@ -114,8 +114,8 @@ class CommChannel(Block):
         (``params=``, ensembles); a larger radius than ``reach`` is reported
         as an overflow.
 
-    Example
-    -------
+    Examples
+    --------
     >>> import numpy as np
     >>> from avblocks.environment import CommChannel
     >>> ch = CommChannel(2, radius=2.0, msg_dim=1, latency=0, input="position")

@@ -286,11 +286,6 @@ class Neighbors(Block):
         engine ignores it (its k-d tree is faster there) and leaves the
         list state untouched.
 
-    ``radius`` and ``fov`` (when given) are numeric parameters; ``k`` and
-    whether there is a field of view are structural. The search's cells are
-    sized for the ``radius`` given here: a compiled run whose ``radius`` is
-    later raised above it reports an overflow.
-
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (outputs held between hits).
@@ -302,6 +297,11 @@ class Neighbors(Block):
 
     Notes
     -----
+    ``radius`` and ``fov`` (when given) are numeric parameters; ``k`` and
+    whether there is a field of view are structural. The search's cells are
+    sized for the ``radius`` given here: a compiled run whose ``radius`` is
+    later raised above it reports an overflow.
+
     Compiles (``backend="jax"``): the search is the cell list of
     :class:`avblocks.utility.spatial.NeighborSearch` (exact: the same
     neighbours in the same order as the NumPy engine, whose radius queries

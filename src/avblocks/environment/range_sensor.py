@@ -365,10 +365,6 @@ class RangeSensor(EdgeGridOwner, Block):
     angles : (R,) array, optional
         Explicit ray angles (overrides ``n_rays`` and ``fov``).
 
-    ``angles`` (the rays, (R,)), ``max_range``, ``noise_std`` and
-    ``agent_radius`` (when given) are numeric parameters; ``n_rays`` and
-    whether there is noise (a random state) are structural.
-
     input : "pose" or "position"
     period : float, optional
         Discrete block with this period (a scan per hit).
@@ -384,6 +380,12 @@ class RangeSensor(EdgeGridOwner, Block):
     capacity : int, optional
         Static per-cell capacity of the agent search (compiled engine);
         default: all pairs for ``n <= SMALL_N``, else planned by the engine.
+
+    Notes
+    -----
+    ``angles`` (the rays, (R,)), ``max_range``, ``noise_std`` and
+    ``agent_radius`` (when given) are numeric parameters; ``n_rays`` and
+    whether there is noise (a random state) are structural.
 
     Equations
     ---------

@@ -91,9 +91,6 @@ class TargetDetection(Block):
     target_radius : float or (M,)
         [m] (default 0: point targets).
 
-    ``targets``, ``sensing_radius`` and ``target_radius`` are numeric
-    parameters (shapes as given).
-
     pickup : bool
         Found targets are removed: they are no longer detected after the
         step they were found (search-and-pickup). Default False.
@@ -108,6 +105,11 @@ class TargetDetection(Block):
         The largest ``max R + max r`` a compiled run may use (the search's
         cell edge; default the constructor's values). Raise it to vary the
         radii at run time.
+
+    Notes
+    -----
+    ``targets``, ``sensing_radius`` and ``target_radius`` are numeric
+    parameters (shapes as given).
 
     Example
     -------

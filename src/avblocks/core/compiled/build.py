@@ -102,12 +102,16 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
         :mod:`avblocks.core.compiled.devices`); ``devices=1`` keeps
         everything on one device.
 
+    Notes
+    -----
     The compiled program is shared by every diagram with the same structure
     (block types, wiring, shapes, sample times, non-parameter attributes),
     step count and log: numeric parameters, initial states and seeds are its
     arguments, so new values never recompile. A block that cannot be traced
     raises :class:`CompileError` naming it.
 
+    Examples
+    --------
     >>> import numpy as np, avblocks as av
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Constant([[1.0]]), name="c")
@@ -261,6 +265,8 @@ def grad(cost, diagram, wrt, t_final, dt=0.01, solver="rk4", *, log=None, log_ev
     JAX arrays: write it with ``jax.numpy``. Other arguments as
     :func:`compile` and :meth:`Runner.value_and_grad`.
 
+    Examples
+    --------
     >>> import jax.numpy as jnp, avblocks as av
     >>> d = av.Diagram()
     >>> c = d.add(av.blocks.Constant([[1.0]]), name="c")

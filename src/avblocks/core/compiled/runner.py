@@ -296,6 +296,14 @@ class Runner:
             Runs per vmapped call, overriding the policy below (a multiple
             of the device count is split across the devices).
 
+        Returns
+        -------
+        Results
+            ``res[port]`` has shape ``(runs, T, ...)``; ``res.final_state``
+            values ``(runs, ...)``; ``res.to_xarray()`` has a ``run`` dim.
+
+        Notes
+        -----
         Chunks: under ``max_log_bytes``; on a CPU also small enough that a
         step's arrays stay in the cache (each device gets ``CPU_STEP_BYTES
         // b`` runs, ``b`` the largest array one step of one run computes,
@@ -304,12 +312,6 @@ class Runner:
         (GPU) as big as the log budget allows; then made equal. The
         chunking never changes the results beyond round-off. See
         :mod:`avblocks.core.compiled.chunking`.
-
-        Returns
-        -------
-        Results
-            ``res[port]`` has shape ``(runs, T, ...)``; ``res.final_state``
-            values ``(runs, ...)``; ``res.to_xarray()`` has a ``run`` dim.
         """
         jax = _jax.jax()
         R = _count_runs(seeds, params, x0, runs)

@@ -1,0 +1,349 @@
+"""The lab course's grader: for every lab the reference solution passes
+``avblocks lab check``, the untouched template fails with a readable
+message, and deliberately wrong solutions (wrong sign, wrong port shape, an
+exception inside the student's code) get the right message and exit status
+1, never a traceback. The checks themselves compare against independent
+truth (closed forms, the library's blocks, closed-loop properties); see
+``avblocks/labs/labN_*.py``."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from avblocks.cli import main
+from avblocks.labs import get, labs
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+SOLUTIONS = HERE / "solutions"
+WRONG = HERE / "wrong"
+NUMBERS = [lab.number for lab in labs()]
+
+
+def _needs_zenoh(number):
+    """Lab 6 drives the robot emulator over Zenoh: skip without the ros2
+    extra on a user's machine, never in CI."""
+    if number == 6 and not os.environ.get("CI"):
+        pytest.importorskip("zenoh", reason="lab 6 needs the ros2 extra")
+        pytest.importorskip("rosbags", reason="lab 6 needs the ros2 extra")
+
+
+def check(capsys, number, path, *extra):
+    _needs_zenoh(number)
+    rc = main(["lab", "check", str(number), str(path), *extra])
+    out = capsys.readouterr()
+    assert "Traceback" not in out.out + out.err
+    return rc, out.out, out.err
+
+
+def _solution(number):
+    return SOLUTIONS / get(number).template.name
+
+
+def test_every_lab_has_a_solution_wrong_solutions_a_template_and_a_page():
+    for lab in labs():
+        assert lab.template.is_file() and _solution(lab.number).is_file()
+        for kind in ("wrong_sign", "wrong_shape", "crash"):
+            assert (WRONG / f"lab{lab.number}_{kind}.py").is_file()
+        assert (ROOT / "docs" / "labs" / f"lab{lab.number}.md").is_file()
+        # the reference solution is not shipped in the template
+        assert "NotImplementedError" in lab.template.read_text()
+
+
+@pytest.mark.parametrize("number", NUMBERS)
+def test_the_reference_solution_passes(capsys, number):
+    rc, out, _ = check(capsys, number, _solution(number))
+    assert rc == 0, out
+    assert "FAIL" not in out and f"{len(get(number).checks)} of {len(get(number).checks)} " \
+        "checks passed" in out
+
+
+@pytest.mark.parametrize("number", NUMBERS)
+def test_the_untouched_template_fails_readably(capsys, number):
+    rc, out, _ = check(capsys, number, get(number).template)
+    assert rc == 1
+    assert "FAIL" in out and "not written yet: NotImplementedError: write" in out
+    # it names the line of the student's file
+    assert f"of {get(number).template.name}, in " in out
+
+
+def _line_of(path, text):
+    for i, ln in enumerate(Path(path).read_text().splitlines(), 1):
+        if text in ln:
+            return i
+    raise AssertionError(f"{text!r} not in {path}")
+
+
+#: (lab, kind) -> (check that must fail, what its message must say)
+WRONG_EXPECTED = {
+    (1, "wrong_sign"): ("derivative (eq. 1)", ["port `pose (its rate, derivative)`",
+                                               "expected [", "found ["]),
+    (1, "wrong_shape"): ("ports", ["input `cmd` of MyUnicycle: shape (4, 3), expected (4, 2)"]),
+    (1, "crash"): ("derivative (eq. 1)", ["your code raised IndexError",
+                                          "line {pose[:, 3]} of lab1_crash.py, in derivative"]),
+    (2, "wrong_sign"): ("the law (inverse map)", ["port `cmd`", "expected [", "found ["]),
+    (2, "wrong_shape"): ("the law (inverse map)", ["port `cmd`: shape (2, 6), expected (6, 2)"]),
+    (2, "crash"): ("saturation at v_max", ["your code raised ValueError: goal too far",
+                                           "line {goal too far} of lab2_crash.py, in output"]),
+    (3, "wrong_sign"): ("closed loop behind a turning leader",
+                        ["formation error (l, alpha)", "expected below 1e-6"]),
+    (3, "wrong_shape"): ("the law (eqs. 2-5)",
+                         ["port `cmd (follower_cmd)`: shape (2, 7), expected (7, 2)"]),
+    (3, "crash"): ("same as controllers.leader_follower_law",
+                   ["your code raised AssertionError: followers too close",
+                    "line {followers too close} of lab3_crash.py, in follower_cmd"]),
+    (4, "wrong_sign"): ("the law u = -K L x", ["port `velocity`", "expected [", "found ["]),
+    (4, "wrong_shape"): ("the law u = -K L x",
+                         ["port `velocity`: shape (12,), expected (6, 2)"]),
+    (4, "crash"): ("laplacian", ["your code raised IndexError",
+                                 "line {a[len(a)]} of lab4_crash.py, in laplacian"]),
+    (5, "wrong_sign"): ("two agents swap without contact",
+                        ["the two agents came", "the safety radius is 1.0 m"]),
+    (5, "wrong_shape"): ("the projection",
+                         ["port `velocity (safety_filter_pair)`: shape (12, 1), expected (12, 2)"]),
+    (6, "wrong_sign"): ("the law and the group hold",
+                        ["port `cmd` with robot 0 silent (fresh false): every robot held",
+                         "expected [0., 0.]"]),
+    (6, "wrong_shape"): ("the law and the group hold",
+                         ["port `cmd`: shape (2, 5), expected (5, 2)"]),
+    (6, "crash"): ("the law and the group hold",
+                   ["your code raised RuntimeError: a robot is silent",
+                    "line {a robot is silent} of lab6_crash.py, in output"]),
+    (5, "flock_wrong_sign"): ("flocking: eq. (23) pair by pair",
+                              ["port `accel (flocking_alpha)` at 10 agents", "eq. (23), agent",
+                               "expected [", "found ["]),
+    (5, "flock_wrong_shape"): ("flocking: same as controllers.flocking_law",
+                               ["port `accel (flocking_alpha)`: shape (3, 9), expected (9, 3)"]),
+    (5, "flock_crash"): ("flocking: eq. (23) pair by pair",
+                         ["your code raised ValueError: range too short for a flock",
+                          "line {range too short} of lab5_flock_crash.py, in flocking_alpha"]),
+    (5, "crash"): ("the barrier constraint",
+                   ["your code raised KeyError: 'agent without a neighbour'",
+                    "line {agent without a neighbour} of lab5_crash.py, in safety_filter_pair"]),
+}
+
+
+def test_the_flocking_wrong_sign_breaks_the_flock(capsys):
+    """The closed-loop property, not only the pointwise comparison, catches
+    attraction in place of separation."""
+    rc, out, _ = check(capsys, 5, WRONG / "lab5_flock_wrong_sign.py", "--json")
+    failed = {c["name"]: c["message"] for c in json.loads(out)["checks"] if not c["passed"]}
+    assert rc == 1 and "flocking: a flock forms" in failed
+    assert "expected at least 0.35 d = 0.35 m" in failed["flocking: a flock forms"]
+
+
+@pytest.mark.parametrize("number,kind", sorted(WRONG_EXPECTED))
+def test_a_wrong_solution_gets_the_right_message(capsys, number, kind):
+    path = WRONG / f"lab{number}_{kind}.py"
+    rc, out, _ = check(capsys, number, path, "--json")
+    assert rc == 1
+    doc = json.loads(out)
+    assert doc["passed"] is False and doc["lab"] == number
+    name, needles = WRONG_EXPECTED[number, kind]
+    failed = {c["name"]: c["message"] for c in doc["checks"] if not c["passed"]}
+    assert name in failed, f"{name!r} did not fail: {doc['checks']}"
+    for needle in needles:
+        if "{" in needle:                   # a line number, found in the file
+            marker = needle[needle.index("{") + 1:needle.index("}")]
+            needle = needle.replace("{" + marker + "}", str(_line_of(path, marker)))
+        assert needle in failed[name], (needle, failed[name])
+
+
+@pytest.mark.parametrize("body,says", [
+    ("def broken(:\n", "the file does not parse: SyntaxError"),
+    ("import avblocks\nraise RuntimeError('at import')\n",
+     "loading the file: your code raised RuntimeError: at import (line 2 of"),
+    ("import sys\nsys.exit(3)\n", "loading the file: your code raised SystemExit: 3"),
+    ("x = 1\n", "the file defines no MyUnicycle, wheels_to_cmd"),
+])
+def test_a_file_that_does_not_load_is_one_readable_line(capsys, tmp_path, body, says):
+    f = tmp_path / "sub.py"
+    f.write_text(body)
+    rc, out, _ = check(capsys, 1, f)
+    assert rc == 1 and says in out
+
+
+def test_bad_lab_number_or_path_is_status_2(capsys, tmp_path):
+    assert main(["lab", "check", "99", str(_solution(1))]) == 2
+    assert "no such lab" in capsys.readouterr().err
+    assert main(["lab", "check", "1", str(tmp_path / "nothing.py")]) == 2
+    assert main(["lab", "check", "1", str(tmp_path)]) == 2      # an empty folder
+
+
+def test_start_copies_the_template_and_never_overwrites(capsys, tmp_path):
+    assert main(["lab", "start", "2", "--to", str(tmp_path)]) == 0
+    dst = tmp_path / "lab2_go_to_goal.py"
+    assert dst.read_text() == get(2).template.read_text()
+    dst.write_text("# my work\n")
+    assert main(["lab", "start", "2", "--to", str(tmp_path)]) == 2
+    assert "not overwriting" in capsys.readouterr().err
+    assert dst.read_text() == "# my work\n"
+    assert main(["lab", "start", "2", "--to", str(tmp_path), "--force"]) == 0
+    assert dst.read_text() == get(2).template.read_text()
+
+
+def test_list_json(capsys):
+    assert main(["lab", "list", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["number"] for r in rows] == NUMBERS
+    assert rows[0]["template"] == "lab1_kinematics.py"
+
+
+def _cmd():
+    exe = shutil.which("avblocks", path=str(Path(sys.executable).parent))
+    return [exe] if exe else [sys.executable, "-m", "avblocks"]
+
+
+def test_grading_a_folder_as_csv_through_a_pipe(tmp_path):
+    """What an instructor runs: a folder of submissions, a CSV on stdout,
+    status 1 because one submission fails."""
+    for name in ("alice.py", "bob.py"):
+        shutil.copyfile(_solution(1), tmp_path / name)
+    shutil.copyfile(WRONG / "lab1_wrong_sign.py", tmp_path / "carol.py")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path), "--csv"],
+                       capture_output=True, text=True, env=env, timeout=600)
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert [r["file"] for r in rows] == ["alice.py", "bob.py", "carol.py"]
+    assert [r["passed"] for r in rows] == ["yes", "yes", "no"]
+    assert rows[2]["checks_passed"] == "2" and "derivative (eq. 1)" in rows[2]["failed"]
+    # the table form says the same
+    p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path)], capture_output=True,
+                       text=True, env=env, timeout=600)
+    assert p.returncode == 1 and "2 of 3 submissions pass every check" in p.stdout
+
+
+# ---------------------------------------------------------------- a guarded child
+def _variant(tmp_path, name, before="", after=""):
+    """Lab 1's reference solution with code put before or after it."""
+    f = tmp_path / name
+    f.write_text(before + _solution(1).read_text() + after)
+    return f
+
+
+LOOP = "\n\ndef wheels_to_cmd(*args, **kwargs):\n    while True:\n        pass\n"
+SLEEP = "import time\ntime.sleep(1000)\n"
+SPAM_BEFORE = ("import os, sys\nfor i in range(3000):\n    print('spam {', i)\n"
+               "    sys.stderr.write('noise\\n')\nos.write(1, b'raw bytes [')\n")
+SPAM_AFTER = ("\n_wheels = wheels_to_cmd\n\n\ndef wheels_to_cmd(*args, **kwargs):\n"
+              "    print('}]} spam')\n    os.write(1, b'\"not json')\n"
+              "    os.write(2, b'Traceback (most recent call last):')\n"
+              "    return _wheels(*args, **kwargs)\n")
+MEMORY = "\n\ndef wheels_to_cmd(*args, **kwargs):\n    import numpy\n" \
+         "    return numpy.ones(2 * 10**8)\n"            # 1.6 GB, over --memory 512
+
+
+def _run_cli(*args):
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    return subprocess.run(_cmd() + ["lab", *args], capture_output=True, text=True, env=env,
+                          timeout=600)
+
+
+def test_an_endless_loop_in_a_check_times_out_and_the_rest_is_reported(tmp_path):
+    f = _variant(tmp_path, "loop.py", after=LOOP)
+    p = _run_cli("check", "1", str(f), "--timeout", "3")
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stderr
+    line = [ln for ln in p.stdout.splitlines() if "timed out" in ln]
+    assert line == ["  FAIL  differential drive: wheels_to_cmd: timed out after 3 s in check "
+                    "'differential drive: wheels_to_cmd' of lab 1: the check was stopped (an "
+                    "endless loop, or a step far too slow?); raise the limit with --timeout "
+                    "SECONDS"], p.stdout
+    assert "4 of 5 checks passed" in p.stdout            # the checks before it ran
+
+
+def test_a_timeout_stops_the_check_and_the_next_ones_are_not_run(tmp_path):
+    # a loop in the first check: the others are reported as not run
+    f = _variant(tmp_path, "loop.py", after="\n\nclass MyUnicycle:\n    def __init__(self, "
+                 "*a, **k):\n        while True:\n            pass\n")
+    from avblocks.labs import run_checks
+    r = run_checks(get(1), f, timeout=2)
+    assert not r.passed and r.score == (0, 5)
+    assert r.checks[0].name == "ports" and r.checks[0].message.startswith(
+        "timed out after 2 s in check 'ports' of lab 1")
+    assert [c.message for c in r.checks[1:]] == ["not run: check 'ports' timed out"] * 4
+
+
+def test_a_sleep_while_loading_times_out(capsys, tmp_path):
+    f = _variant(tmp_path, "sleep.py", before=SLEEP)
+    rc, out, _ = check(capsys, 1, f, "--timeout", "2", "--json")
+    doc = json.loads(out)
+    assert rc == 1 and doc["passed"] is False and doc["checks_total"] == 1
+    assert doc["checks"][0]["name"] == "load"
+    assert doc["checks"][0]["message"].startswith(
+        "timed out after 2 s while loading the file of lab 1")
+
+
+def test_prints_from_the_student_never_reach_json_or_csv(tmp_path):
+    f = _variant(tmp_path, "spam.py", before=SPAM_BEFORE, after=SPAM_AFTER)
+    p = _run_cli("check", "1", str(f), "--json")
+    assert p.returncode == 0, p.stdout + p.stderr
+    doc = json.loads(p.stdout)                 # nothing but the report on stdout
+    assert doc["passed"] is True and doc["checks_passed"] == 5
+    assert p.stderr == ""
+    p = _run_cli("check", "1", str(tmp_path), "--csv")
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert p.returncode == 0 and [(r["file"], r["passed"]) for r in rows] == [("spam.py", "yes")]
+
+
+def test_a_huge_allocation_is_a_readable_memory_error(capsys, tmp_path):
+    f = _variant(tmp_path, "mem.py", after=MEMORY)
+    rc, out, _ = check(capsys, 1, f, "--memory", "512", "--json")
+    doc = json.loads(out)
+    msg = {c["name"]: c["message"] for c in doc["checks"]}["differential drive: wheels_to_cmd"]
+    assert rc == 1 and msg.startswith("your code raised MemoryError") and \
+        "(the grader allows 512 MiB: --memory)" in msg, msg
+
+
+def test_os_exit_in_the_student_code_is_reported(capsys, tmp_path):
+    f = _variant(tmp_path, "exit.py", after="\n\ndef wheels_to_cmd(*a, **k):\n"
+                 "    import os\n    os._exit(7)\n")
+    rc, out, _ = check(capsys, 1, f)
+    assert rc == 1 and "the process running your code ended (exit status 7) in check " \
+        "'differential drive: wheels_to_cmd' of lab 1" in out
+
+
+def test_a_folder_goes_on_after_a_timeout(tmp_path):
+    shutil.copyfile(_solution(1), tmp_path / "alice.py")
+    _variant(tmp_path, "bob.py", before=SLEEP)
+    shutil.copyfile(_solution(1), tmp_path / "carol.py")
+    p = _run_cli("check", "1", str(tmp_path), "--csv", "--timeout", "2")
+    assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
+    rows = list(csv.DictReader(io.StringIO(p.stdout)))
+    assert [(r["file"], r["passed"]) for r in rows] == [("alice.py", "yes"), ("bob.py", "no"),
+                                                        ("carol.py", "yes")]
+    assert rows[1]["failed"].startswith("load: timed out after 2 s while loading the file")
+    p = _run_cli("check", "1", str(tmp_path), "--timeout", "2")
+    assert "bob.py    FAIL  0/1  load: timed out after 2 s" in p.stdout
+    assert "2 of 3 submissions pass every check" in p.stdout
+
+
+def test_a_negative_limit_is_status_2(capsys):
+    assert main(["lab", "check", "1", str(_solution(1)), "--timeout", "-1"]) == 2
+    assert "a negative limit" in capsys.readouterr().err
+
+
+def test_run_checks_from_a_script_read_on_stdin():
+    """The child is a fresh interpreter, not a multiprocessing spawn (which
+    re-imports the caller's ``__main__`` and fails for ``python -`` or a
+    notebook, and re-runs an unguarded script)."""
+    script = ("from avblocks.labs import get, run_checks\n"
+              f"r = run_checks(get(4), {str(_solution(4))!r}, timeout=120)\n"
+              "print('PASSED' if r.passed else r.text())\n")
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.run([sys.executable, "-"], input=script, capture_output=True, text=True,
+                       env=env, timeout=600)
+    assert p.returncode == 0 and p.stdout.strip() == "PASSED", p.stdout + p.stderr
+    assert p.stderr == ""

@@ -266,6 +266,16 @@ class Diagram:
         """Flatten, resolve shapes, check every input is driven, sort."""
         return CompiledDiagram(self)
 
+    def unconnected_inputs(self) -> list[str]:
+        """Every input of a leaf block that no wire drives, as ``"block.port"``
+        paths (dotted through subsystems), in the order blocks were added.
+        :meth:`build` stops at the first of them; this lists them all (the
+        editor marks each one)."""
+        leaves, wires = _flatten(self, "")
+        driven = {dst for _src, dst in wires}
+        return [f"{name}.{inp}" for name, b in leaves for inp in _inputs_of(b)
+                if (name, inp) not in driven]
+
     # ------------------------------------------------------------- pictures
     def to_graphviz(self) -> str:
         """The diagram in Graphviz DOT text (blocks, ports, wires)."""

@@ -7,9 +7,10 @@
     avblocks list [--blocks]
     avblocks diagram waypoints -o diagram.svg
     avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
+    avblocks edit formation
     avblocks --version
 
-Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep) and the
+Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, edit) and the
 ROS 2 commands (:mod:`avblocks.interfaces.ros2.cli`).
 """
 
@@ -20,6 +21,7 @@ import os
 import sys
 
 from .commands import diagram as _diagram
+from .commands import edit as _edit
 from .commands import listing as _listing
 from .commands import run as _run
 from .commands import sweep as _sweep
@@ -45,6 +47,7 @@ def build_parser():
     _listing.add_parser(sub)
     _diagram.add_parser(sub)
     _sweep.add_parser(sub)                                   # `avblocks sweep` (issue 14)
+    _edit.add_parser(sub)                                    # `avblocks edit` (issue 31)
     return ap
 
 

@@ -134,7 +134,7 @@ def make_app(service: EditorService, token: str):
 
     async def get_op(request):
         op = request.path_params["op"]
-        if op not in ("palette", "files"):
+        if op not in ("palette", "files", "new"):
             return JSONResponse({"error": {"message": f"GET {op}: use POST",
                                            "kind": "BadRequest"}}, status_code=405)
         return await call(service.call, op, {})

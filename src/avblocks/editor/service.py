@@ -350,6 +350,9 @@ class EditorService:
         self._lock = threading.Lock()
         self._palette = None
         self._lives = []
+        #: What the page opens first: ``{"path": ...}``, ``{"builtin": ...}``
+        #: or None (a new, empty diagram); ``avblocks edit NAME|FILE`` sets it.
+        self.initial = None
 
     # ------------------------------------------------------------ paths
     def _path(self, path, *, save=False) -> Path:
@@ -405,7 +408,13 @@ class EditorService:
         builtins = [{"name": n, "kind": p.suffix.lstrip("."),
                      "editable": p.suffix in (".yaml", ".yml")}
                     for n, p in builtin_scenarios().items()]
-        return {"root": str(self.root), "files": found, "builtins": builtins}
+        return {"root": str(self.root), "files": found, "builtins": builtins,
+                "initial": self.initial}
+
+    def new(self) -> dict:
+        """A new, empty document (parameters ``agents`` and ``seed``, a 30 s run)."""
+        return {"document": copy.deepcopy(EMPTY_DOCUMENT), "path": None,
+                "builtin": None, "revision": None}
 
     def load(self, path=None, builtin=None) -> dict:
         """The document of a file under the root, or of a built-in case study."""
@@ -452,9 +461,9 @@ class EditorService:
                                   status=409, kind="Conflict",
                                   hint="load it again (or save under another name)")
         text = _dump_document(document, full)
-        from ..core.atomic import write_bytes_atomic
+        from ..core.atomic import atomic_write_bytes
         full.parent.mkdir(parents=True, exist_ok=True)
-        write_bytes_atomic(full, text.encode("utf-8"))
+        atomic_write_bytes(full, text.encode("utf-8"))
         return {"path": self._rel(full), "revision": _revision(text.encode("utf-8")),
                 "draft": bool(draft)}
 
@@ -627,7 +636,8 @@ class EditorService:
         transports go through here)."""
         args = dict(args or {})
         fn = {
-            "palette": self.palette, "files": self.files, "load": self.load,
+            "palette": self.palette, "files": self.files, "new": self.new,
+            "load": self.load,
             "validate": self.validate, "save": self.save, "run": self.run,
             "status": self.status, "cancel": self.cancel, "signal": self.signal,
             "live": self.live, "export": self.export,

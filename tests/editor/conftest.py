@@ -29,6 +29,12 @@ def _need(*modules):
         pytest.skip(f"needs {missing} (pip install 'avblocks[editor]')")
 
 
+@pytest.fixture
+def need_editor_extra():
+    """``need("module", ...)``: skip without them (fail in CI)."""
+    return _need
+
+
 @dataclass
 class EditorHandle:
     url: str

@@ -1,0 +1,104 @@
+"""``av.edit()`` in a kernel, without a browser: custom messages go in and out
+through ipywidgets' comm layer (a recording ``comm`` such as a kernel installs)."""
+
+from __future__ import annotations
+
+import copy
+import itertools
+
+import numpy as np
+import pytest
+
+
+
+@pytest.fixture(autouse=True)
+def _needs_anywidget(need_editor_extra):
+    need_editor_extra("anywidget", "ipywidgets", "comm")
+
+
+@pytest.fixture
+def sent(monkeypatch):
+    """Every message the widgets send, as a kernel's comm would publish them."""
+    import comm
+    from comm.base_comm import BaseComm
+    out = []
+
+    class RecordingComm(BaseComm):
+        def publish_msg(self, msg_type, data=None, metadata=None, buffers=None, **keys):
+            out.append((msg_type, data))
+
+    monkeypatch.setattr(comm, "create_comm", lambda *a, **k: RecordingComm(*a, **k))
+    return out
+
+
+_ids = itertools.count(1)
+
+
+def _ask(w, sent, op, **args):
+    """Send ``{id, op, args}`` from the 'front end' through the widget's comm;
+    return the widget's reply."""
+    rid = next(_ids)
+    msg = {"content": {"comm_id": w.comm.comm_id,
+                       "data": {"method": "custom",
+                                "content": {"id": rid, "op": op, "args": args}}},
+           "buffers": []}
+    w.comm.handle_msg(msg)
+    replies = [d["content"] for t, d in sent if t == "comm_msg" and d.get("method") ==
+               "custom" and d["content"].get("id") == rid]
+    assert len(replies) == 1
+    return replies[0]
+
+
+def test_edits_through_messages_update_the_kernels_diagram(sent, tmp_path):
+    import avblocks as av
+    w = av.edit("formation", root=tmp_path)
+    assert w.diagram is not None
+    assert w.diagram["fleet"].block.output_ports["pose"].shape == (5, 3)
+    doc = copy.deepcopy(w.document)
+    doc["parameters"]["followers"] = 7                   # a team of 8
+    reply = _ask(w, sent, "validate", document=doc)
+    assert reply["ok"] and reply["result"]["ok"]
+    assert reply["result"]["signals"]["fleet.pose"]["shape"] == "(8, 3)"
+    assert w.document["parameters"]["followers"] == 7
+    assert w.diagram["fleet"].block.output_ports["pose"].shape == (8, 3)
+    res = av.simulate(w.diagram, **{**w.simulation, "t_final": 0.2})
+    assert res["fleet.pose"].shape[1:] == (8, 3)
+    # an invalid edit: errors come back, the diagram and document stay the last valid
+    bad = copy.deepcopy(doc)
+    bad["wires"] = [x for x in bad["wires"] if x[1] != "fleet.cmd"]
+    reply = _ask(w, sent, "validate", document=bad)
+    assert reply["ok"] and not reply["result"]["ok"]
+    assert {(e["block"], e["port"]) for e in reply["result"]["errors"]} == {("fleet", "cmd")}
+    assert w.errors == reply["result"]["errors"]
+    assert ["lf.cmd", "fleet.cmd"] in w.document["wires"]
+    # a failing operation answers {ok: false, error}
+    reply = _ask(w, sent, "save", path="../out.yaml", document=doc)
+    assert reply["ok"] is False and reply["error"]["kind"] == "OutsideFolder"
+    reply = _ask(w, sent, "nope")
+    assert reply["ok"] is False and reply["error"]["kind"] == "NotFound"
+
+
+def test_widget_runs_with_figures_as_data_urls(sent, tmp_path):
+    import avblocks as av
+    w = av.edit("nest", root=tmp_path)
+    reply = _ask(w, sent, "run", document=w.document, t_final=3)
+    rid = reply["result"]["run"]
+    w.service.wait(rid, 120)
+    st = _ask(w, sent, "status", run=rid)["result"]
+    assert st["status"] == "done"
+    url = st["figures"][0]["url"]
+    assert url.startswith("data:image/png;base64,")
+    import base64
+    assert base64.b64decode(url.split(",", 1)[1])[:4] == b"\x89PNG"
+    sig = _ask(w, sent, "signal", run=rid, name="gossip.informed")["result"]
+    assert np.asarray(sig["values"]).shape[0] == len(sig["t"])
+
+
+def test_widget_front_end_is_the_bundle(tmp_path):
+    import avblocks as av
+    from avblocks.editor.widget import WIDGET_JS
+    w = av.edit(None, root=tmp_path)
+    assert w.document["parameters"] == {"agents": 15, "seed": 1}
+    assert w.document["simulation"] == {"t_final": 30, "dt": 0.02}
+    if WIDGET_JS.is_file():
+        assert "render" in WIDGET_JS.read_text()

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 
-
 @pytest.fixture(autouse=True)
 def _needs_anywidget(need_editor_extra):
     need_editor_extra("anywidget", "ipywidgets", "comm")

@@ -23,7 +23,6 @@ references, generator mappings), exactly as in a scenario file.
 from __future__ import annotations
 
 import copy
-import hashlib
 import os
 import secrets
 import shutil
@@ -88,57 +87,53 @@ def scenario_data(document) -> dict:
     return {k: v for k, v in document.items() if k != EDITOR_KEY}
 
 
-def _revision(raw: bytes) -> str:
-    return hashlib.sha256(raw).hexdigest()[:32]
-
-
-def _read_document(path: Path) -> dict:
-    """The document of a scenario file (its mapping, ``editor`` key included)."""
+def _document_io():
+    """The scenario model's document functions (``load_document``,
+    ``save_document``): comment-keeping ruamel round trips."""
     try:
-        from ..scenarios.document import load_document
-    except ImportError:
-        load_document = None
-    if load_document is not None:
-        doc = load_document(path)
-        return _plain(getattr(doc, "data", doc))
-    from ..scenarios.files import _read
-    data = _read(path)
-    return data if isinstance(data, dict) else {}
+        from ..scenarios import document
+    except ImportError:          # TEMPORARY until the scenario model lands
+        return _PlainDocuments
+    return document
 
 
-def _plain(v):
-    """JSON-ready copy (ruamel's commented maps and sequences as dict/list)."""
-    if isinstance(v, dict):
-        return {str(k): _plain(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_plain(x) for x in v]
-    if isinstance(v, bool) or v is None or isinstance(v, (int, float, str)):
-        if type(v) not in (bool, int, float, str, type(None)):   # ruamel scalars
-            for t in (bool, int, float, str):
-                if isinstance(v, t):
-                    return t(v)
-        return v
-    return str(v)
+class _PlainDocuments:
+    """Stand-in for ``avblocks.scenarios.document`` (plain PyYAML, no
+    comments kept): same signatures, removed once that module is there."""
 
+    class DocumentChanged(ScenarioError):
+        pass
 
-def _dump_document(document, path: Path) -> str:
-    """The YAML text of ``document`` for ``path``: through the scenario
-    model's comment-keeping writer when it is there, else a plain dump with
-    the sections in the scenario file's order and ``editor`` last."""
-    try:
-        from ..scenarios.document import dump_document
-    except ImportError:
-        dump_document = None
-    if dump_document is not None:
-        return dump_document(document, path if path.is_file() else None)
-    import yaml
-    order = ["name", "description", "parameters", "blocks", "wires", "simulation",
-             "params", "movie", "outcome", "figures", "report"]
-    data = {k: document[k] for k in order if k in document}
-    data.update({k: v for k, v in document.items() if k not in data and k != EDITOR_KEY})
-    if EDITOR_KEY in document:
-        data[EDITOR_KEY] = document[EDITOR_KEY]
-    return yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+    @staticmethod
+    def _rev(raw):
+        import hashlib
+        return hashlib.sha256(raw).hexdigest()[:32]
+
+    @classmethod
+    def load_document(cls, name_or_path, root=None):
+        from ..scenarios.files import _read
+        from ..scenarios.loader import builtin_scenarios
+        b = builtin_scenarios()
+        builtin = name_or_path if name_or_path in b else None
+        p = b[builtin] if builtin else Path(root) / name_or_path
+        raw = p.read_bytes()
+        data = _read(p) or {}
+        return {"document": data, "path": None if builtin else str(name_or_path),
+                "builtin": builtin, "revision": cls._rev(raw)}
+
+    @classmethod
+    def save_document(cls, path, document, root, revision=None, draft=False, origin=None):
+        import yaml
+
+        from ..core.atomic import atomic_write_bytes
+        p = Path(root) / path
+        if p.is_file() and revision is not None and cls._rev(p.read_bytes()) != revision:
+            raise cls.DocumentChanged("the file changed on disk since it was loaded",
+                                      file=str(path))
+        text = yaml.safe_dump(dict(document), sort_keys=False).encode()
+        p.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_bytes(p, text)
+        return {"path": str(path), "revision": cls._rev(text), "draft": bool(draft)}
 
 
 # -------------------------------------------------------------- validation
@@ -436,36 +431,37 @@ class EditorService:
             if not full.is_file():
                 raise EditorError(f"no such file '{path}'", status=404, kind="NotFound")
             rel = self._rel(full)
-        raw = full.read_bytes()
-        doc = _read_document(full)
-        return {"document": doc, "path": rel, "builtin": builtin,
-                "revision": _revision(raw)}
+        doc = _document_io()
+        try:
+            return doc.load_document(builtin if builtin is not None else rel, root=self.root)
+        except ScenarioError as e:
+            raise EditorError(str(e), kind="ScenarioError") from None
 
-    def save(self, path, document, revision=None, draft=False) -> dict:
-        """Write the document as a scenario file under the root, atomically.
-        An invalid document is refused unless ``draft``; a file changed on
-        disk since ``revision`` is refused (409)."""
+    def save(self, path, document, revision=None, draft=False, origin=None) -> dict:
+        """Write the document as a scenario file under the root, atomically,
+        keeping the comments and forms of the file it was loaded from
+        (``origin``: a built-in name or a path under the root, when it is
+        not ``path`` itself). An invalid document is refused unless
+        ``draft``; a file changed on disk since ``revision`` is refused (409)."""
         full = self._path(path, save=True)
         scenario_data(document)
+        if origin is not None and not isinstance(origin, str):
+            raise EditorError("origin is a built-in name or a path", kind="BadRequest")
         if not draft:
-            v = self.validate(document, path=path)
-            if not v["ok"]:
+            errors, _signals, _built = self.check(document, path=path)
+            if errors:
                 raise EditorError("the diagram has errors; save it as a draft to keep "
-                                  "it as it is", kind="InvalidDiagram",
-                                  errors=v["errors"])
-        if full.exists():
-            if full.is_dir():
-                raise EditorError(f"'{path}' is a folder", kind="BadPath")
-            if revision is not None and _revision(full.read_bytes()) != revision:
-                raise EditorError(f"'{path}' changed on disk since it was loaded",
-                                  status=409, kind="Conflict",
-                                  hint="load it again (or save under another name)")
-        text = _dump_document(document, full)
-        from ..core.atomic import atomic_write_bytes
-        full.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(full, text.encode("utf-8"))
-        return {"path": self._rel(full), "revision": _revision(text.encode("utf-8")),
-                "draft": bool(draft)}
+                                  "it as it is", kind="InvalidDiagram", errors=errors)
+        if full.is_dir():
+            raise EditorError(f"'{path}' is a folder", kind="BadPath")
+        doc = _document_io()
+        try:                  # checked above: written as it is
+            return doc.save_document(self._rel(full), document, self.root,
+                                     revision=revision, draft=True, origin=origin)
+        except doc.DocumentChanged as e:
+            raise EditorError(str(e), status=409, kind="Conflict") from None
+        except ScenarioError as e:
+            raise EditorError(str(e), kind="ScenarioError") from None
 
     # ------------------------------------------------------- validation
     def _source(self, path=None) -> str:
@@ -481,30 +477,34 @@ class EditorService:
     def validate(self, document, path=None) -> dict:
         """Build the document with the library's own checks; every error found.
 
-        Blocks are constructed one by one, then wires connected one by one,
-        then every unconnected input listed, then the whole diagram built by
-        the scenario loader (shapes, sample times, algebraic loops,
+        The scenario loader builds it first (as ``avblocks run`` does); if
+        that fails, blocks are constructed one by one, then wires connected
+        one by one, then every unconnected input listed, and what remains is
+        the whole diagram's error (shapes, sample times, algebraic loops,
         ``params``): as many errors as the library can tell, each with what
         it names. The document itself is never changed."""
         t0 = time.perf_counter()
-        data = copy.deepcopy(scenario_data(document))
-        errors, signals = _validate(data, self._source(path))
+        errors, signals, _built = self.check(document, path)
         return {"ok": not errors, "errors": errors, "signals": signals,
                 "elapsed_ms": round(1e3 * (time.perf_counter() - t0), 2)}
 
-    def build(self, document, path=None, out=None):
+    def check(self, document, path=None):
+        """``(errors, signals, built)``: :meth:`validate`'s findings and,
+        for a valid document, ``(Diagram, simulate kwargs, Scenario)``."""
+        data = copy.deepcopy(scenario_data(document))
+        from ..scenarios.paths import safe_name
+        out = self.root / "avblocks-out" / safe_name(data.get("name") or "untitled")
+        return _validate(data, self._source(path), out)
+
+    def build(self, document, path=None):
         """``(Diagram, simulate kwargs, Scenario)`` of a valid document
         through the scenario loader; an :class:`EditorError` with the
         errors otherwise."""
-        data = copy.deepcopy(scenario_data(document))
-        v = _validate(data, self._source(path))
-        if v[0]:
-            raise EditorError("the diagram has errors", kind="InvalidDiagram", errors=v[0])
-        from ..scenarios.loader import Scenario
-        sc = Scenario(data, self._source(path))
-        with tempfile.TemporaryDirectory() as tmp:
-            d, sim = sc.build(output_dir=out or tmp)
-        return d, sim, sc
+        errors, _signals, built = self.check(document, path)
+        if errors:
+            raise EditorError("the diagram has errors", kind="InvalidDiagram",
+                              errors=errors)
+        return built
 
     # -------------------------------------------------------------- runs
     def run(self, document, backend="numpy", t_final=None, dt=None, path=None) -> dict:
@@ -522,11 +522,8 @@ class EditorService:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                     raise EditorError(f"{key} must be a number > 0", kind="BadRequest")
                 overrides[key] = float(v)
+        self.build(document, path)
         data = copy.deepcopy(scenario_data(document))
-        errors, _ = _validate(data, self._source(path))
-        if errors:
-            raise EditorError("the diagram has errors", kind="InvalidDiagram",
-                              errors=errors)
         with self._lock:
             running = sum(r.status == "running" for r in self._runs.values())
             if running >= 2:
@@ -651,47 +648,47 @@ class EditorService:
                               ) from None
 
 
-def _validate(data, source):
-    """``(errors, signals)`` of a scenario mapping (see :meth:`EditorService.validate`)."""
-    from ..core.diagram import Diagram
+def _validate(data, source, out):
+    """``(errors, signals, built)`` of a scenario mapping (see
+    :meth:`EditorService.validate`); ``built`` is ``(Diagram, simulate
+    kwargs, Scenario)`` when there is no error, else None. ``out``: the
+    folder the blocks may write to when run (nothing is written here)."""
     from ..scenarios.loader import Scenario
-    errors = []
     if not data.get("blocks"):
         # an empty drawing is not an error to mark on anything, but it does not run
         return ([{"message": "the diagram has no blocks yet", "kind": "ScenarioError",
                   "block": None, "port": None, "param": None, "wire": None,
-                  "cycle": None}], {})
+                  "cycle": None}], {}, None)
+    sc = Scenario(data, source)
     try:
-        Scenario(data, source).validate()
+        sc.validate()
     except AvError as e:
-        return [error_record(e)], {}
-    with tempfile.TemporaryDirectory() as out:
-        c = _Collector(data, source, out)
-        d = c.blocks()
-        c.wires(d)
-        for path in d.unconnected_inputs():
-            b, _, p = path.rpartition(".")
-            if not any(r["block"] == b and r["wire"] is not None for r in c.errors):
-                c.add(_unconnected(b, p), block=b, port=p)
-        errors = c.errors
-        for rec in errors:
-            j = rec["wire"]
-            if isinstance(j, int):
-                ws = data.get("wires") or []
-                rec["wire"] = list(ws[j]) if j < len(ws) and isinstance(ws[j], list) \
-                    else None
-        signals = _signals((n, h.block) for n, h in d.blocks.items())
-        if errors:
-            return errors, signals
-        try:
-            sc = Scenario(data, source)
-            d2, _sim = sc.build(output_dir=out)
-        except AvError as e:
-            return [_whole(e, data)], signals
-        compiled = d2.build()
-        signals = _signals(zip(compiled.names, compiled.blocks))
-    del Diagram
-    return [], signals
+        return [error_record(e)], {}, None
+    # the loader builds it as `avblocks run` would: when that passes, done
+    try:
+        d, sim = sc.build(output_dir=out)
+    except AvError as e:
+        whole = e
+    else:
+        return [], _signals((n, h.block) for n, h in d.blocks.items()), (d, sim, sc)
+    # it failed: piece by piece, to find every error (not only the first)
+    c = _Collector(data, source, out)
+    d = c.blocks()
+    c.wires(d)
+    for path in d.unconnected_inputs():
+        b, _, p = path.rpartition(".")
+        if not any(r["block"] == b and r["port"] == p for r in c.errors):
+            c.add(_unconnected(b, p), block=b, port=p)
+    errors = c.errors
+    ws = data.get("wires") or []
+    for rec in errors:
+        j = rec["wire"]
+        if isinstance(j, int):
+            rec["wire"] = list(ws[j]) if j < len(ws) and isinstance(ws[j], list) else None
+    signals = _signals((n, h.block) for n, h in d.blocks.items())
+    if not errors:             # only the whole diagram is wrong (a loop, params...)
+        errors = [_whole(whole, data)]
+    return errors, signals, None
 
 
 def _unconnected(block, port):

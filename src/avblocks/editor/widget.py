@@ -86,12 +86,17 @@ def _widget_class():
             ``save``) updates :attr:`document` and :attr:`diagram`."""
             args = dict(args)
             if op == "validate":
+                import time
+                t0 = time.perf_counter()
                 doc = args.get("document")
-                result = self.service.validate(doc, path=args.get("path", self.path))
-                self.errors = result["errors"]
-                if result["ok"]:
-                    self._adopt(doc)
-                return result
+                errors, signals, built = self.service.check(doc,
+                                                            args.get("path", self.path))
+                self.errors = errors
+                if built is not None:
+                    self.diagram = built[0]
+                    self.document = copy.deepcopy(doc)
+                return {"ok": not errors, "errors": errors, "signals": signals,
+                        "elapsed_ms": round(1e3 * (time.perf_counter() - t0), 2)}
             if op == "status" and "run" in args:
                 return self.service.status(args["run"])
             result = self.service.call(op, args)
@@ -103,12 +108,11 @@ def _widget_class():
                 self._adopt(args.get("document"), check=True)
             return result
 
-        def _adopt(self, doc, check=False):
-            if check and not self.service.validate(doc, path=self.path)["ok"]:
-                self.document = copy.deepcopy(doc)
-                return
-            d, _sim, _sc = self.service.build(doc, path=self.path)
-            self.diagram = d
+        def _adopt(self, doc, check=True):
+            errors, _signals, built = self.service.check(doc, self.path)
+            self.errors = errors
+            if built is not None:
+                self.diagram = built[0]
             self.document = copy.deepcopy(doc)
 
         @property
@@ -174,8 +178,5 @@ def edit(diagram_or_file=None, *, root=None, blocks=(), height=640):
                               status=404, kind="NotFound")
         doc, path = loaded["document"], loaded["path"]
     w = cls(service, doc, path=path, height=int(height))
-    v = service.validate(doc, path=path)
-    w.errors = v["errors"]
-    if v["ok"]:
-        w.diagram = service.build(doc, path=path)[0]
+    w._adopt(doc)
     return w

@@ -45,3 +45,11 @@ def test_export_refuses_an_invalid_diagram(tmp_path):
     with pytest.raises(EditorError) as e:
         service.export(doc, format="python")
     assert e.value.errors[0]["port"] == "cmd"
+
+
+def test_docs_page_is_the_protocol_file():
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[2]
+    api = (root / "src/avblocks/editor/API.md").read_text()
+    page = (root / "docs/editor-api.md").read_text()
+    assert page.endswith(api.split("\n", 1)[1])          # all but the title

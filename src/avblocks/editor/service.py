@@ -623,10 +623,7 @@ class EditorService:
             r.discard()
         self._runs.clear()
         for v in self._lives:
-            try:
-                v._cmds.put(("stop",))
-            except Exception:  # noqa: BLE001 - best effort at shutdown
-                pass
+            v.stop()
 
     # ------------------------------------------------------------ dispatch
     def call(self, op, args) -> dict:

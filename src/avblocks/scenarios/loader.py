@@ -43,7 +43,7 @@ from pathlib import Path
 
 from ..core.diagram import Diagram
 from ..core.errors import AvError, ScenarioError, did_you_mean
-from ._numeric import is_numeric_key, resolve
+from ._numeric import resolve, split_overrides
 from .files import _read
 from .generators import GENERATORS
 from .limits import (  # noqa: F401  (as before)
@@ -58,7 +58,7 @@ from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie", "params", "outcome", "figures", "report"}
+             "movie", "params", "outcome", "figures", "report", "editor"}
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
 REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
@@ -71,6 +71,63 @@ _SIM_SHORTCUTS = {"t_final", "dt", "log_every", "solver"}
 WRITE_KEYS = {"path", "movie", "file", "filename", "output", "save", "save_path"}
 #: ... and files it reads: they must lie under the scenario file's folder.
 READ_KEYS = {"background", "image", "map", "geojson"}
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def check_editor(section, source="<scenario>"):
+    """The ``editor:`` section (the block-diagram editor's layout): checked
+    lightly, never used to build or run. ``layout`` maps block names to
+    ``[x, y]``; ``groups`` maps group names to ``{blocks: [names...],
+    position: [x, y], label: str, groups: [...]}``; ``viewport`` is
+    ``[x, y, zoom]``. Other keys are kept and ignored. A malformed section
+    is a :class:`ScenarioError` naming the entry."""
+    if section is None:
+        return
+    if not isinstance(section, dict):
+        raise ScenarioError("'editor' must be a mapping (layout, groups, viewport)",
+                            file=source, entry="editor")
+
+    def point(v, where, n=2):
+        if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
+            raise ScenarioError(f"expected a list of {n} numbers, found {v!r:.60}",
+                                file=source, entry=where)
+
+    layout = section.get("layout")
+    if layout is not None:
+        if not isinstance(layout, dict):
+            raise ScenarioError("'editor.layout' must map block names to [x, y]",
+                                file=source, entry="editor.layout")
+        for k, v in layout.items():
+            point(v, f"editor.layout.{k}")
+    groups = section.get("groups")
+    if groups is not None:
+        if not isinstance(groups, dict):
+            raise ScenarioError("'editor.groups' must map group names to "
+                                "{blocks: [...], position: [x, y]}", file=source,
+                                entry="editor.groups")
+        for k, g in groups.items():
+            where = f"editor.groups.{k}"
+            if not isinstance(g, dict):
+                raise ScenarioError("a group is a mapping {blocks: [...], position: [x, y]}",
+                                    file=source, entry=where)
+            blocks = g.get("blocks", [])
+            if not (isinstance(blocks, list) and all(isinstance(b, str) for b in blocks)):
+                raise ScenarioError("'blocks' must be a list of block names",
+                                    file=source, entry=f"{where}.blocks")
+            if g.get("position") is not None:
+                point(g["position"], f"{where}.position")
+            if g.get("label") is not None and not isinstance(g["label"], str):
+                raise ScenarioError("'label' must be text", file=source,
+                                    entry=f"{where}.label")
+            sub = g.get("groups", [])
+            if not (isinstance(sub, list) and all(isinstance(b, str) for b in sub)):
+                raise ScenarioError("'groups' must be a list of group names",
+                                    file=source, entry=f"{where}.groups")
+    if section.get("viewport") is not None:
+        point(section["viewport"], "editor.viewport", 3)
 
 
 # ------------------------------------------------------------------ registry
@@ -121,6 +178,14 @@ class Scenario:
         return str(self.data.get("description", ""))
 
     # ----------------------------------------------------------- values
+    def value(self, v, where="value", params=None):
+        """A file value (``$parameter`` references, generators) resolved with
+        this scenario's parameters (``params`` on top), as :meth:`build`
+        resolves a block argument."""
+        self.params = {**dict(self.data.get("parameters") or {}), **dict(params or {})}
+        self._generated_bytes = 0
+        return self._value(v, where)
+
     def _value(self, v, where):
         if isinstance(v, str):
             m = _REF.match(v.strip())
@@ -186,14 +251,25 @@ class Scenario:
                                 hint="use fewer agents or blocks (AVBLOCKS_MAX_MEMORY)")
         return value
 
+    def accepts(self, key) -> bool:
+        """Whether ``key`` is one of this scenario's parameters."""
+        return key in (self.data.get("parameters") or {})
+
     def with_overrides(self, overrides: dict) -> Scenario:
-        """A copy with ``--set`` values applied: parameter names, or
-        ``simulation.<key>``."""
+        """A copy with ``--set`` values applied: parameter names,
+        ``simulation.<key>``, the shortcuts ``t_final``/``dt``/``log_every``/
+        ``solver``, or ``block.param`` (checked against the built diagram by
+        :meth:`build`). The copy is validated when it is built."""
         import copy
-        self.validate()
+        if not isinstance(self.data, dict) or not isinstance(
+                self.data.get("parameters") or {}, dict):
+            self.validate()                 # raises, naming what is wrong
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
-        for key, val in overrides.items():
+        plain, numeric = split_overrides(overrides)
+        if numeric:                         # block.param: checked on build
+            data["params"] = {**(data.get("params") or {}), **numeric}
+        for key, val in plain.items():
             if key.startswith("simulation."):
                 sub = key.split(".", 1)[1]
                 if sub not in _SIM_KEYS:
@@ -202,8 +278,6 @@ class Scenario:
                                         hint=did_you_mean(sub, _SIM_KEYS)
                                         + f"known: {sorted(_SIM_KEYS)}")
                 data["simulation"] = {**(data.get("simulation") or {}), sub: val}
-            elif is_numeric_key(key):          # block.param: checked on build
-                data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
             elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
@@ -217,6 +291,25 @@ class Scenario:
                                       "block.param)")
         data["parameters"] = params
         return Scenario(data, self.source)
+
+    def hooks(self, diagram, sim):
+        """The ``outcome``/``figures`` of this scenario built as ``diagram``
+        with simulate kwargs ``sim`` (:mod:`avblocks.scenarios.report`):
+        its own sections, else those of the case study its ``report:`` names."""
+        from ._report_schema import logged_signals
+        from .report import hooks_from_data, hooks_from_report
+        d = self.data
+        hooks = hooks_from_data(d.get("outcome"), d.get("figures"), diagram, self.source,
+                                log=sim.get("log"))
+        if d.get("report"):
+            hooks = hooks_from_report(d["report"], d.get("parameters") or {}, hooks,
+                                      logged_signals(diagram, sim.get("log"), self.source),
+                                      self.source)
+        return hooks
+
+    def movie(self) -> dict:
+        """The movie options, values resolved (after :meth:`build`)."""
+        return self._value(self.movie_options(), "movie")       # generators too
 
     # ------------------------------------------------------------- build
     def validate(self):
@@ -238,6 +331,7 @@ class Scenario:
                                 entry="report",
                                 hint=did_you_mean(shown, REPORTS)
                                 + f"reports: {list(REPORTS)}")
+        check_editor(d.get("editor"), self.source)
         from ._report_schema import check_sections
         check_sections(d.get("outcome"), d.get("figures"), self.source)
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:

@@ -141,6 +141,17 @@ def test_unknown_out_of_range_parameters_and_types(editor_server):
     assert by_block["fleet"]["param"] == truth.value.param == "v_max"
     assert by_block["fleet"]["message"] == str(truth.value)
     assert "vehicles.Unicycle" in by_block["ghost"]["message"]     # did you mean
+    # a generator's failure names the block and argument, with the loader's words
+    doc["blocks"]["more"] = {"type": "blocks.Gain",
+                             "k": {"random_poses": {"n": -1, "area": [1, 1]}}}
+    doc["wires"].append(["fleet.pose", "nowhere.u"])
+    body = _errors(editor_server, doc)
+    gen, = [e for e in body["errors"] if e["block"] == "more"]
+    assert (gen["param"], gen["kind"]) == ("k", "ParameterError")
+    assert gen["message"].startswith("blocks.more.k: 'random_poses' failed: in parameter "
+                                     "'n': out of range")
+    wire, = [e for e in body["errors"] if e["wire"] == ["fleet.pose", "nowhere.u"]]
+    assert "unknown block 'nowhere'" in wire["message"]
     # the document came back unaltered: validation never edits it
     assert doc["blocks"]["drive"]["gian"] == 2.0
 
@@ -202,6 +213,38 @@ def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path
     b = _summary(tmp, editor_server.root / "mine" / f"{name}.yaml", ["t_final=6"])
     for k in ("status", "agents", "simulated_s", "outcome", "numbers"):
         assert a[k] == b[k], k
+
+
+@pytest.mark.parametrize("name", ["formation", "flocking"])
+def test_save_as_keeps_the_files_comments_and_changes_only_the_edit(editor_server, name):
+    pytest.importorskip("avblocks.scenarios.document")   # the scenario model's writer
+    status, loaded = editor_server.post("load", {"builtin": name})
+    doc = loaded["document"]
+    status, saved = editor_server.post("save", {"path": f"mine/{name}.yaml",
+                                                "document": doc, "origin": name})
+    assert status == 200, saved
+    # unchanged, "save as" from the built-in keeps its file as it is (comments,
+    # anchors, references): the bytes of the shipped file
+    from avblocks.scenarios.loader import builtin_scenarios
+    shipped = builtin_scenarios()[name].read_text()
+    assert (editor_server.root / "mine" / f"{name}.yaml").read_text() == shipped
+    # an edit changes only what was edited
+    doc2 = copy.deepcopy(doc)
+    first = next(iter(doc2["parameters"]))
+    doc2["parameters"]["seed"] = 7
+    status, saved2 = editor_server.post("save", {"path": f"mine/{name}.yaml",
+                                                 "document": doc2,
+                                                 "revision": saved["revision"]})
+    assert status == 200, saved2
+    text = (editor_server.root / "mine" / f"{name}.yaml").read_text()
+    changed = [(a, b) for a, b in zip(shipped.splitlines(), text.splitlines()) if a != b]
+    assert len(changed) == 1 and "seed" in changed[0][1] and "7" in changed[0][1], changed
+    assert first in text
+    status, saved = editor_server.post("save", {"path": f"mine/{name}.yaml",
+                                                "document": doc,
+                                                "revision": saved2["revision"]})
+    assert status == 200                       # and back: the shipped file again
+    assert (editor_server.root / "mine" / f"{name}.yaml").read_text() == shipped
 
 
 # ------------------------------------------------------------------ runs

@@ -166,9 +166,15 @@ def error_record(e: AvError, *, block=None, port=None, param=None, wire=None,
     inner = e.__context__ if isinstance(e, ScenarioError) else None
     src = inner if isinstance(inner, AvError) else e
     eb, ep, ew = _where(getattr(e, "entry", None))
+    message = str(e)
+    where = "".join(f"{x}: " for x in (getattr(e, "file", None), getattr(e, "entry", None))
+                    if x is not None)
+    if src is not e and e.cause == where + str(src):
+        message = str(src)             # the loader only added where it was
+    elif isinstance(e, ScenarioError) and e.file and message.startswith(f"{e.file}: "):
+        message = message[len(e.file) + 2:]    # the page knows which file it is
     rec = {
-        "message": str(src) if src is not e and not isinstance(src, ScenarioError)
-        else str(e),
+        "message": message,
         "kind": type(src).__name__,
         "block": block or eb or _leaf(getattr(src, "block", None)),
         "port": port or getattr(src, "port", None),
@@ -281,13 +287,18 @@ class _Collector:
                                        entry=f"wires[{j}]"), wire=j)
                 continue
             refs = []
+            drawn = self.data.get("blocks") or {}
+            unknown = [s.partition(".")[0] for s in w if s.partition(".")[0] not in drawn]
+            if unknown:
+                from ..core.errors import WiringError, did_you_mean
+                self.add(WiringError(f"wire names unknown block '{unknown[0]}'",
+                                     hint=did_you_mean(unknown[0], drawn)
+                                     + f"blocks: {sorted(drawn)}"), wire=j)
+                continue
             for s in w:
                 b, _, p = s.partition(".")
                 if b not in d.blocks:
-                    if b in (self.data.get("blocks") or {}):
-                        break                   # that block has its own error
-                    self.add(AvError(f"wire names unknown block '{b}'", block=b), wire=j)
-                    break
+                    break                       # that block has its own error
                 try:
                     refs.append(d[b].port(p))
                 except AvError as e:

@@ -139,7 +139,7 @@ def _data_of(src):
 def split_overrides(values: dict):
     """``(scenario overrides, block parameters)`` from override names
     (:func:`avblocks.scenarios._numeric.split_overrides`)."""
-    from ..scenarios._numeric import split_overrides as split
+    from ..scenarios.targets import split_overrides as split
     return split(values)
 
 

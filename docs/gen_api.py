@@ -31,6 +31,8 @@ PAGES = [
     ("live", "avblocks.viz.live", "The live browser view."),
     ("scenarios", "avblocks.scenarios", "Scenario files and the case studies."),
     ("sweep", "avblocks.sweep", "Parameter sweeps and Monte Carlo on Dask."),
+    ("editor", "avblocks.editor",
+     "The browser diagram editor: its operations, its server, the Jupyter widget."),
     ("rl", "avblocks.rl", "Learning: diagrams as PettingZoo/Gymnasium environments, PPO, APG."),
     ("ros2", "avblocks.interfaces.ros2", "ROS 2 robots over Zenoh."),
     ("mujoco", "avblocks.interfaces.mujoco", "MuJoCo physics world and cameras."),

@@ -14,10 +14,8 @@ the docs page "The editor's JSON API").
 
 from __future__ import annotations
 
-__all__ = ["edit"]
+from .server import EditorServer
+from .service import EditorError, EditorService
+from .widget import edit
 
-
-def edit(diagram_or_file=None, **options):
-    """The editor in a Jupyter cell (see :func:`avblocks.editor.widget.edit`)."""
-    from .widget import edit as _edit
-    return _edit(diagram_or_file, **options)
+__all__ = ["edit", "EditorService", "EditorServer", "EditorError"]

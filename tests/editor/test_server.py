@@ -97,6 +97,31 @@ def test_a_wrong_wire_names_block_port_wire_with_the_librarys_message(editor_ser
     assert body["signals"]["fleet.pose"]["shape"] == "(4, 3)"   # shapes still shown
 
 
+def test_an_agent_count_mismatch_names_the_wire(editor_server):
+    import avblocks as av
+    from avblocks.controllers import PointToPoint
+    from avblocks.vehicles import Unicycle
+    six = copy.deepcopy(P2P)
+    six["n"] = 6
+    six["waypoints"]["random_waypoints"]["n"] = 6
+    doc = _doc({"fleet": FLEET, "drive": six},
+               [["fleet.pose", "drive.pose"], ["drive.cmd", "fleet.cmd"]])
+    body = _errors(editor_server, doc)
+    d = av.Diagram("drawn")
+    fleet = d.add(Unicycle(pose0=np.zeros((4, 3))), name="fleet")
+    drive = d.add(PointToPoint(np.zeros((6, 2, 2)), n=6), name="drive")
+    truths = []
+    for a, b in ((fleet.pose, drive.pose), (drive.cmd, fleet.cmd)):
+        with pytest.raises(ShapeError) as t:
+            d.connect(a, b)
+        truths.append(str(t.value))
+    assert [e["message"] for e in body["errors"]] == truths
+    assert "agent count mismatch" in truths[0]
+    assert [e["wire"] for e in body["errors"]] == doc["wires"]      # both wires marked
+    assert [(e["block"], e["port"]) for e in body["errors"]] == [("drive", "pose"),
+                                                                 ("fleet", "cmd")]
+
+
 def test_every_unconnected_input_is_reported(editor_server):
     doc = _doc({"fleet": FLEET, "drive": P2P}, [])
     body = _errors(editor_server, doc)

@@ -401,7 +401,9 @@ class EditorService:
         from ..scenarios.loader import builtin_scenarios
         skip = {"avblocks-out", "node_modules", "__pycache__", ".git", ".venv"}
         found = []
-        for dirpath, dirnames, filenames in os.walk(self.root):
+        for seen, (dirpath, dirnames, filenames) in enumerate(os.walk(self.root)):
+            if seen >= 5000:            # started in a huge tree: list what was seen
+                break
             dirnames[:] = sorted(d for d in dirnames if d not in skip
                                  and not d.startswith("."))
             for f in sorted(filenames):

@@ -155,14 +155,15 @@ class Diagram:
                               expected="e.g. 'fleet'", found=repr(name))
         if name in self._handles:
             raise WiringError("a block of that name exists already", block=name)
-        for h in self._handles.values():
-            if h.block is block:
-                raise WiringError(f"this block object is already in the diagram as "
-                                  f"'{h.name}'", block=name,
-                                  hint="create a second block instance")
+        ref = _OWNER.get(block) if isinstance(block, Block) else None
+        other = ref() if ref is not None else None
+        if other is self or isinstance(block, Diagram):   # (a block: no scan of all)
+            for h in self._handles.values():
+                if h.block is block:
+                    raise WiringError(f"this block object is already in the diagram as "
+                                      f"'{h.name}'", block=name,
+                                      hint="create a second block instance")
         if isinstance(block, Block):
-            ref = _OWNER.get(block)
-            other = ref() if ref is not None else None
             if other is not None and other is not self:
                 raise WiringError("this block object is already in another diagram",
                                   block=name,

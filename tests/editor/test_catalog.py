@@ -9,9 +9,11 @@ import textwrap
 import numpy as np
 import pytest
 
+import avblocks as av
+from avblocks import ScenarioError
 from avblocks.core.declarations import doc_sections
 from avblocks.editor.catalog import FAMILIES, build_template, palette
-from avblocks.scenarios import GENERATORS, block_registry
+from avblocks.scenarios import GENERATORS, Scenario, block_registry
 
 
 @pytest.fixture(scope="module")
@@ -142,8 +144,19 @@ def test_a_user_module_is_a_family_of_its_own(tmp_path, monkeypatch):
         __all__ = ["Boost"]
     '''))
     monkeypatch.syspath_prepend(str(tmp_path))
+    data = {"name": "lab", "parameters": {"agents": 4},
+            "blocks": {"src": {"type": "blocks.Constant", "value": [[1.0, 2.0]] * 4},
+                       "boost": {"type": "mylab.blocks.Boost", "n": "$agents",
+                                 "gain": 3.0}},
+            "wires": [["src.y", "boost.u"]], "simulation": {"t_final": 0.1}}
     try:
         pal = palette(extra_modules=("mylab.blocks",))
+        with pytest.raises(ScenarioError, match="unknown block type 'mylab.blocks.Boost'"):
+            Scenario(data, "<lab>").build(output_dir=tmp_path / "o")
+        d, sim = Scenario(data, "<lab>", modules=("mylab.blocks",)).build(
+            output_dir=tmp_path / "o")
+        res = av.simulate(d, progress=False, **sim)
+        assert np.allclose(res["boost.y"][-1], [[3.0, 6.0]] * 4)
     finally:
         sys.modules.pop("mylab.blocks", None)
         sys.modules.pop("mylab", None)

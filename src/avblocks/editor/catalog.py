@@ -15,14 +15,12 @@ template (its ``example``, or derived from its required arguments) with
 
 from __future__ import annotations
 
-import importlib
 import inspect
 import json
 import math
 
-from ..core.block import Block
 from ..core.declarations import constructor_parameters, doc_sections, shape_text
-from ..core.errors import AvError, ScenarioError
+from ..core.errors import AvError
 
 #: Families in the palette's order (then each ``--blocks`` module).
 FAMILIES = ("vehicles", "controllers", "environment", "blocks", "viz", "interfaces")
@@ -160,28 +158,12 @@ def _generators() -> list:
     return out
 
 
-def module_blocks(module) -> dict:
-    """``{"module.Class": class}`` of the public block classes a user's
-    module defines (its ``__all__``, else its public names)."""
-    try:
-        mod = importlib.import_module(module)
-    except ImportError as e:
-        raise ScenarioError(f"cannot import the block module '{module}': {e}",
-                            entry="--blocks") from None
-    out = {}
-    for name in getattr(mod, "__all__", [n for n in dir(mod) if not n.startswith("_")]):
-        obj = getattr(mod, name, None)
-        if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
-            out[f"{module}.{name}"] = obj
-    return out
-
-
 def palette(extra_modules=()) -> dict:
     """The palette JSON of API.md: ``{"families": [...], "generators":
     [...], "version": str}``; ``extra_modules``: module names whose blocks
     form a family each (``--blocks mypackage.blocks``)."""
     from .. import __version__
-    from ..scenarios import block_registry
+    from ..scenarios.loader import block_registry, module_blocks
     reg = block_registry()
     families = []
     for fam in FAMILIES:

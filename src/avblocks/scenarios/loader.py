@@ -131,10 +131,33 @@ def check_editor(section, source="<scenario>"):
 
 
 # ------------------------------------------------------------------ registry
-def block_registry(code_blocks=False) -> dict:
+def module_blocks(module) -> dict:
+    """``{"module.Class": class}`` of the public block classes a user's
+    module defines (its ``__all__``, else its public names): the blocks of
+    ``avblocks edit --blocks mypackage.blocks``. Importing the module runs
+    it: it is named by the user on the command line, never by a file."""
+    import importlib
+
+    from ..core.block import Block
+    try:
+        mod = importlib.import_module(str(module))
+    except ImportError as e:
+        raise ScenarioError(f"cannot import the block module '{module}': {e}",
+                            entry="--blocks") from None
+    out = {}
+    for name in getattr(mod, "__all__", [n for n in dir(mod) if not n.startswith("_")]):
+        obj = getattr(mod, name, None)
+        if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+            out[f"{module}.{name}"] = obj
+    return out
+
+
+def block_registry(code_blocks=False, modules=()) -> dict:
     """``{"vehicles.Unicycle": class, ...}`` for every public block class
     that a scenario file can name (``code_blocks=True``: also those that
-    take Python code, such as ``blocks.Function``)."""
+    take Python code, such as ``blocks.Function``; ``modules``: user
+    modules whose blocks are named ``"module.Class"``, see
+    :func:`module_blocks`)."""
     import importlib
 
     from ..core.block import Block
@@ -151,6 +174,8 @@ def block_registry(code_blocks=False) -> dict:
                 if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
+    for m in modules or ():
+        reg.update(module_blocks(m))
     return reg
 
 
@@ -161,6 +186,8 @@ class Scenario:
     data: dict
     source: str = "<dict>"
     params: dict = field(default_factory=dict)
+    #: user block modules whose blocks the file may name (``module.Class``)
+    modules: tuple = ()
 
     @property
     def name(self) -> str:
@@ -290,7 +317,7 @@ class Scenario:
                                       "(or t_final, dt, log_every, simulation.<setting>, "
                                       "block.param)")
         data["parameters"] = params
-        return Scenario(data, self.source)
+        return Scenario(data, self.source, modules=self.modules)
 
     def hooks(self, diagram, sim):
         """The ``outcome``/``figures`` of this scenario built as ``diagram``
@@ -408,7 +435,7 @@ class Scenario:
         self.validate()
         self.params = dict(self.data.get("parameters") or {})
         self._generated_bytes = 0
-        reg = block_registry()
+        reg = block_registry(modules=self.modules)
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():
             where = f"blocks.{name}"

@@ -59,3 +59,20 @@ def test_edit_refuses_a_file_outside_its_folder(tmp_path, need_editor_extra):
                        env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
     assert r.returncode == 2
     assert "outside the editor's folder" in r.stderr
+
+
+def test_a_missing_extra_names_the_install_command(tmp_path):
+    code = ("import sys; sys.modules['uvicorn'] = None\n"
+            "from avblocks.cli import main\n"
+            "sys.exit(main(['edit', '--no-browser']))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
+    assert r.returncode == 2
+    assert 'pip install "avblocks[editor]"' in r.stderr
+    assert "Traceback" not in r.stderr
+    code = ("import sys; sys.modules['anywidget'] = None\n"
+            "import avblocks as av\n"
+            "try:\n    av.edit()\nexcept av.AvError as e:\n    print(e)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
+    assert 'pip install "avblocks[editor]"' in r.stdout, r.stderr

@@ -166,3 +166,16 @@ def test_the_editor_section_is_layout_only(tmp_path):
         with pytest.raises(av.ScenarioError) as e:
             load_scenario(f)
         assert e.value.entry == entry
+
+
+def test_an_invalid_draft_is_saved_and_loaded_back_as_it_is(tmp_path):
+    doc = {"name": "draft", "parameters": {"agents": 3},
+           "blocks": {"fleet": {"type": "vehicles.Unicycl", "pose0": "$agents"}},
+           "wires": [["fleet.pose", "nowhere.u"]], "editor": {"layout": {"fleet": [1, 2]}}}
+    with pytest.raises(av.ScenarioError, match="did you mean 'vehicles.Unicycle'"):
+        save_document("d.yaml", doc, tmp_path)
+    save_document("d.yaml", doc, tmp_path, draft=True)
+    assert load_document("d.yaml", root=tmp_path)["document"] == doc
+    (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
+    with pytest.raises(av.ScenarioError, match="mapping of sections"):
+        load_document("list.yaml", root=tmp_path)

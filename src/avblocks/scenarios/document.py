@@ -97,8 +97,9 @@ def load_document(name_or_path, root=None) -> dict:
     -------
     dict
         ``{"document": {...}, "path": str or None, "builtin": str or None,
-        "revision": str}``: the file's mapping as plain JSON values (checked
-        as ``avblocks run`` checks a file's structure), the path read
+        "revision": str}``: the file's mapping as plain JSON values (read
+        as safely as ``avblocks run`` reads it; not validated, so a draft
+        loads as it was saved), the path read
         (relative to ``root`` for files under it; None for a built-in), the
         built-in's name, and the revision of the bytes read.
 
@@ -107,14 +108,15 @@ def load_document(name_or_path, root=None) -> dict:
     ScenarioError
         An unknown name, a file outside ``root``, a file that is not a
         scenario (naming the entry), or a built-in case study that exists
-        only as Python code.
+        only as Python code; a file that is not a mapping.
     """
-    from .loader import Scenario
     p, builtin = _resolve(name_or_path, root)
     raw = p.read_bytes()
-    data = _read(p)
+    data = _read(p)                   # size, encoding, YAML safety: as `avblocks run`
     data = {} if data is None else data
-    Scenario(data, str(p)).validate()
+    if not isinstance(data, dict):    # a draft may be invalid, but it is a mapping
+        raise ScenarioError("a scenario file is a mapping of sections (name, blocks, "
+                            f"wires, ...), found {type(data).__name__}", file=str(p))
     path = None
     if builtin is None:
         path = str(p)

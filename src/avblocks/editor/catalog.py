@@ -55,9 +55,11 @@ def _jsonable(v):
 
 
 def _summary(cls) -> str:
+    """The docstring's first sentence (a full stop followed by a capital
+    letter ends it; "eq. 1" does not)."""
+    import re
     para = " ".join((cls.__doc__ or "").strip().split("\n\n")[0].split())
-    cut = para.find(". ")
-    return para[:cut + 1] if cut >= 0 else para
+    return re.split(r"(?<=\.)\s+(?=[A-Z`(])", para, maxsplit=1)[0]
 
 
 def _random(kind, **extra):

@@ -242,7 +242,6 @@ def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path
 
 @pytest.mark.parametrize("name", ["formation", "flocking"])
 def test_save_as_keeps_the_files_comments_and_changes_only_the_edit(editor_server, name):
-    pytest.importorskip("avblocks.scenarios.document")   # the scenario model's writer
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]
     status, saved = editor_server.post("save", {"path": f"mine/{name}.yaml",

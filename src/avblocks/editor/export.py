@@ -32,9 +32,10 @@ def _ident(name, taken, prefix):
 
 
 class _Writer:
-    def __init__(self, data):
+    def __init__(self, data, modules=()):
         from ..scenarios.generators import GENERATORS
         self.data = data
+        self.modules = tuple(modules)
         self.generators = GENERATORS
         self.taken = {"av", "np", "GENERATORS", "diagram", "res", "parse_world"}
         self.uses_generators = False
@@ -81,12 +82,14 @@ class _Writer:
         imports = {}
         handles = {}
         from ..scenarios.loader import block_registry
-        reg = block_registry()
+        own = block_registry()
+        reg = {**block_registry(modules=self.modules), **own}
         for name, spec in blocks.items():
             typ = spec["type"]
             cls = reg[typ]
-            fam = typ.split(".", 1)[0]
-            imports.setdefault(fam, set()).add(cls.__name__)
+            module = typ.rpartition(".")[0]
+            module = f"avblocks.{module}" if typ in own else module
+            imports.setdefault(module, set()).add(cls.__name__)
             handles[name] = _ident(name, self.taken, "b_")
         body = []
         body.append(f"diagram = av.Diagram({d.get('name', 'diagram')!r})")
@@ -131,8 +134,8 @@ class _Writer:
         lines.append('"""')
         lines.append("")
         lines.append("import avblocks as av")
-        for fam in sorted(imports):
-            lines.append(f"from avblocks.{fam} import {', '.join(sorted(imports[fam]))}")
+        for module in sorted(imports):
+            lines.append(f"from {module} import {', '.join(sorted(imports[module]))}")
         if self.uses_generators:
             lines.append("from avblocks.scenarios.generators import GENERATORS")
         if self.uses_world:
@@ -169,8 +172,9 @@ def _wrap(text, width=76):
     return out
 
 
-def to_python(data: dict) -> str:
+def to_python(data: dict, modules=()) -> str:
     """The Python script that builds and simulates the scenario mapping
     ``data`` (a valid one: block types from the registry, wires as
-    ``"block.port"`` pairs)."""
-    return _Writer(data).script()
+    ``"block.port"`` pairs); ``modules``: the user block modules its types
+    may come from (imported by the script under their own names)."""
+    return _Writer(data, modules).script()

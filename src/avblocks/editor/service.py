@@ -87,56 +87,6 @@ def scenario_data(document) -> dict:
     return {k: v for k, v in document.items() if k != EDITOR_KEY}
 
 
-def _document_io():
-    """The scenario model's document functions (``load_document``,
-    ``save_document``): comment-keeping ruamel round trips."""
-    try:
-        from ..scenarios import document
-    except ImportError:          # TEMPORARY until the scenario model lands
-        return _PlainDocuments
-    return document
-
-
-class _PlainDocuments:
-    """Stand-in for ``avblocks.scenarios.document`` (plain PyYAML, no
-    comments kept): same signatures, removed once that module is there."""
-
-    class DocumentChanged(ScenarioError):
-        pass
-
-    @staticmethod
-    def _rev(raw):
-        import hashlib
-        return hashlib.sha256(raw).hexdigest()[:32]
-
-    @classmethod
-    def load_document(cls, name_or_path, root=None):
-        import yaml
-
-        from ..scenarios.loader import builtin_scenarios
-        b = builtin_scenarios()
-        builtin = name_or_path if name_or_path in b else None
-        p = b[builtin] if builtin else Path(root) / name_or_path
-        raw = p.read_bytes()
-        data = yaml.safe_load(raw) or {}
-        return {"document": data, "path": None if builtin else str(name_or_path),
-                "builtin": builtin, "revision": cls._rev(raw)}
-
-    @classmethod
-    def save_document(cls, path, document, root, revision=None, draft=False, origin=None):
-        import yaml
-
-        from ..core.atomic import atomic_write_bytes
-        p = Path(root) / path
-        if p.is_file() and revision is not None and cls._rev(p.read_bytes()) != revision:
-            raise cls.DocumentChanged("the file changed on disk since it was loaded",
-                                      file=str(path))
-        text = yaml.safe_dump(dict(document), sort_keys=False).encode()
-        p.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(p, text)
-        return {"path": str(path), "revision": cls._rev(text), "draft": bool(draft)}
-
-
 # -------------------------------------------------------------- validation
 def _where(entry):
     """``(block, param, wire index)`` named by a loader entry such as
@@ -195,10 +145,10 @@ class _Collector:
     """Builds a document into a diagram piece by piece, collecting every
     error the library raises on the way (see :meth:`EditorService.validate`)."""
 
-    def __init__(self, data, source, out):
+    def __init__(self, data, source, out, modules=()):
         from ..scenarios.loader import Scenario
         self.data = data
-        self.sc = Scenario(data, source)
+        self.sc = Scenario(data, source, modules=tuple(modules))
         self.out = out
         self.errors = []
 
@@ -220,7 +170,7 @@ class _Collector:
         sc = self.sc
         sc.params = dict(self.data.get("parameters") or {})
         sc._generated_bytes = 0
-        reg = block_registry()
+        reg = block_registry(modules=sc.modules)
         d = Diagram(sc.name if str(sc.name).isidentifier() else None)
         for name, spec in (self.data.get("blocks") or {}).items():
             where = f"blocks.{name}"
@@ -385,14 +335,8 @@ class EditorService:
     def palette(self) -> dict:
         """Every public block by family, the generators, the library version."""
         if self._palette is None:
-            try:
-                from .catalog import palette
-            except ImportError:
-                palette = None
-            if palette is not None:
-                self._palette = palette(extra_modules=self.extra_modules)
-            else:
-                self._palette = _basic_palette()
+            from .catalog import palette
+            self._palette = palette(extra_modules=self.extra_modules)
         return self._palette
 
     # ------------------------------------------------------------ files
@@ -445,7 +389,7 @@ class EditorService:
             if not full.is_file():
                 raise EditorError(f"no such file '{path}'", status=404, kind="NotFound")
             rel = self._rel(full)
-        doc = _document_io()
+        from ..scenarios import document as doc
         try:
             return doc.load_document(builtin if builtin is not None else rel, root=self.root)
         except ScenarioError as e:
@@ -468,7 +412,7 @@ class EditorService:
                                   "it as it is", kind="InvalidDiagram", errors=errors)
         if full.is_dir():
             raise EditorError(f"'{path}' is a folder", kind="BadPath")
-        doc = _document_io()
+        from ..scenarios import document as doc
         try:                  # checked above: written as it is
             return doc.save_document(self._rel(full), document, self.root,
                                      revision=revision, draft=True, origin=origin)
@@ -508,7 +452,7 @@ class EditorService:
         data = copy.deepcopy(scenario_data(document))
         from ..scenarios.paths import safe_name
         out = self.root / "avblocks-out" / safe_name(data.get("name") or "untitled")
-        return _validate(data, self._source(path), out)
+        return _validate(data, self._source(path), out, self.extra_modules)
 
     def build(self, document, path=None):
         """``(Diagram, simulate kwargs, Scenario)`` of a valid document
@@ -545,7 +489,8 @@ class EditorService:
                                   status=409, kind="Busy")
             self._prune()
             rid = secrets.token_hex(6)
-            r = _Run(rid, data, self._source(path), backend, overrides)
+            r = _Run(rid, data, self._source(path), backend, overrides,
+                     self.extra_modules)
             self._runs[rid] = r
         r.start()
         return {"run": rid}
@@ -611,7 +556,7 @@ class EditorService:
         if format == "python":
             from .export import to_python
             self.build(document, path)          # refuses an invalid diagram
-            return {"text": to_python(scenario_data(document))}
+            return {"text": to_python(scenario_data(document), self.extra_modules)}
         if format in ("svg", "png"):
             import base64
 
@@ -659,7 +604,7 @@ class EditorService:
                               ) from None
 
 
-def _validate(data, source, out):
+def _validate(data, source, out, modules=()):
     """``(errors, signals, built)`` of a scenario mapping (see
     :meth:`EditorService.validate`); ``built`` is ``(Diagram, simulate
     kwargs, Scenario)`` when there is no error, else None. ``out``: the
@@ -670,7 +615,7 @@ def _validate(data, source, out):
         return ([{"message": "the diagram has no blocks yet", "kind": "ScenarioError",
                   "block": None, "port": None, "param": None, "wire": None,
                   "cycle": None}], {}, None)
-    sc = Scenario(data, source)
+    sc = Scenario(data, source, modules=tuple(modules))
     try:
         sc.validate()
     except AvError as e:
@@ -683,7 +628,7 @@ def _validate(data, source, out):
     else:
         return [], _signals((n, h.block) for n, h in d.blocks.items()), (d, sim, sc)
     # it failed: piece by piece, to find every error (not only the first)
-    c = _Collector(data, source, out)
+    c = _Collector(data, source, out, modules)
     d = c.blocks()
     c.wires(d)
     for path in d.unconnected_inputs():
@@ -738,8 +683,9 @@ class _Cancelled(KeyboardInterrupt):
 class _Run:
     """One run of a document in a background thread."""
 
-    def __init__(self, rid, data, source, backend, overrides):
+    def __init__(self, rid, data, source, backend, overrides, modules=()):
         self.id = rid
+        self.modules = tuple(modules)
         self.data = data
         self.source = source
         self.backend = backend
@@ -784,18 +730,9 @@ class _Run:
         from ..core.frontend import simulate
         from ..scenarios.loader import Scenario
         from ..scenarios.report import default_figures, default_outcome
-        sc = Scenario(self.data, self.source)
+        sc = Scenario(self.data, self.source, modules=self.modules)
         d, sim = sc.build(output_dir=self.folder / "files")
-        if hasattr(sc, "hooks"):            # the scenario model's one way
-            hooks, movie = sc.hooks(d, sim), sc.movie()
-        else:                               # TEMPORARY: until it lands, as load_any
-            import yaml
-
-            from ..scenarios.targets import load_any
-            f = self.folder / "scenario.yaml"
-            f.write_text(yaml.safe_dump(self.data, sort_keys=False))
-            loaded = load_any(str(f), {}, self.folder / "files")
-            d, sim, movie, hooks = loaded[0], loaded[1], loaded[3], loaded.hooks
+        hooks, movie = sc.hooks(d, sim), sc.movie()
         sim.update(self.overrides)
         sim.setdefault("t_final", 10.0)
         self.t_final = float(sim["t_final"])
@@ -883,21 +820,3 @@ class _Run:
 
     def discard(self):
         shutil.rmtree(self.folder, ignore_errors=True)
-
-
-def _basic_palette() -> dict:
-    """A palette from the registry alone, until the catalogue is there."""
-    from .. import __version__
-    from ..scenarios.loader import block_registry
-    fams = {}
-    for typ, cls in block_registry().items():
-        fam, _, name = typ.partition(".")
-        doc = (cls.__doc__ or "").strip()
-        fams.setdefault(fam, []).append({"type": typ, "name": name,
-                                         "summary": doc.split("\n")[0], "doc": doc,
-                                         "inputs": [], "outputs": [], "params": [],
-                                         "template": {}, "ports_depend_on": []})
-    order = ["vehicles", "controllers", "environment", "blocks", "viz", "interfaces"]
-    return {"families": [{"name": f, "title": f.title(), "blocks": fams[f]}
-                         for f in order if f in fams],
-            "generators": [], "version": __version__}

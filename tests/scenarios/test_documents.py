@@ -179,3 +179,24 @@ def test_an_invalid_draft_is_saved_and_loaded_back_as_it_is(tmp_path):
     (tmp_path / "list.yaml").write_text("- 1\n- 2\n")
     with pytest.raises(av.ScenarioError, match="mapping of sections"):
         load_document("list.yaml", root=tmp_path)
+
+
+@pytest.mark.parametrize("edit, line", [
+    # the entry that defines the anchor &n, and one that uses the alias *n
+    (("fleet", "pose0", "formation_start"), "    pose0: {formation_start: {n: &n {team_size:"),
+    (("lf", "leader", "formation_references"), "    leader: {formation_references: {n: *n,"),
+])
+def test_an_edit_next_to_an_anchor_or_alias_changes_that_entry_only(edit, line, tmp_path):
+    original = builtin_scenarios()["formation"].read_text()
+    doc = load_document("formation")["document"]
+    node = doc["blocks"]
+    for k in edit:
+        node = node[k]
+    node["spacing"] = 2.0
+    text = dump_yaml(doc, original)
+    assert yaml.safe_load(text) == doc
+    new = [ln for ln in text.splitlines() if ln not in original.splitlines()]
+    assert len(new) == 1 and new[0].startswith(line) and "spacing: 2.0" in new[0], new
+    gone = [ln for ln in original.splitlines() if ln not in text.splitlines()]
+    assert len(gone) == 2                          # the entry's two lines, now one
+    assert text.count("&n") == 1 and text.count("*n") == original.count("*n")

@@ -378,11 +378,25 @@ def _spliced(original, data, indent):
     tree = _yaml().load(original)
     counts = {}
     _count_refs(tree, counts)
+    _keep_anchors(tree, set())
     lines = original.splitlines(keepends=True)
     if lines and not lines[-1].endswith("\n"):
         lines[-1] += "\n"
     out = _splice_map(tree, data, lines, 0, len(lines), counts, indent, 0)
     return None if out is None else "".join(out)
+
+
+def _keep_anchors(node, seen):
+    """Mark every anchor of the tree to be written even where its node is
+    dumped alone (a re-emitted entry that defines ``&n`` keeps it)."""
+    if id(node) in seen or not isinstance(node, (dict, list)):
+        return
+    seen.add(id(node))
+    anchor = getattr(node, "anchor", None)
+    if anchor is not None and anchor.value:
+        node.yaml_set_anchor(anchor.value, always_dump=True)
+    for v in (node.values() if isinstance(node, dict) else node):
+        _keep_anchors(v, seen)
 
 
 def _content_end(lines, a, b):
@@ -395,13 +409,37 @@ def _content_end(lines, a, b):
     return end
 
 
-def _emit(node, col, indent):
+def _alias_tokens(node, before, tokens):
+    """Replace in ``node`` each anchored value defined above line ``before``
+    (kept there as text) by a token that becomes its alias ``*name``."""
+    items = list(node.items()) if isinstance(node, dict) else list(enumerate(node))
+    for k, v in items:
+        if not isinstance(v, (dict, list)):
+            continue
+        anchor = getattr(v, "anchor", None)
+        lc = getattr(v, "lc", None)
+        if anchor is not None and anchor.value and lc is not None and lc.line is not None \
+                and lc.line < before:
+            tok = f"__avblocks_alias_{anchor.value}__"
+            node[k] = tok
+            tokens[tok] = f"*{anchor.value}"
+        else:
+            _alias_tokens(v, before, tokens)
+
+
+def _emit(node, col, indent, before=None):
     """``node`` (a one-entry mapping or a one-item list) dumped by ruamel,
-    indented to column ``col``."""
+    indented to column ``col``; anchors defined above line ``before`` are
+    written as their aliases."""
     import textwrap
+    tokens = {}
+    if before is not None:
+        _alias_tokens(node, before, tokens)
     buf = io.StringIO()
     _yaml(indent).dump(node, buf)
     text = textwrap.dedent(buf.getvalue())
+    for tok, alias in tokens.items():
+        text = text.replace(tok, alias)
     return [(" " * col + ln) if ln.strip() else ln
             for ln in text.splitlines(keepends=True)]
 
@@ -446,7 +484,7 @@ def _splice_map(node, new, lines, lo, hi, counts, indent, depth):
             m[k] = _merge(v, nv, counts, depth + 1, k)
             if k in node.ca.items:
                 m.ca.items[k] = node.ca.items[k]
-            sub = _emit(m, col, indent)
+            sub = _emit(m, col, indent, before=a)
         out += sub + lines[end:b]
     added = [k for k in new if k not in node]
     for k in added:
@@ -487,7 +525,8 @@ def _splice_seq(node, new, lines, lo, hi, counts, indent, depth):
                 _fresh(new[j], depth + 1)
             seq = CommentedSeq([item])
             seq.fa.set_block_style()
-            out += _emit(seq, dash, indent)
+            out += _emit(seq, dash, indent,
+                         before=starts[i] if i is not None else starts[min(i1, len(node) - 1)])
         for i in olds:                                # comment lines after an item
             b = starts[i + 1] if i + 1 < len(node) else hi
             out += lines[_content_end(lines, starts[i], b):b]

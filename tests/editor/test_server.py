@@ -360,3 +360,38 @@ def test_export_picture(editor_server):
     assert status == 200
     svg = base64.b64decode(body["data_url"].split(",", 1)[1]).decode()
     assert svg.lstrip().startswith("<?xml") and "bees" in svg and "gossip" in svg
+
+
+def test_bad_requests_get_4xx_with_a_reason(editor_server):
+    import urllib.error
+    import urllib.request
+    srv = editor_server
+    status, body = srv.post("validate", {})
+    assert status == 400 and body["error"]["kind"] == "BadRequest"
+    status, body = srv.post("validate", {"document": [1, 2]})
+    assert status == 400 and body["error"]["kind"] == "BadDocument"
+    status, body = srv.post("validate", {"document": {}, "evil": "__import__('os')"})
+    assert status == 400 and "evil" in body["error"]["message"]
+    status, body = srv.post("frobnicate", {})
+    assert status == 404
+    status, body = srv.get("run/nope")
+    assert status == 404 and body["error"]["kind"] == "NotFound"
+    req = urllib.request.Request(srv.url + "api/validate", data=b"{not json",
+                                 method="POST")
+    try:
+        urllib.request.urlopen(req, timeout=30)
+    except urllib.error.HTTPError as e:
+        assert e.code == 400 and b"not JSON" in e.read()
+    else:
+        raise AssertionError("accepted a body that is not JSON")
+    # a body announced over 8 MB is refused before it is read
+    import http.client
+    port = int(srv.base.rsplit(":", 1)[1].strip("/"))
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+    conn.putrequest("POST", f"/{srv.token}/api/validate")
+    conn.putheader("content-type", "application/json")
+    conn.putheader("content-length", str(9 * 1024 * 1024))
+    conn.endheaders()
+    r = conn.getresponse()
+    assert r.status == 413 and b"too large" in r.read()
+    conn.close()

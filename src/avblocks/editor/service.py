@@ -597,11 +597,13 @@ class EditorService:
         }.get(op)
         if fn is None:
             raise EditorError(f"unknown operation '{op}'", status=404, kind="NotFound")
+        import inspect
         try:
-            return fn(**args)
+            inspect.signature(fn).bind(**args)
         except TypeError as e:
             raise EditorError(f"bad arguments for '{op}': {e}", kind="BadRequest"
                               ) from None
+        return fn(**args)
 
 
 def _validate(data, source, out, modules=()):

@@ -530,7 +530,7 @@ function Editor({ transport }: { transport: Transport }) {
       setSelectedEdges(e.wire ? new Set([wireId(e.wire)]) : new Set());
       setTab('props');
       const pos = doc.editor?.layout?.[target];
-      if (pos) setTimeout(() => rf.setCenter(pos[0] + 105, pos[1] + 40, { zoom: Math.max(rf.getZoom(), 1), duration: 200 }), 30);
+      if (pos) setTimeout(() => rf.setCenter(pos[0] + 105, pos[1] + 40, { zoom: rf.getZoom(), duration: 200 }), 30);
     },
     [doc, rf],
   );

@@ -10,6 +10,16 @@ export const ROW_H = 22;
 export const IN_NODE = '__in';
 export const OUT_NODE = '__out';
 
+const textLen = (p: PortView) => p.label.length + (p.shape ? p.shape.length + 1 : 0);
+
+/** Wide enough for the longest input and output row side by side, and the title. */
+export function nodeWidth(inputs: PortView[], outputs: PortView[], title = ''): number {
+  const li = Math.max(0, ...inputs.map(textLen));
+  const lo = Math.max(0, ...outputs.map(textLen));
+  const w = Math.max(6.6 * (li + lo) + 48, 7 * title.length + 40);
+  return Math.max(NODE_W, Math.min(420, Math.ceil(w / 10) * 10));
+}
+
 export function nodeHeight(nIn: number, nOut: number): number {
   return HEADER_H + Math.max(1, nIn, nOut) * ROW_H + 10;
 }
@@ -160,7 +170,7 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
       type: 'block',
       position: { x: p[0], y: p[1] },
       selected: selected.has(name),
-      width: NODE_W,
+      width: nodeWidth(inputs, outputs, `${decl?.name ?? b.type} ${name}`),
       height: nodeHeight(inputs.length, outputs.length),
       data: {
         kind: 'block',
@@ -200,7 +210,7 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
       type: 'group',
       position: { x: p[0], y: p[1] },
       selected: selected.has(g),
-      width: NODE_W + 40,
+      width: nodeWidth(inputs, outputs, grp.label ?? g) + 40,
       height: nodeHeight(inputs.length, outputs.length) + 16,
       data: { kind: 'group', name: g, label: grp.label ?? g, count: blocks.length, inputs, outputs, errors: groupErrors },
     });

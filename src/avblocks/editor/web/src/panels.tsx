@@ -687,10 +687,6 @@ export function RunResults({ status, fileUrl, hasRun }: { status: RunStatus | nu
 
 const COLORS = ['#2563eb', '#dc2626', '#16a34a', '#9333ea', '#ea580c', '#0891b2', '#ca8a04', '#db2777'];
 
-function flat(v: number | number[] | number[][]): number[] {
-  return Array.isArray(v) ? (v as unknown[]).flat(2).map(Number) : [Number(v)];
-}
-
 function ticks(lo: number, hi: number, n = 4): number[] {
   if (!(hi > lo)) return [lo];
   const step0 = (hi - lo) / n;
@@ -701,27 +697,43 @@ function ticks(lo: number, hi: number, n = 4): number[] {
   return out;
 }
 
-/** A small line plot of a logged signal (time on x, one line per component; at most 8). */
+/** The lines to draw: for (N, k, ...) one agent's k components; for (N,) the first 8 agents. */
+export function signalLines(data: SignalData, agent: number): { label: string; ys: number[] }[] {
+  const v0 = data.values[0];
+  if (!Array.isArray(v0)) return [{ label: 'value', ys: data.values.map((v) => Number(v)) }];
+  if (!Array.isArray(v0[0])) {
+    const n = Math.min(8, v0.length);
+    return Array.from({ length: n }, (_, j) => ({ label: `agent ${j}`, ys: data.values.map((v) => Number((v as number[])[j])) }));
+  }
+  const row = (v: unknown) => ((v as unknown[])[agent] as unknown[]).flat(2).map(Number);
+  const k = Math.min(8, row(data.values[0]).length);
+  return Array.from({ length: k }, (_, j) => ({ label: data.labels?.[j] ?? `[${agent}, ${j}]`, ys: data.values.map((v) => row(v)[j]) }));
+}
+
+/** A small line plot of a logged signal against time. */
 export function SignalPlot({ name, data, onClose }: { name: string; data: SignalData | null; onClose: () => void }) {
-  const W = 420;
+  const [agent, setAgent] = useState(0);
+  const W = 440;
   const H = 220;
   const m = { l: 48, r: 10, t: 10, b: 28 };
+  const nAgents = data && Array.isArray(data.values[0]) && Array.isArray((data.values[0] as unknown[])[0]) ? (data.values[0] as unknown[]).length : 0;
   let body: ReactNode = <div className="muted pad">Loading {name}…</div>;
+  let legend: { label: string; color: string }[] = [];
   if (data && data.t.length) {
-    const rows = data.values.map(flat);
-    const k = Math.min(8, rows[0]?.length ?? 0);
+    const lines = signalLines(data, Math.min(agent, Math.max(0, nAgents - 1)));
+    legend = lines.map((l, j) => ({ label: l.label, color: COLORS[j % COLORS.length] }));
     const t0 = data.t[0];
     const t1 = data.t[data.t.length - 1];
     let lo = Infinity;
     let hi = -Infinity;
-    for (const r of rows) for (let j = 0; j < k; j++) if (Number.isFinite(r[j])) ((lo = Math.min(lo, r[j])), (hi = Math.max(hi, r[j])));
+    for (const l of lines) for (const y of l.ys) if (Number.isFinite(y)) ((lo = Math.min(lo, y)), (hi = Math.max(hi, y)));
+    if (!Number.isFinite(lo)) ((lo = 0), (hi = 1));
     if (!(hi > lo)) ((lo -= 1), (hi += 1));
+    const pad = 0.05 * (hi - lo);
+    lo -= pad;
+    hi += pad;
     const x = (t: number) => m.l + ((t - t0) / (t1 - t0 || 1)) * (W - m.l - m.r);
     const y = (v: number) => H - m.b - ((v - lo) / (hi - lo)) * (H - m.t - m.b);
-    const lines = Array.from({ length: k }, (_, j) =>
-      rows.map((r, i) => `${i ? 'L' : 'M'}${x(data.t[i]).toFixed(1)},${y(r[j]).toFixed(1)}`).join(''),
-    );
-    const total = rows[0]?.length ?? 0;
     body = (
       <svg width={W} height={H} className="plot" data-testid="signal-plot">
         {ticks(lo, hi).map((v) => (
@@ -733,20 +745,24 @@ export function SignalPlot({ name, data, onClose }: { name: string; data: Signal
           </g>
         ))}
         {ticks(t0, t1).map((v) => (
-          <text key={`x${v}`} x={x(v)} y={H - 8} textAnchor="middle">
+          <text key={`x${v}`} x={x(v)} y={H - 10} textAnchor="middle">
             {+v.toPrecision(4)}
           </text>
         ))}
+        <text x={W - m.r} y={H - 10} textAnchor="end">t [s]</text>
         <line x1={m.l} x2={m.l} y1={m.t} y2={H - m.b} className="axis" />
         <line x1={m.l} x2={W - m.r} y1={H - m.b} y2={H - m.b} className="axis" />
-        {lines.map((d, j) => (
-          <path key={j} d={d} stroke={COLORS[j % COLORS.length]} fill="none" strokeWidth={1.4}>
-            <title>{data.labels?.[j] ?? `component ${j}`}</title>
+        {lines.map((l, j) => (
+          <path
+            key={j}
+            d={l.ys.map((v, i) => `${i ? 'L' : 'M'}${x(data.t[i]).toFixed(1)},${y(Number.isFinite(v) ? v : lo).toFixed(1)}`).join('')}
+            stroke={COLORS[j % COLORS.length]}
+            fill="none"
+            strokeWidth={1.5}
+          >
+            <title>{l.label}</title>
           </path>
         ))}
-        <text x={W - m.r} y={m.t + 10} textAnchor="end" className="muted">
-          t [s]{total > k ? `  (first ${k} of ${total} components)` : ''}
-        </text>
       </svg>
     );
   } else if (data) body = <div className="muted pad">No samples.</div>;
@@ -754,12 +770,28 @@ export function SignalPlot({ name, data, onClose }: { name: string; data: Signal
     <div className="plot-panel">
       <div className="plot-head">
         <span className="mono">{name}</span>
-        {data?.shape ? <span className="muted"> {Array.isArray(data.shape) ? `(${data.shape.join(', ')})` : data.shape}</span> : null}
+        {data?.shape ? <span className="muted small"> ({Array.isArray(data.shape) ? data.shape.join(', ') : data.shape})</span> : null}
+        {nAgents > 1 ? (
+          <label className="small muted">
+            {' '}agent{' '}
+            <input className="agent-pick" type="number" min={0} max={nAgents - 1} value={agent} onChange={(e) => setAgent(Math.max(0, Math.min(nAgents - 1, Number(e.target.value) || 0)))} aria-label="Agent" />
+          </label>
+        ) : null}
         <button className="link" onClick={onClose} aria-label="Close the plot">
           ×
         </button>
       </div>
       {body}
+      {legend.length > 1 ? (
+        <div className="legend">
+          {legend.map((l) => (
+            <span key={l.label}>
+              <i style={{ background: l.color }} />
+              {l.label}
+            </span>
+          ))}
+        </div>
+      ) : null}
     </div>
   );
 }

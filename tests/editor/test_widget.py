@@ -101,3 +101,36 @@ def test_widget_front_end_is_the_bundle(tmp_path):
     assert w.document["simulation"] == {"t_final": 30, "dt": 0.02}
     if WIDGET_JS.is_file():
         assert "render" in WIDGET_JS.read_text()
+
+
+def test_a_diagram_built_in_python_opens_and_runs_the_same(sent, tmp_path):
+    import avblocks as av
+    from avblocks.controllers import PointToPoint
+    from avblocks.utility import random_poses
+    from avblocks.vehicles import Unicycle
+    d = av.Diagram("mine")
+    fleet = d.add(Unicycle(random_poses(5, area=(20, 20), seed=3), v_max=2.0), name="fleet")
+    rng = np.random.default_rng(1)
+    drive = d.add(PointToPoint(rng.uniform(0, 20, (5, 2, 2)), n=5, gain=1.5), name="drive")
+    d.connect(fleet.pose, drive.pose)
+    d.connect(drive.cmd, fleet.cmd)
+    truth = av.simulate(d, t_final=3.0, dt=0.05, progress=False)
+    w = av.edit(d, root=tmp_path)
+    assert w.errors == []
+    assert w.document["blocks"]["drive"]["gain"] == 1.5
+    assert w.document["blocks"]["fleet"]["type"] == "vehicles.Unicycle"
+    assert sorted(w.document["wires"]) == [["drive.cmd", "fleet.cmd"],
+                                           ["fleet.pose", "drive.pose"]]
+    assert w.diagram is not d
+    mine = av.simulate(w.diagram, t_final=3.0, dt=0.05, progress=False)
+    np.testing.assert_array_equal(mine["fleet.pose"], truth["fleet.pose"])
+
+
+def test_a_diagram_with_code_in_it_is_refused_by_name(tmp_path):
+    import avblocks as av
+    from avblocks.blocks import Function
+    d = av.Diagram()
+    d.add(Function(lambda t, u: u, inputs={"u": (2,)}, outputs={"y": (2,)}), name="f")
+    with pytest.raises(av.AvError) as e:
+        av.edit(d, root=tmp_path)
+    assert "'f'" in str(e.value)

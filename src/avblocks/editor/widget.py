@@ -130,10 +130,12 @@ def edit(diagram_or_file=None, *, root=None, blocks=(), height=640):
 
     Parameters
     ----------
-    diagram_or_file : str, path, dict or None
-        A built-in case study name, a scenario file (under ``root``), a
-        scenario mapping, or None for an empty diagram. (A :class:`Diagram`
-        built in Python has no scenario form yet: open its scenario file.)
+    diagram_or_file : Diagram, str, path, dict or None
+        A diagram built in Python (its blocks with the arguments they were
+        constructed with: data only, see
+        :func:`avblocks.editor.from_diagram.document_of`), a built-in case
+        study name, a scenario file (under ``root``), a scenario mapping, or
+        None for an empty diagram.
     root : path, optional
         The folder the editor may read and write (default: the working
         directory).
@@ -159,10 +161,8 @@ def edit(diagram_or_file=None, *, root=None, blocks=(), height=640):
         doc = copy.deepcopy(x)
         scenario_data(doc)
     elif isinstance(x, Diagram):
-        raise EditorError("a Diagram built in Python cannot be drawn yet: open its "
-                          "scenario file, or export a drawn one with "
-                          "widget.service.export(widget.document)",
-                          kind="NotEditable")
+        from .from_diagram import document_of
+        doc = document_of(x, modules=blocks)
     else:
         from ..scenarios.loader import builtin_scenarios
         p = Path(str(x))

@@ -4,7 +4,9 @@ and signal shapes out) for the built-in case studies and a 500-block document.
 Run: ``python benchmarks/editor.py [--repeat 20]``. Prints a markdown table
 of the median and best milliseconds per validation, in process
 (``EditorService.validate``) and over HTTP on loopback (the JSON request of
-the page, through uvicorn). Target of issue 31: a case study under 100 ms.
+the page, through uvicorn), and what the piece-by-piece pass costs (blocks
+one by one, wires one by one, undriven inputs: the extra work a document
+with an error takes to have every error found). Target of issue 31: a case study under 100 ms.
 Not part of the test suite.
 """
 
@@ -59,7 +61,7 @@ def main():
     import os
 
     from avblocks.editor.server import EditorServer
-    from avblocks.editor.service import EditorService
+    from avblocks.editor.service import EditorService, _Collector
     root = tempfile.mkdtemp()
     service = EditorService(root)
     docs = [(n, service.load(builtin=n)["document"]) for n in args.cases]
@@ -67,8 +69,9 @@ def main():
     print(f"load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs, "
           f"{args.repeat} repeats")
     print()
-    print("| document | blocks | ok | in process median ms | best | HTTP median ms | best |")
-    print("|---|---|---|---|---|---|---|")
+    print("| document | blocks | ok | in process median ms | best | HTTP median ms | best "
+          "| piece by piece median ms |")
+    print("|---|---|---|---|---|---|---|---|")
     with EditorServer(service) as srv:
         for name, doc in docs:
             body = json.dumps({"document": doc}).encode()
@@ -83,8 +86,17 @@ def main():
             ok = service.validate(doc)["ok"]
             med, best = _time(lambda doc=doc: service.validate(doc), args.repeat)
             hmed, hbest = _time(over_http, args.repeat)
+
+            def pieces(doc=doc):        # what a document with an error costs
+                data = {k: v for k, v in doc.items() if k != "editor"}
+                c = _Collector(data, str(service.root / "x.yaml"), service.root / "o")
+                d = c.blocks()
+                c.wires(d)
+                d.unconnected_inputs()
+
+            pmed, _ = _time(pieces, max(3, args.repeat // 2))
             print(f"| {name} | {len(doc['blocks'])} | {ok} | {med:.1f} | {best:.1f} "
-                  f"| {hmed:.1f} | {hbest:.1f} |")
+                  f"| {hmed:.1f} | {hbest:.1f} | {pmed:.1f} |")
 
 
 if __name__ == "__main__":

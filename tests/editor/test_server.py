@@ -395,3 +395,19 @@ def test_bad_requests_get_4xx_with_a_reason(editor_server):
     r = conn.getresponse()
     assert r.status == 413 and b"too large" in r.read()
     conn.close()
+
+
+def test_a_bad_numeric_parameter_names_block_and_parameter(editor_server):
+    from avblocks.core.errors import ScenarioError
+    from avblocks.scenarios.loader import Scenario, builtin_scenarios
+    status, loaded = editor_server.post("load", {"builtin": "nest"})
+    doc = loaded["document"]
+    doc["params"] = {"walk.gain": -5}
+    body = _errors(editor_server, doc)
+    err, = body["errors"]
+    assert (err["block"], err["param"], err["kind"]) == ("walk", "gain", "ParameterError")
+    with pytest.raises(ScenarioError) as truth:            # what `avblocks run` says
+        Scenario(dict(doc), str(builtin_scenarios()["nest"])).build(
+            output_dir=editor_server.root / "o")
+    assert err["message"] in str(truth.value)
+    assert "below its lower bound" in err["message"]

@@ -527,7 +527,7 @@ def builtin_dir() -> Path:
 
 #: modules of this package that are machinery, not scenarios
 INFRASTRUCTURE = ("loader", "report", "paths", "targets", "generators", "limits",
-                  "worlds", "files")
+                  "worlds", "files", "document")
 
 
 def builtin_scenarios() -> dict:

@@ -53,3 +53,18 @@ def test_docs_page_is_the_protocol_file():
     api = (root / "src/avblocks/editor/API.md").read_text()
     page = (root / "docs/editor-api.md").read_text()
     assert page.endswith(api.split("\n", 1)[1])          # all but the title
+
+
+def test_a_layout_only_edit_reuses_the_findings_a_real_edit_does_not(tmp_path):
+    service = EditorService(tmp_path)
+    doc = service.load(builtin="nest")["document"]
+    e1, s1, b1 = service.check(doc)
+    moved = dict(doc, editor={"layout": {"bees": [10, 20]}})
+    e2, s2, b2 = service.check(moved)
+    assert (e1, s1) == (e2, s2) == ([], s1) and b2 is b1       # remembered
+    more = dict(moved, parameters={**doc["parameters"], "agents": 7})
+    e3, s3, b3 = service.check(more)
+    assert b3 is not b1 and s3["bees.pose"]["shape"] == "(7, 3)"
+    assert service.check(doc, fresh=True)[2] is not b1
+    e2.append("changed by a caller")                            # copies handed out
+    assert service.check(moved)[0] == []

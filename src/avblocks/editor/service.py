@@ -49,6 +49,9 @@ MAX_SIGNAL_POINTS = 2000
 MAX_SIGNAL_VALUES = 400_000
 #: Runs kept (with their figures) before the oldest finished one is dropped.
 MAX_RUNS = 8
+#: Validations remembered by their scenario (a layout-only edit, such as a
+#: block moved, is answered without building again).
+CHECK_CACHE = 8
 
 
 class EditorError(AvError):
@@ -307,6 +310,7 @@ class EditorService:
         self._lock = threading.Lock()
         self._palette = None
         self._lives = []
+        self._checked = {}          # recent validations by scenario (not layout)
         #: What the page opens first: ``{"path": ...}``, ``{"builtin": ...}``
         #: or None (a new, empty diagram); ``avblocks edit NAME|FILE`` sets it.
         self.initial = None
@@ -446,19 +450,41 @@ class EditorService:
         return {"ok": not errors, "errors": errors, "signals": signals,
                 "elapsed_ms": round(1e3 * (time.perf_counter() - t0), 2)}
 
-    def check(self, document, path=None):
+    def check(self, document, path=None, fresh=False):
         """``(errors, signals, built)``: :meth:`validate`'s findings and,
-        for a valid document, ``(Diagram, simulate kwargs, Scenario)``."""
+        for a valid document, ``(Diagram, simulate kwargs, Scenario)``
+        (remembered for a few recent scenarios: ``fresh=True`` builds anew)."""
+        import json
         data = copy.deepcopy(scenario_data(document))
+        source = self._source(path)
+        try:        # the same scenario as lately (a block moved, say): its findings
+            key = (source, json.dumps(data, sort_keys=True, allow_nan=False))
+        except (TypeError, ValueError):
+            key = None
+        if fresh:
+            key = None
+        with self._lock:
+            hit = self._checked.get(key) if key is not None else None
+            if hit is not None:
+                self._checked[key] = self._checked.pop(key)       # most recent last
+        if hit is not None:
+            errors, signals, built = hit
+            return copy.deepcopy(errors), copy.deepcopy(signals), built
         from ..scenarios.paths import safe_name
         out = self.root / "avblocks-out" / safe_name(data.get("name") or "untitled")
-        return _validate(data, self._source(path), out, self.extra_modules)
+        errors, signals, built = _validate(data, source, out, self.extra_modules)
+        if key is not None:
+            with self._lock:
+                self._checked[key] = (copy.deepcopy(errors), copy.deepcopy(signals), built)
+                while len(self._checked) > CHECK_CACHE:
+                    self._checked.pop(next(iter(self._checked)))
+        return errors, signals, built
 
-    def build(self, document, path=None):
+    def build(self, document, path=None, fresh=False):
         """``(Diagram, simulate kwargs, Scenario)`` of a valid document
         through the scenario loader; an :class:`EditorError` with the
-        errors otherwise."""
-        errors, _signals, built = self.check(document, path)
+        errors otherwise (``fresh``: a diagram no one else holds)."""
+        errors, _signals, built = self.check(document, path, fresh=fresh)
         if errors:
             raise EditorError("the diagram has errors", kind="InvalidDiagram",
                               errors=errors)
@@ -539,7 +565,7 @@ class EditorService:
             raise EditorError(f"the live view needs its extra ({e})",
                               kind="MissingExtra", hint='pip install "avblocks[live]"'
                               ) from None
-        d, sim, _sc = self.build(document, path)
+        d, sim, _sc = self.build(document, path, fresh=True)     # the view runs it
         sim = dict(sim)
         t_final = float(sim.pop("t_final", 10.0))
         keep = {k: sim[k] for k in ("dt", "solver", "seed", "log", "log_every", "params",

@@ -109,7 +109,7 @@ def _widget_class():
             return result
 
         def _adopt(self, doc, check=True):
-            errors, _signals, built = self.service.check(doc, self.path)
+            errors, _signals, built = self.service.check(doc, self.path, fresh=True)
             self.errors = errors
             if built is not None:
                 self.diagram = built[0]

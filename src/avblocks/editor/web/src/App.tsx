@@ -1,7 +1,7 @@
 // The editor: owns the document (controlled React Flow), talks to the Python side through a Transport.
 
 import { useCallback, useEffect, useMemo, useRef, useState } from 'react';
-import { Background, Controls, MiniMap, ReactFlow, ReactFlowProvider, useReactFlow, SelectionMode } from '@xyflow/react';
+import { Background, Controls, MiniMap, ReactFlow, ReactFlowProvider, useReactFlow, useStore, SelectionMode } from '@xyflow/react';
 import type { Connection, EdgeChange, NodeChange, Edge, Node } from '@xyflow/react';
 import type { Doc, FileList, Json, Palette, RunStatus, SignalData, Validation, ValidationError, XY } from './types';
 import * as M from './model';
@@ -64,6 +64,8 @@ function download(name: string, href: string) {
 function Editor({ transport }: { transport: Transport }) {
   const api = useMemo(() => new Api(transport), [transport]);
   const rf = useReactFlow();
+  // level of detail: zoomed far out, draw blocks without their text (faster, and unreadable anyway)
+  const far = useStore((s) => s.transform[2] < 0.45);
   const [palette, setPalette] = useState<Palette | null>(null);
   const [hist, setHist] = useState<M.History>(() => M.history(M.emptyDocument()));
   const doc = hist.present;
@@ -755,7 +757,7 @@ function Editor({ transport }: { transport: Transport }) {
       </header>
       <div className="main">
         <PalettePanel palette={palette} onAdd={(t) => addAt(t)} searchRef={searchRef} />
-        <div className="canvas" onDragOver={(e) => {
+        <div className={`canvas ${far ? 'far' : ''}`} onDragOver={(e) => {
           e.preventDefault();
           e.dataTransfer.dropEffect = 'copy';
         }} onDrop={onDrop}>

@@ -134,3 +134,19 @@ def test_a_diagram_with_code_in_it_is_refused_by_name(tmp_path):
     with pytest.raises(av.AvError) as e:
         av.edit(d, root=tmp_path)
     assert "'f'" in str(e.value)
+
+
+def test_the_page_opens_what_av_edit_was_given(sent, tmp_path):
+    import avblocks as av
+    w = av.edit("swap", root=tmp_path)
+    files = _ask(w, sent, "files")["result"]
+    assert files["initial"] == {"builtin": "swap"}
+    doc = {"name": "given", "parameters": {"agents": 2, "seed": 1},
+           "blocks": {"g": {"type": "blocks.Gain", "k": 2.0}}, "wires": []}
+    w = av.edit(doc, root=tmp_path)
+    initial = _ask(w, sent, "files")["result"]["initial"]
+    assert initial == {"current": True}
+    loaded = _ask(w, sent, "load", **initial)["result"]
+    assert loaded["document"] == doc and loaded["path"] is None
+    w = av.edit(None, root=tmp_path)
+    assert _ask(w, sent, "files")["result"]["initial"] is None

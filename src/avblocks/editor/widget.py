@@ -99,6 +99,9 @@ def _widget_class():
                         "elapsed_ms": round(1e3 * (time.perf_counter() - t0), 2)}
             if op == "status" and "run" in args:
                 return self.service.status(args["run"])
+            if op == "load" and args.get("current"):     # what av.edit() was given
+                return {"document": copy.deepcopy(self.document), "path": self.path,
+                        "builtin": None, "revision": None}
             result = self.service.call(op, args)
             if op == "load":
                 self.path = result["path"]
@@ -160,9 +163,11 @@ def edit(diagram_or_file=None, *, root=None, blocks=(), height=640):
     elif isinstance(x, dict):
         doc = copy.deepcopy(x)
         scenario_data(doc)
+        service.initial = {"current": True}
     elif isinstance(x, Diagram):
         from .from_diagram import document_of
         doc = document_of(x, modules=blocks)
+        service.initial = {"current": True}
     else:
         from ..scenarios.loader import builtin_scenarios
         p = Path(str(x))
@@ -171,8 +176,10 @@ def edit(diagram_or_file=None, *, root=None, blocks=(), height=640):
             if service.root not in full.parents:
                 service.root = full.parent
             loaded = service.load(path=service._rel(full))
+            service.initial = {"path": loaded["path"]}
         elif str(x) in builtin_scenarios():
             loaded = service.load(builtin=str(x))
+            service.initial = {"builtin": str(x)}
         else:
             raise EditorError(f"no scenario file or built-in case study '{x}'",
                               status=404, kind="NotFound")

@@ -302,19 +302,23 @@ def test_search_to_add_and_group(page):
     pg.wait_for_selector('.react-flow__edge[data-id="point_to_point.cmd->unicycle.cmd"]', state="attached")
     pg.locator('.react-flow__node[data-id="point_to_point"]').click()
     pg.keyboard.press("Control+g")
-    g = pg.locator(".react-flow__node-group")
+    g = pg.locator(".react-flow__node-subsystem")
     g.wait_for()
     # the group's ports are the wires it cuts
     assert sorted(g.locator(".react-flow__handle").evaluate_all(
         "hs => hs.map(h => h.dataset.handleid)")) == ["point_to_point.cmd", "point_to_point.pose"]
+    pg.keyboard.press("f")
+    pg.wait_for_timeout(400)
     shot(pg, "group")
     g.dblclick()
     pg.wait_for_selector('.react-flow__node[data-id="point_to_point"]')
+    pg.wait_for_timeout(400)
+    shot(pg, "group-inside")
     assert pg.locator('.react-flow__node[data-id="unicycle"]').count() == 0
     assert pg.locator(".breadcrumb button").count() == 2
     pg.keyboard.press("Escape")
     pg.keyboard.press("Escape")
-    pg.wait_for_selector(".react-flow__node-group")
+    pg.wait_for_selector(".react-flow__node-subsystem")
 
 
 def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_factory):
@@ -373,3 +377,26 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
     pg.get_by_test_id("toast").filter(has_text="saved formation.yaml").last.wait_for()
     text = saved.read_text()
     assert "gain: 1.4" in text and "spacing: 1.5 " in text
+
+
+def test_help_overlay_and_python_export(page, editor_server):
+    pg = page
+    pg.keyboard.press("?")
+    dialog = pg.get_by_role("dialog", name="Keyboard shortcuts")
+    dialog.wait_for()
+    assert "Ctrl+G" in dialog.inner_text()
+    pg.keyboard.press("Escape")
+    dialog.wait_for(state="detached")
+    drag_from_palette(pg, "vehicles.Unicycle", 260, 260)
+    drag_from_palette(pg, "controllers.PointToPoint", 620, 260)
+    wire(pg, "unicycle.pose", "point_to_point.pose")
+    wire(pg, "point_to_point.cmd", "unicycle.cmd")
+    wait_checked(pg)
+    pg.get_by_label("Export").select_option("python")
+    code = pg.locator("pre.code")
+    code.wait_for()
+    shown = code.inner_text()
+    doc = current_document(pg, editor_server, "exported.yaml")
+    status, r = editor_server.post("export", {"document": doc, "format": "python"})
+    assert status == 200
+    assert shown.strip() == r["text"].strip()

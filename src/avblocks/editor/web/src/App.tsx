@@ -787,7 +787,7 @@ function Editor({ transport }: { transport: Transport }) {
               dragStart.current = true;
             }}
             onNodeDoubleClick={(_, n) => {
-              if (n.type === 'group') openGroup(n.id);
+              if (n.type === 'subsystem') openGroup(n.id);
             }}
             onEdgeClick={onEdgeClick}
             onPaneClick={() => setPlot(null)}
@@ -804,7 +804,7 @@ function Editor({ transport }: { transport: Transport }) {
             connectionRadius={24}
           >
             <Background gap={20} size={1} color="#d4d8de" />
-            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={(n) => ((n as FlowNode).type === 'group' ? '#c7d2fe' : (n as FlowNode).data && ((n as FlowNode).data as { errors?: string[] }).errors?.length ? '#fca5a5' : '#cbd5e1')} />
+            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={(n) => ((n as FlowNode).type === 'subsystem' ? '#c7d2fe' : (n as FlowNode).data && ((n as FlowNode).data as { errors?: string[] }).errors?.length ? '#fca5a5' : '#cbd5e1')} />
             <Controls showInteractive={false} />
           </ReactFlow>
           {!Object.keys(doc.blocks).length ? (

@@ -69,7 +69,7 @@ export type NodeData = BlockData | GroupData | BoundaryData;
 
 export interface FlowNode {
   id: string;
-  type: 'block' | 'group' | 'boundary';
+  type: 'block' | 'subsystem' | 'boundary';
   position: { x: number; y: number };
   data: NodeData;
   selected?: boolean;
@@ -207,7 +207,7 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
     const p = opts.positions?.[g] ?? grp.position ?? [0, 0];
     nodes.push({
       id: g,
-      type: 'group',
+      type: 'subsystem',
       position: { x: p[0], y: p[1] },
       selected: selected.has(g),
       width: nodeWidth(inputs, outputs, grp.label ?? g) + 40,
@@ -276,8 +276,8 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
     nodes.push({
       id: IN_NODE,
       type: 'boundary',
-      position: { x: minX - 300, y: minY },
-      width: 180,
+      position: { x: minX - nodeWidth([], boundaryIn) - 100, y: minY },
+      width: nodeWidth([], boundaryIn),
       height: nodeHeight(0, boundaryIn.length),
       deletable: false,
       data: { kind: 'boundary', side: 'in', ports: boundaryIn },
@@ -286,7 +286,7 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
       id: OUT_NODE,
       type: 'boundary',
       position: { x: maxX + 120, y: minY },
-      width: 180,
+      width: nodeWidth(boundaryOut, []),
       height: nodeHeight(boundaryOut.length, 0),
       deletable: false,
       data: { kind: 'boundary', side: 'out', ports: boundaryOut },

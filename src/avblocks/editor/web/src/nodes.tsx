@@ -86,7 +86,7 @@ export const GroupNode = memo(function GroupNode({ data, selected }: NodeProps) 
     <div className={`av-node av-group ${selected ? 'selected' : ''} ${bad ? 'bad' : ''}`} data-group={d.name} title="Double-click to open">
       <div className="av-node-head">
         <span className="av-node-title">▣ {d.label}</span>
-        <span className="av-node-name">{d.count} blocks</span>
+        <span className="av-node-name">{d.count} block{d.count === 1 ? '' : 's'}</span>
         {bad ? (
           <span className="av-node-err" title={d.errors.join('\n')}>
             {d.errors.length}
@@ -147,5 +147,5 @@ export const WireEdge = memo(function WireEdge(props: EdgeProps) {
   );
 });
 
-export const nodeTypes = { block: BlockNode, group: GroupNode, boundary: BoundaryNode };
+export const nodeTypes = { block: BlockNode, subsystem: GroupNode, boundary: BoundaryNode };
 export const edgeTypes = { wire: WireEdge };

@@ -327,19 +327,16 @@ def dump_yaml(data: dict, original: str | None = None) -> str:
         ``data``.
     """
     if original is not None:
-        from ruamel.yaml.util import load_yaml_guess_indent
         try:
-            _, ind, bsi = load_yaml_guess_indent(original)
-            tree = _yaml().load(original)
+            plain = _safe_load(original)
         except Exception:  # noqa: BLE001 - an unreadable original: written fresh
-            tree = None
-        if isinstance(tree, dict):
-            if _same(_plain(tree), data):
+            plain = None
+        if isinstance(plain, dict):
+            if _same(_jsonable(plain), data):
                 return original
-            indent = (2, ind or 2, bsi or 0) if ind else None
             for attempt in (_spliced, _remerged):
                 try:
-                    text = attempt(original, data, indent)
+                    text = attempt(original, data)
                 except Exception:  # noqa: BLE001 - the next, plainer way
                     continue
                 if text is not None and _reads_back(text, data):
@@ -349,17 +346,25 @@ def dump_yaml(data: dict, original: str | None = None) -> str:
     return buf.getvalue()
 
 
+def _safe_load(text):
+    import yaml
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # noqa: S506
+
+
 def _reads_back(text, data) -> bool:
     import yaml
     try:
-        return _same(_jsonable(yaml.safe_load(text)), data)
+        return _same(_jsonable(_safe_load(text)), data)
     except yaml.YAMLError:
         return False
 
 
-def _remerged(original, data, indent):
+def _remerged(original, data):
     """The original tree with the data merged in, dumped whole by ruamel
     (comments and anchors kept; long flow values put on one line)."""
+    from ruamel.yaml.util import load_yaml_guess_indent
+    _, ind, bsi = load_yaml_guess_indent(original)
+    indent = (2, ind or 2, bsi or 0) if ind else None
     tree = _yaml().load(original)
     counts = {}
     _count_refs(tree, counts)
@@ -369,7 +374,7 @@ def _remerged(original, data, indent):
     return buf.getvalue()
 
 
-def _spliced(original, data, indent):
+def _spliced(original, data, indent=None):
     """The original text with only the changed entries rewritten: block
     mappings and block lists are walked by the line of each key/item
     (ruamel's positions); an entry whose value is unchanged keeps its

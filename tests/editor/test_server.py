@@ -360,6 +360,17 @@ def test_export_picture(editor_server):
     assert status == 200
     svg = base64.b64decode(body["data_url"].split(",", 1)[1]).decode()
     assert svg.lstrip().startswith("<?xml") and "bees" in svg and "gossip" in svg
+    assert "wire bees.pose -&gt; walk.pose" in svg or "wire bees.pose -> walk.pose" in svg
+    status, body = editor_server.post("export", {"document": loaded["document"],
+                                                 "format": "png"})
+    assert status == 200 and body["data_url"].startswith("data:image/png;base64,")
+    png = base64.b64decode(body["data_url"].split(",", 1)[1])
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    import io
+
+    import matplotlib.image as mpimg
+    img = mpimg.imread(io.BytesIO(png))
+    assert img.shape[0] > 100 and img.shape[1] > 100 and img[..., :3].std() > 0.01
 
 
 def test_bad_requests_get_4xx_with_a_reason(editor_server):

@@ -122,6 +122,16 @@ def click_empty(pg):
     pg.locator(".react-flow__pane").click(position={"x": box["width"] / 2, "y": 20})
 
 
+def until(check, timeout=10.0):
+    """Poll ``check`` until it holds (the page re-renders asynchronously)."""
+    t0 = time.monotonic()
+    while True:
+        ok = check()
+        if ok or time.monotonic() - t0 > timeout:
+            return ok
+        time.sleep(0.05)
+
+
 def blocks_on_canvas(pg):
     return sorted(pg.eval_on_selector_all(".react-flow__node-block", "ns => ns.map(n => n.dataset.id)"))
 
@@ -241,7 +251,7 @@ def test_wrong_wire_shows_the_library_error_on_the_port(page, editor_server):
     pg.get_by_test_id("tab-problems").click()
     prob = pg.locator(".problem", has_text=on_port[0])
     prob.first.click()
-    assert pg.locator('.react-flow__node[data-id="unicycle"].selected').count() == 1
+    assert until(lambda: pg.locator('.react-flow__node[data-id="unicycle"].selected').count() == 1)
     pg.keyboard.press("f")  # fit the view
     pg.wait_for_timeout(400)
     shot(pg, "error")
@@ -264,27 +274,27 @@ def test_undo_redo(page):
     pg.wait_for_selector(".react-flow__edge", state="attached")
     click_empty(pg)
     pg.keyboard.press("Control+z")
-    assert pg.locator(".react-flow__edge").count() == 0
+    assert until(lambda: pg.locator(".react-flow__edge").count() == 0)
     pg.keyboard.press("Control+z")
-    assert blocks_on_canvas(pg) == ["unicycle"]
+    assert until(lambda: blocks_on_canvas(pg) == ["unicycle"])
     pg.keyboard.press("Control+Shift+z")
-    assert blocks_on_canvas(pg) == ["point_to_point", "unicycle"]
+    assert until(lambda: blocks_on_canvas(pg) == ["point_to_point", "unicycle"])
     pg.keyboard.press("Control+y")
-    assert pg.locator(".react-flow__edge").count() == 1
+    assert until(lambda: pg.locator(".react-flow__edge").count() == 1)
     # the toolbar buttons do the same
     pg.get_by_test_id("undo").click()
-    assert pg.locator(".react-flow__edge").count() == 0
+    assert until(lambda: pg.locator(".react-flow__edge").count() == 0)
     pg.get_by_test_id("redo").click()
-    assert pg.locator(".react-flow__edge").count() == 1
+    assert until(lambda: pg.locator(".react-flow__edge").count() == 1)
     # copy / paste renames; delete removes; undo brings it back
     pg.locator('.react-flow__node[data-id="unicycle"]').click()
     pg.keyboard.press("Control+c")
     pg.keyboard.press("Control+v")
     pg.wait_for_selector('.react-flow__node[data-id="unicycle2"]')
     pg.keyboard.press("Delete")
-    assert blocks_on_canvas(pg) == ["point_to_point", "unicycle"]
+    assert until(lambda: blocks_on_canvas(pg) == ["point_to_point", "unicycle"])
     pg.keyboard.press("Control+z")
-    assert blocks_on_canvas(pg) == ["point_to_point", "unicycle", "unicycle2"]
+    assert until(lambda: blocks_on_canvas(pg) == ["point_to_point", "unicycle", "unicycle2"])
 
 
 def test_search_to_add_and_group(page):
@@ -387,8 +397,13 @@ def test_help_overlay_and_python_export(page, editor_server):
     assert "Ctrl+G" in dialog.inner_text()
     pg.keyboard.press("Escape")
     dialog.wait_for(state="detached")
-    drag_from_palette(pg, "vehicles.Unicycle", 260, 260)
-    drag_from_palette(pg, "controllers.PointToPoint", 620, 260)
+    # the palette's + button adds a block where there is room in view
+    for t in ("vehicles.Unicycle", "controllers.PointToPoint"):
+        item = pg.locator(f'.palette-item[data-type="{t}"]')
+        item.scroll_into_view_if_needed()
+        item.hover()
+        item.locator(".pi-add").click()
+    pg.wait_for_selector('.react-flow__node[data-id="point_to_point"]')
     wire(pg, "unicycle.pose", "point_to_point.pose")
     wire(pg, "point_to_point.cmd", "unicycle.cmd")
     wait_checked(pg)

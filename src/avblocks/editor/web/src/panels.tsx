@@ -95,6 +95,17 @@ export function PalettePanel({
                       }}
                       title="Drag onto the canvas, or double-click / Enter to add"
                     >
+                      <button
+                        className="pi-add"
+                        title={`Add ${b.name} to the canvas`}
+                        aria-label={`Add ${b.name}`}
+                        onClick={(e) => {
+                          e.stopPropagation();
+                          onAdd(b.type);
+                        }}
+                      >
+                        +
+                      </button>
                       <div className="pi-name">{b.name}</div>
                       <div className="pi-summary">{b.summary}</div>
                     </div>

@@ -27,8 +27,12 @@ A scenario file has five sections::
 :mod:`avblocks.scenarios.report`.)
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
-(also inside strings: ``"${agents}"``), or a one-key mapping naming one of
-the generators in :data:`GENERATORS`. Nothing in the file is executed.
+(also inside strings: ``"${agents}"``), a one-key mapping naming one of
+the generators in :data:`GENERATORS`, or ``{function: "module:name"}``: a
+function of the library (a module under ``avblocks``) or of a block module
+the user named (``--blocks``), by importable name, e.g. the ``fn`` of a
+``blocks.Function`` (see :func:`resolve_function`). Nothing in the file is
+executed.
 
 ``params`` sets numeric parameters of the built blocks by dotted path (see
 :mod:`avblocks.scenarios._numeric`); ``--set drive.gain=3`` overrides them.
@@ -128,6 +132,44 @@ def check_editor(section, source="<scenario>"):
                                     file=source, entry=f"{where}.groups")
     if section.get("viewport") is not None:
         point(section["viewport"], "editor.viewport", 3)
+
+
+_FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
+                           r":([A-Za-z][A-Za-z0-9_]*)$")
+
+
+def resolve_function(ref, modules=(), source="<scenario>", where="function"):
+    """The function a file names as ``"package.module:name"``.
+
+    Only modules of the library (``avblocks`` and below) and the user's
+    block modules (``modules``, named on the command line, and below) are
+    imported; the name must be public (no leading underscore) and a plain
+    Python function (not a class, so nothing is constructed). Anything
+    else is a :class:`ScenarioError` naming the entry."""
+    import importlib
+    if not isinstance(ref, str) or not _FUNCTION_REF.match(ref):
+        raise ScenarioError(f"expected 'package.module:function', found {ref!r:.80}",
+                            file=source, entry=where,
+                            hint="e.g. avblocks.scenarios.honeybee:choose_command")
+    mod_name, name = ref.split(":")
+    allowed = ("avblocks", *[str(m) for m in modules or ()])
+    if not any(mod_name == a or mod_name.startswith(a + ".") for a in allowed):
+        raise ScenarioError(f"'{mod_name}' is not a module a file may name",
+                            file=source, entry=where,
+                            hint="functions come from avblocks or a block module "
+                                 "given with --blocks")
+    try:
+        mod = importlib.import_module(mod_name)
+    except ImportError as e:
+        raise ScenarioError(f"cannot import '{mod_name}': {e}", file=source,
+                            entry=where) from None
+    fn = getattr(mod, name, None)
+    if not inspect.isfunction(fn):
+        raise ScenarioError(f"'{ref}' is not a function", file=source, entry=where,
+                            hint=did_you_mean(name, [n for n in dir(mod)
+                                                     if inspect.isfunction(getattr(mod, n))
+                                                     and not n.startswith("_")]))
+    return fn
 
 
 # ------------------------------------------------------------------ registry
@@ -258,6 +300,9 @@ class Scenario:
                         raise ScenarioError(f"'{k}' failed: {type(e).__name__}: {e}",
                                             file=self.source, entry=where,
                                             hint=f"'{k}' takes {sig}") from None
+                if k == "function":
+                    return resolve_function(self._value(args, f"{where}.function"),
+                                            self.modules, self.source, where)
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)
@@ -435,7 +480,9 @@ class Scenario:
         self.validate()
         self.params = dict(self.data.get("parameters") or {})
         self._generated_bytes = 0
-        reg = block_registry(modules=self.modules)
+        # a file may name blocks.Function: its fn can only be a function
+        # resolved by name ({function: "module:name"}), never code
+        reg = block_registry(code_blocks=True, modules=self.modules)
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():
             where = f"blocks.{name}"

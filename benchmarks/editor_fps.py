@@ -55,8 +55,8 @@ def measure(browser, url, seconds, n_blocks):
     pg = browser.new_page(viewport={"width": 1440, "height": 880})
     t0 = time.perf_counter()
     pg.goto(url)
-    pg.wait_for_function(f"document.querySelectorAll('.react-flow__node-block').length >= {n_blocks}",
-                         timeout=300_000)
+    pg.wait_for_function("n => document.querySelectorAll('.react-flow__node-block').length >= n",
+                         arg=n_blocks, timeout=300_000)
     pg.wait_for_function("!document.querySelector('[data-testid=check]').classList.contains('busy')",
                          timeout=300_000)
     t_open = time.perf_counter() - t0
@@ -65,7 +65,6 @@ def measure(browser, url, seconds, n_blocks):
     rows = []
     for view in ("all in view", "zoom 1"):
         if view == "zoom 1":
-            pg.evaluate("() => {}")
             pg.mouse.move(cx, cy)
             for _ in range(12):
                 pg.mouse.wheel(0, -240)
@@ -105,8 +104,10 @@ def main():
     from avblocks.editor.service import EditorService
     from editor import big_document
 
-    print(f"load: {os.getloadavg()[0]:.2f} (1 min), {os.cpu_count()} cores; Chromium headless, software rendering\n")
-    print("| blocks | open [s] | view | nodes drawn | pan [frames/s] | zoom [frames/s] | idle [frames/s] |")
+    print(f"load: {os.getloadavg()[0]:.2f} (1 min), {os.cpu_count()} cores; "
+          "Chromium headless, software rendering\n")
+    print("| blocks | open [s] | view | nodes drawn | pan [frames/s] | zoom [frames/s] "
+          "| idle [frames/s] |")
     print("|---:|---:|---|---:|---:|---:|---:|")
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
@@ -122,7 +123,8 @@ def main():
                 finally:
                     srv.stop()
             for view, drawn, f_pan, f_zoom, idle in rows:
-                print(f"| {n} | {t_open:.1f} | {view} | {drawn} | {f_pan:.0f} | {f_zoom:.0f} | {idle:.0f} |")
+                print(f"| {n} | {t_open:.1f} | {view} | {drawn} | {f_pan:.0f} "
+                      f"| {f_zoom:.0f} | {idle:.0f} |")
         browser.close()
 
 

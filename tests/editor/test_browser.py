@@ -85,11 +85,9 @@ def shot(pg, name):
 
 
 def wait_checked(pg):
-    """Wait until the debounced validation of the last edit has come back."""
-    pg.wait_for_function("document.querySelector('[data-testid=check]') && "
-                         "!document.querySelector('[data-testid=check]').classList.contains('busy')")
-    pg.wait_for_timeout(100)
-    pg.wait_for_function("!document.querySelector('[data-testid=check]').classList.contains('busy')")
+    """Wait until the check shown is the answer about the document as it is now."""
+    pg.wait_for_function("document.querySelector('[data-testid=check]')?.dataset.fresh === 'true'",
+                         timeout=60_000)
 
 
 def drag_from_palette(pg, type_, x, y):
@@ -116,6 +114,11 @@ def wire(pg, src, dst):
     pg.mouse.up()
 
 
+def wait_edge(pg, wire_id):
+    """Wait for the wire ``"a.x->b.y"`` to be on the canvas."""
+    pg.wait_for_selector(f'.react-flow__edge[data-id="{wire_id}"]', state="attached")
+
+
 def click_empty(pg):
     """Click the canvas where nothing is drawn (clears the selection)."""
     box = pg.locator(".react-flow__pane").bounding_box()
@@ -133,11 +136,8 @@ def until(check, timeout=10.0):
 
 
 def blocks_on_canvas(pg):
-    return sorted(pg.eval_on_selector_all(".react-flow__node-block", "ns => ns.map(n => n.dataset.id)"))
-
-
-def wires_on_canvas(pg):
-    return sorted(pg.eval_on_selector_all(".react-flow__edge", "es => es.map(e => e.dataset.id || e.getAttribute('data-testid'))"))
+    return sorted(pg.eval_on_selector_all(".react-flow__node-block",
+                                          "ns => ns.map(n => n.dataset.id)"))
 
 
 def current_document(pg, editor_server, name):
@@ -183,8 +183,8 @@ def test_draw_wire_set_agents_run(page, editor_server):
     # both wires, each way
     wire(pg, "unicycle.pose", "point_to_point.pose")
     wire(pg, "point_to_point.cmd", "unicycle.cmd")
-    pg.wait_for_selector('.react-flow__edge[data-id="unicycle.pose->point_to_point.pose"]', state="attached")
-    pg.wait_for_selector('.react-flow__edge[data-id="point_to_point.cmd->unicycle.cmd"]', state="attached")
+    wait_edge(pg, "unicycle.pose->point_to_point.pose")
+    wait_edge(pg, "point_to_point.cmd->unicycle.cmd")
     wait_checked(pg)
 
     # the diagram parameters: agents 15 -> 300 in one field
@@ -233,16 +233,18 @@ def test_wrong_wire_shows_the_library_error_on_the_port(page, editor_server):
     wire(pg, "unicycle.pose", "point_to_point.pose")
     # a pose (N, 3) into the unicycle's command input (N, 2)
     wire(pg, "unicycle.pose", "unicycle.cmd")
-    pg.wait_for_selector('.react-flow__edge[data-id="unicycle.pose->unicycle.cmd"]', state="attached")
+    wait_edge(pg, "unicycle.pose->unicycle.cmd")
     wait_checked(pg)
-    bad = pg.locator('.react-flow__node[data-id="unicycle"] .react-flow__handle.target.bad[data-handleid="cmd"]')
+    bad = pg.locator('.react-flow__node[data-id="unicycle"] '
+                     '.react-flow__handle.target.bad[data-handleid="cmd"]')
     bad.wait_for()
 
     # what the library says about this diagram, asked independently
     doc = current_document(pg, editor_server, "wrong.yaml")
     status, v = editor_server.post("validate", {"document": doc})
     assert status == 200 and not v["ok"]
-    on_port = [e["message"] for e in v["errors"] if e.get("block") == "unicycle" and e.get("port") == "cmd"]
+    on_port = [e["message"] for e in v["errors"]
+               if e.get("block") == "unicycle" and e.get("port") == "cmd"]
     assert on_port, v["errors"]
     title = bad.get_attribute("title")
     for m in on_port:
@@ -258,7 +260,7 @@ def test_wrong_wire_shows_the_library_error_on_the_port(page, editor_server):
 
     # one driver per input: a wire into the taken input replaces the old one
     wire(pg, "point_to_point.cmd", "unicycle.cmd")
-    pg.wait_for_selector('.react-flow__edge[data-id="point_to_point.cmd->unicycle.cmd"]', state="attached")
+    wait_edge(pg, "point_to_point.cmd->unicycle.cmd")
     assert pg.locator('.react-flow__edge[data-id="unicycle.pose->unicycle.cmd"]').count() == 0
     assert "one driver" in pg.get_by_test_id("toast").last.inner_text()
     wait_checked(pg)
@@ -309,7 +311,7 @@ def test_search_to_add_and_group(page):
     pg.wait_for_selector('.react-flow__node[data-id="point_to_point"]')
     wire(pg, "unicycle.pose", "point_to_point.pose")
     wire(pg, "point_to_point.cmd", "unicycle.cmd")
-    pg.wait_for_selector('.react-flow__edge[data-id="point_to_point.cmd->unicycle.cmd"]', state="attached")
+    wait_edge(pg, "point_to_point.cmd->unicycle.cmd")
     pg.locator('.react-flow__node[data-id="point_to_point"]').click()
     pg.keyboard.press("Control+g")
     g = pg.locator(".react-flow__node-subsystem")
@@ -340,7 +342,10 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
     wait_checked(pg)
     assert pg.get_by_test_id("check").inner_text().startswith("✓")
     assert blocks_on_canvas(pg) == ["collision", "drive", "fleet", "lf", "morph", "supervisor"]
-    boxes = pg.eval_on_selector_all(".react-flow__node-block", "ns => ns.map(n => { const r = n.getBoundingClientRect(); return [r.x, r.y, r.right, r.bottom]; })")
+    boxes = pg.eval_on_selector_all(
+        ".react-flow__node-block",
+        "ns => ns.map(n => { const r = n.getBoundingClientRect(); "
+        "return [r.x, r.y, r.right, r.bottom]; })")
     for i, a in enumerate(boxes):
         for b in boxes[i + 1:]:
             assert not (a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]), (a, b)
@@ -367,9 +372,9 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
     sums = []
     for target, name in [(str(saved), "saved"), ("formation", "builtin")]:
-        subprocess.run([sys.executable, "-m", "avblocks", "run", target, "--quiet", "--t-final", "4",
-                        "--out", str(out / name)], check=True, env=env, cwd=out, timeout=600,
-                       stdout=subprocess.DEVNULL)
+        subprocess.run([sys.executable, "-m", "avblocks", "run", target, "--quiet",
+                        "--t-final", "4", "--out", str(out / name)],
+                       check=True, env=env, cwd=out, timeout=600, stdout=subprocess.DEVNULL)
         s = json.loads((out / name / "summary.json").read_text())
         for k in ("realtime_factor", "wall_s", "files"):  # the clock and where it wrote
             s.pop(k)

@@ -65659,24 +65659,24 @@ function Xm({ transport: e }) {
 		path: null,
 		builtin: null,
 		revision: null
-	}), [d, f] = (0, S.useState)(c), [p, m] = (0, S.useState)([]), h = p.length ? p[p.length - 1] : null, [g, _] = (0, S.useState)(/* @__PURE__ */ new Set()), [v, y] = (0, S.useState)(/* @__PURE__ */ new Set()), [b, x] = (0, S.useState)(null), [w, ee] = (0, S.useState)(!1), [te, ne] = (0, S.useState)([]), [re, ie] = (0, S.useState)(null), [ae, oe] = (0, S.useState)(null), [se, ce] = (0, S.useState)("props"), [le, ue] = (0, S.useState)("numpy"), [de, fe] = (0, S.useState)(""), [pe, me] = (0, S.useState)(""), [he, ge] = (0, S.useState)(null), [_e, ve] = (0, S.useState)(null), [ye, be] = (0, S.useState)(null), xe = (0, S.useRef)(null), Se = (0, S.useRef)(0), Ce = (0, S.useRef)(null), we = (0, S.useRef)(!1), Te = (0, S.useRef)(0), Ee = (0, S.useCallback)((e, t = "info") => {
-		let n = ++Te.current;
-		ne((r) => [...r.slice(-3), {
+	}), [d, f] = (0, S.useState)(c), [p, m] = (0, S.useState)([]), h = p.length ? p[p.length - 1] : null, [g, _] = (0, S.useState)(/* @__PURE__ */ new Set()), [v, y] = (0, S.useState)(/* @__PURE__ */ new Set()), [b, x] = (0, S.useState)(null), [w, ee] = (0, S.useState)(!1), [te, ne] = (0, S.useState)([]), [re, ie] = (0, S.useState)([]), [ae, oe] = (0, S.useState)(null), [se, ce] = (0, S.useState)(null), [le, ue] = (0, S.useState)("props"), [de, fe] = (0, S.useState)("numpy"), [pe, me] = (0, S.useState)(""), [he, ge] = (0, S.useState)(""), [_e, ve] = (0, S.useState)(null), [ye, be] = (0, S.useState)(null), [xe, Se] = (0, S.useState)(null), Ce = (0, S.useRef)(null), we = (0, S.useRef)(0), Te = (0, S.useRef)(null), Ee = (0, S.useRef)(!1), De = (0, S.useRef)(0), Oe = (0, S.useCallback)((e, t = "info") => {
+		let n = ++De.current;
+		ie((r) => [...r.slice(-3), {
 			id: n,
 			text: e,
 			kind: t
-		}]), setTimeout(() => ne((e) => e.filter((e) => e.id !== n)), t === "error" ? 7e3 : 4e3);
-	}, []), De = (0, S.useCallback)((e, t = null) => {
+		}]), setTimeout(() => ie((e) => e.filter((e) => e.id !== n)), t === "error" ? 7e3 : 4e3);
+	}, []), ke = (0, S.useCallback)((e, t = null) => {
 		s((n) => {
 			try {
 				return Yp(n, e(n.present), t);
 			} catch (e) {
-				if (e instanceof vp) setTimeout(() => Ee(e.message, "warn"));
+				if (e instanceof vp) setTimeout(() => Oe(e.message, "warn"));
 				else throw e;
 				return n;
 			}
 		});
-	}, [Ee]), Oe = (0, S.useCallback)(async (e, t) => {
+	}, [Oe]), Ae = (0, S.useCallback)(async (e, t) => {
 		let r = {
 			...e.document,
 			blocks: e.document.blocks ?? {},
@@ -65686,7 +65686,7 @@ function Xm({ transport: e }) {
 			path: e.path,
 			builtin: e.builtin,
 			revision: e.revision
-		}), m([]), _(/* @__PURE__ */ new Set()), y(/* @__PURE__ */ new Set()), ve(null), ge(null), be(null), Object.keys(r.blocks).length ? setTimeout(() => n.fitView({
+		}), m([]), _(/* @__PURE__ */ new Set()), y(/* @__PURE__ */ new Set()), be(null), ve(null), Se(null), Object.keys(r.blocks).length ? setTimeout(() => n.fitView({
 			padding: .15,
 			duration: 0,
 			maxZoom: 1.2
@@ -65695,64 +65695,70 @@ function Xm({ transport: e }) {
 			y: 0,
 			zoom: 1
 		}), 30);
-	}, [n]), ke = (0, S.useRef)(!1);
+	}, [n]), je = (0, S.useRef)(!1);
 	(0, S.useEffect)(() => {
-		ke.current || (ke.current = !0, (async () => {
+		je.current || (je.current = !0, (async () => {
 			let e = null;
 			try {
 				e = await t.palette(), a(e);
 			} catch (e) {
-				Ee(`palette: ${e.message}`, "error");
+				Oe(`palette: ${e.message}`, "error");
 			}
 			try {
 				let n = await t.files();
-				oe(n);
+				ce(n);
 				let r = n.initial;
 				if (r) {
 					let n = await t.load(r);
-					await Oe(n, e);
+					await Ae(n, e);
 				}
 			} catch (e) {
-				Ee(e.message, "error");
+				Oe(e.message, "error");
 			}
 		})());
 	}, [
 		t,
-		Oe,
-		Ee
+		Ae,
+		Oe
 	]);
-	let Ae = (0, S.useCallback)(async (e) => {
-		ie(null);
+	let Me = (0, S.useCallback)(async (e) => {
+		oe(null);
 		try {
 			let n = await t.load(e);
-			await Oe(n, i), Ee(`opened ${n.path ?? n.builtin}`);
+			await Ae(n, i), Oe(`opened ${n.path ?? n.builtin}`);
 		} catch (e) {
-			Ee(e.message, "error");
+			Oe(e.message, "error");
 		}
 	}, [
 		t,
-		Oe,
+		Ae,
 		i,
-		Ee
-	]), je = (0, S.useRef)(0);
+		Oe
+	]), Ne = (0, S.useRef)(0);
 	(0, S.useEffect)(() => {
-		let e = ++je.current;
+		let e = ++Ne.current;
 		ee(!0);
 		let n = setTimeout(async () => {
+			let n = [
+				c.blocks,
+				c.wires,
+				c.parameters,
+				c.simulation
+			];
 			try {
-				let n = await t.validate(c);
-				e === je.current && x(n);
+				let r = await t.validate(c);
+				e === Ne.current && (x(r), ne(n));
 			} catch (t) {
-				e === je.current && x({
+				e === Ne.current && (x({
 					ok: !1,
 					errors: [{
 						message: t.message,
 						kind: t.kind ?? "Error"
 					}],
 					signals: {}
-				});
+				}), ne(n));
 			} finally {
-				e === je.current && ee(!1);
+				e === Ne.current && ee(!1);
 			}
 		}, 150);
 		return () => clearTimeout(n);
@@ -65763,7 +65769,7 @@ function Xm({ transport: e }) {
 		c.parameters,
 		c.simulation
 	]);
-	let Me = (0, S.useMemo)(() => pm(c, i, {
+	let Pe = (0, S.useMemo)(() => pm(c, i, {
 		level: h,
 		validation: b,
 		selected: g,
@@ -65775,38 +65781,38 @@ function Xm({ transport: e }) {
 		b,
 		g,
 		v
-	]), Ne = (0, S.useCallback)((e) => {
+	]), Fe = (0, S.useCallback)((e) => {
 		let t = {}, n = null;
 		for (let r of e) r.type === "position" && r.position && r.id !== "__in" && r.id !== "__out" && (t[r.id] = [r.position.x, r.position.y]), r.type === "select" && (n ??= new Set(g), r.selected ? n.add(r.id) : n.delete(r.id));
 		Object.keys(t).length && s((e) => {
 			let n = Mp(e.present, t);
-			return we.current ? (we.current = !1, Yp(e, n)) : Xp(e, n);
+			return Ee.current ? (Ee.current = !1, Yp(e, n)) : Xp(e, n);
 		}), n && _(n);
-	}, [g]), Pe = (0, S.useCallback)((e) => {
+	}, [g]), Ie = (0, S.useCallback)((e) => {
 		let t = null;
 		for (let n of e) n.type === "select" && (t ??= new Set(v), n.selected ? t.add(n.id) : t.delete(n.id));
 		t && y(t);
-	}, [v]), Fe = (0, S.useCallback)((e) => {
+	}, [v]), Le = (0, S.useCallback)((e) => {
 		if (!e.source || !e.target || !e.sourceHandle || !e.targetHandle) return;
 		if (e.target === "__out") {
-			Ee("to feed something outside this subsystem, leave it (Escape) and draw the wire there", "warn");
+			Oe("to feed something outside this subsystem, leave it (Escape) and draw the wire there", "warn");
 			return;
 		}
 		let t = mm(c, e.source, e.sourceHandle), n = mm(c, e.target, e.targetHandle);
 		try {
 			let e = Np(c, t, n);
 			if (!e.added) return;
-			s((t) => Yp(t, e.doc)), e.replaced && Ee(`${n} had a driver (${e.replaced[0]}): an input has one driver, so the new wire from ${t} replaces it`, "warn");
+			s((t) => Yp(t, e.doc)), e.replaced && Oe(`${n} had a driver (${e.replaced[0]}): an input has one driver, so the new wire from ${t} replaces it`, "warn");
 		} catch (e) {
-			Ee(e.message, "warn");
+			Oe(e.message, "warn");
 		}
-	}, [c, Ee]), Ie = (0, S.useCallback)((e) => e.target !== "__out" && e.source !== "__out" && e.target !== "__in", []), Le = (0, S.useCallback)((e, t) => {
+	}, [c, Oe]), Re = (0, S.useCallback)((e) => e.target !== "__out" && e.source !== "__out" && e.target !== "__in", []), ze = (0, S.useCallback)((e, t) => {
 		let r = Kp(i, e), a = t;
 		if (!a) {
 			let e = document.querySelector(".canvas")?.getBoundingClientRect(), t = n.screenToFlowPosition({
 				x: (e?.left ?? 0) + (e?.width ?? 800) / 2,
 				y: (e?.top ?? 0) + (e?.height ?? 600) / 2
-			}), r = Me.nodes.map((e) => [
+			}), r = Pe.nodes.map((e) => [
 				e.position.x,
 				e.position.y,
 				e.position.x + (e.width ?? 210),
@@ -65835,18 +65841,18 @@ function Xm({ transport: e }) {
 						}
 					}
 				}
-			}), s((e) => Yp(e, n)), _(/* @__PURE__ */ new Set([t.name])), y(/* @__PURE__ */ new Set()), ce("props");
+			}), s((e) => Yp(e, n)), _(/* @__PURE__ */ new Set([t.name])), y(/* @__PURE__ */ new Set()), ue("props");
 		} catch (e) {
-			Ee(e.message, "warn");
+			Oe(e.message, "warn");
 		}
 	}, [
 		c,
 		h,
 		i,
 		n,
-		Ee,
-		Me.nodes
-	]), Re = (0, S.useCallback)((e) => {
+		Oe,
+		Pe.nodes
+	]), Be = (0, S.useCallback)((e) => {
 		e.preventDefault();
 		let t = e.dataTransfer.getData("application/x-avblocks-type") || e.dataTransfer.getData("text/plain");
 		if (!t) return;
@@ -65854,10 +65860,10 @@ function Xm({ transport: e }) {
 			x: e.clientX,
 			y: e.clientY
 		});
-		Le(t, [r.x - 20, r.y - 15]);
-	}, [Le, n]), ze = (0, S.useCallback)(() => {
-		let e = [...g].filter((e) => e !== "__in" && e !== "__out"), t = Me.edges.filter((e) => v.has(e.id)).map((e) => e.data.wire);
-		(e.length || t.length) && (De((n) => {
+		ze(t, [r.x - 20, r.y - 15]);
+	}, [ze, n]), Ve = (0, S.useCallback)(() => {
+		let e = [...g].filter((e) => e !== "__in" && e !== "__out"), t = Pe.edges.filter((e) => v.has(e.id)).map((e) => e.data.wire);
+		(e.length || t.length) && (ke((n) => {
 			let r = Dp(n, e);
 			for (let e of t) r = Pp(r, e);
 			return r;
@@ -65865,41 +65871,41 @@ function Xm({ transport: e }) {
 	}, [
 		g,
 		v,
-		Me.edges,
-		De
-	]), Be = (0, S.useCallback)(() => {
+		Pe.edges,
+		ke
+	]), He = (0, S.useCallback)(() => {
 		let e = [...g].filter((e) => e !== "__in" && e !== "__out");
-		return e.length ? (xe.current = Wp(c, e), Se.current = 0, Ee(`copied ${Object.keys(xe.current.blocks).length} block(s)`), !0) : !1;
+		return e.length ? (Ce.current = Wp(c, e), we.current = 0, Oe(`copied ${Object.keys(Ce.current.blocks).length} block(s)`), !0) : !1;
 	}, [
 		c,
 		g,
-		Ee
-	]), Ve = (0, S.useCallback)(() => {
-		if (!xe.current) return;
-		Se.current += 1;
-		let e = 40 * Se.current, t = Gp(c, xe.current, [e, e], h);
+		Oe
+	]), Ue = (0, S.useCallback)(() => {
+		if (!Ce.current) return;
+		we.current += 1;
+		let e = 40 * we.current, t = Gp(c, Ce.current, [e, e], h);
 		s((e) => Yp(e, t.doc)), _(new Set(t.names));
-	}, [c, h]), He = (0, S.useCallback)(() => {
+	}, [c, h]), We = (0, S.useCallback)(() => {
 		let e = [...g].filter((e) => e !== "__in" && e !== "__out");
-		if (!e.length) return Ee("select blocks to group (Shift+drag draws a selection box)", "warn");
+		if (!e.length) return Oe("select blocks to group (Shift+drag draws a selection box)", "warn");
 		try {
 			let t = Vp(c, e);
-			s((e) => Yp(e, t.doc)), _(/* @__PURE__ */ new Set([t.name])), Ee(`grouped ${e.length} item(s) into ${t.name}; double-click it to open`);
+			s((e) => Yp(e, t.doc)), _(/* @__PURE__ */ new Set([t.name])), Oe(`grouped ${e.length} item(s) into ${t.name}; double-click it to open`);
 		} catch (e) {
-			Ee(e.message, "warn");
+			Oe(e.message, "warn");
 		}
 	}, [
 		c,
 		g,
-		Ee
-	]), Ue = (0, S.useCallback)(() => {
+		Oe
+	]), Ge = (0, S.useCallback)(() => {
 		let e = [...g].filter((e) => e in (c.editor?.groups ?? {}));
-		e.length && (De((t) => e.reduce((e, t) => Hp(e, t), t)), _(new Set(e.flatMap((e) => [...c.editor.groups[e].blocks ?? [], ...c.editor.groups[e].groups ?? []]))));
+		e.length && (ke((t) => e.reduce((e, t) => Hp(e, t), t)), _(new Set(e.flatMap((e) => [...c.editor.groups[e].blocks ?? [], ...c.editor.groups[e].groups ?? []]))));
 	}, [
 		c,
 		g,
-		De
-	]), We = (0, S.useCallback)(async () => {
+		ke
+	]), Ke = (0, S.useCallback)(async () => {
 		let e = await gm(c, i, h);
 		s((t) => Yp(t, Mp(t.present, e))), setTimeout(() => n.fitView({
 			padding: .15,
@@ -65911,20 +65917,20 @@ function Xm({ transport: e }) {
 		i,
 		h,
 		n
-	]), Ge = (0, S.useCallback)((e) => {
+	]), qe = (0, S.useCallback)((e) => {
 		m((t) => [...t, e]), _(/* @__PURE__ */ new Set()), y(/* @__PURE__ */ new Set()), setTimeout(() => n.fitView({
 			padding: .2,
 			duration: 150,
 			maxZoom: 1.2
 		}), 30);
-	}, [n]), Ke = (0, S.useCallback)((e) => {
+	}, [n]), Je = (0, S.useCallback)((e) => {
 		m((t) => t.slice(0, e)), _(/* @__PURE__ */ new Set()), setTimeout(() => n.fitView({
 			padding: .15,
 			duration: 150,
 			maxZoom: 1.2
 		}), 30);
-	}, [n]), qe = b?.ok ?? !1, Je = d !== c && JSON.stringify(d) !== JSON.stringify(c), Ye = (0, S.useCallback)(async (e, n = {}) => {
-		let r = n.draft ?? !qe;
+	}, [n]), Ye = b?.ok ?? !1, Xe = d !== c && JSON.stringify(d) !== JSON.stringify(c), Ze = (0, S.useCallback)(async (e, n = {}) => {
+		let r = n.draft ?? !Ye;
 		try {
 			let i = await t.save({
 				path: e,
@@ -65936,62 +65942,62 @@ function Xm({ transport: e }) {
 				path: i.path,
 				builtin: null,
 				revision: i.revision
-			}), f(c), ie(null), Ee(i.draft ? `saved ${i.path} as a draft (it has problems; avblocks run will report them)` : `saved ${i.path}`, i.draft ? "warn" : "info");
+			}), f(c), oe(null), Oe(i.draft ? `saved ${i.path} as a draft (it has problems; avblocks run will report them)` : `saved ${i.path}`, i.draft ? "warn" : "info");
 		} catch (t) {
-			t instanceof vee && t.status === 409 ? ie({
+			t instanceof vee && t.status === 409 ? oe({
 				kind: "conflict",
 				path: e,
 				draft: r
-			}) : Ee(t.message, "error");
+			}) : Oe(t.message, "error");
 		}
 	}, [
 		t,
 		c,
 		l,
-		qe,
-		Ee
-	]), Xe = (0, S.useCallback)(() => {
-		l.path ? Ye(l.path) : ie({
+		Ye,
+		Oe
+	]), Qe = (0, S.useCallback)(() => {
+		l.path ? Ze(l.path) : oe({
 			kind: "saveas",
-			draft: !qe
+			draft: !Ye
 		});
 	}, [
 		l.path,
-		Ye,
-		qe
-	]), Ze = (0, S.useCallback)(async () => {
-		ie({ kind: "open" });
+		Ze,
+		Ye
+	]), $e = (0, S.useCallback)(async () => {
+		oe({ kind: "open" });
 		try {
-			oe(await t.files());
+			ce(await t.files());
 		} catch (e) {
-			Ee(e.message, "error");
+			Oe(e.message, "error");
 		}
-	}, [t, Ee]), Qe = (0, S.useCallback)(() => {
-		Oe({
+	}, [t, Oe]), et = (0, S.useCallback)(() => {
+		Ae({
 			document: yp(),
 			path: null,
 			builtin: null,
 			revision: null
 		}, i);
-	}, [Oe, i]), $e = (0, S.useRef)(null), et = (0, S.useCallback)(async () => {
-		if (_e?.status === "running") return;
+	}, [Ae, i]), tt = (0, S.useRef)(null), nt = (0, S.useCallback)(async () => {
+		if (ye?.status === "running") return;
 		let e = {
 			document: c,
-			backend: le
+			backend: de
 		};
-		de.trim() && (e.t_final = Number(de)), pe.trim() && (e.dt = Number(pe)), ce("run"), be(null), ve({
+		pe.trim() && (e.t_final = Number(pe)), he.trim() && (e.dt = Number(he)), ue("run"), Se(null), be({
 			status: "running",
 			progress: 0
 		});
 		try {
 			let { run: n } = await t.run(e);
-			ge(n);
+			ve(n);
 			let r = async () => {
 				try {
 					let e = await t.runStatus(n);
-					ve(e), e.status === "running" ? $e.current = window.setTimeout(r, 250) : e.status === "done" && Ee(e.outcome ?? "run finished");
+					be(e), e.status === "running" ? tt.current = window.setTimeout(r, 250) : e.status === "done" && Oe(e.outcome ?? "run finished");
 				} catch (e) {
-					ve({
+					be({
 						status: "failed",
 						progress: 0,
 						error: e.message
@@ -66000,7 +66006,7 @@ function Xm({ transport: e }) {
 			};
 			r();
 		} catch (e) {
-			ve({
+			be({
 				status: "failed",
 				progress: 0,
 				error: e.message
@@ -66009,115 +66015,135 @@ function Xm({ transport: e }) {
 	}, [
 		t,
 		c,
-		le,
 		de,
 		pe,
-		_e,
-		Ee
+		he,
+		ye,
+		Oe
 	]);
 	(0, S.useEffect)(() => () => {
-		$e.current && clearTimeout($e.current);
+		tt.current && clearTimeout(tt.current);
 	}, []);
-	let tt = (0, S.useCallback)(() => {
-		he && t.cancel(he).catch((e) => Ee(e.message, "error"));
+	let rt = (0, S.useCallback)(() => {
+		_e && t.cancel(_e).catch((e) => Oe(e.message, "error"));
 	}, [
 		t,
-		he,
-		Ee
-	]), nt = (0, S.useCallback)(async () => {
+		_e,
+		Oe
+	]), it = (0, S.useCallback)(async () => {
 		try {
 			let { url: e } = await t.live(c);
-			window.open(e, "_blank"), Ee(`live view: ${e}`);
+			window.open(e, "_blank"), Oe(`live view: ${e}`);
 		} catch (e) {
-			Ee(e.message, "error");
+			Oe(e.message, "error");
 		}
 	}, [
 		t,
 		c,
-		Ee
-	]), rt = (0, S.useCallback)(async (e) => {
+		Oe
+	]), at = (0, S.useCallback)(async (e) => {
 		try {
 			let n = await t.export(c, e), r = (c.name || "diagram").replace(/[^\w.-]/g, "_");
-			e === "python" ? ie({
+			e === "python" ? oe({
 				kind: "export",
 				text: n.text ?? "",
 				filename: `${r}.py`
 			}) : n.data_url ? Ym(`${r}.${e}`, n.data_url) : n.text && Ym(`${r}.${e}`, URL.createObjectURL(new Blob([n.text], { type: "image/svg+xml" })));
 		} catch (e) {
-			Ee(e.message, "error");
+			Oe(e.message, "error");
 		}
 	}, [
 		t,
 		c,
-		Ee
-	]), it = (0, S.useCallback)(async (e) => {
-		if (y(/* @__PURE__ */ new Set([um(e)])), !he || !_e) return;
-		if (_e.status === "running") return Ee("the run is still going: click the wire again when it is done", "info");
-		if (_e.status !== "done") return;
+		Oe
+	]), ot = (0, S.useCallback)(async (e) => {
+		if (y(/* @__PURE__ */ new Set([um(e)])), !_e || !ye) return;
+		if (ye.status === "running") return Oe("the run is still going: click the wire again when it is done", "info");
+		if (ye.status !== "done") return;
 		let n = e[0];
-		be({
+		Se({
 			name: n,
 			data: null
 		});
 		try {
-			let e = await t.signal(he, n);
-			be({
+			let e = await t.signal(_e, n);
+			Se({
 				name: n,
 				data: e
 			});
 		} catch (e) {
-			be(null), Ee(`${n}: ${e.message}`, "warn");
+			Se(null), Oe(`${n}: ${e.message}`, "warn");
 		}
 	}, [
 		t,
-		he,
 		_e,
-		Ee
-	]), at = (0, S.useCallback)((e, t) => it(t.data.wire), [it]);
+		ye,
+		Oe
+	]), st = (0, S.useCallback)((e, t) => ot(t.data.wire), [ot]);
 	(0, S.useEffect)(() => {
-		let e = (e) => it(e.detail);
+		let e = (e) => ot(e.detail);
 		return window.addEventListener(xm, e), () => window.removeEventListener(xm, e);
-	}, [it]);
-	let ot = (0, S.useCallback)((e) => {
+	}, [ot]);
+	let ct = (0, S.useCallback)((e) => {
 		let t = e.block ?? (e.wire ? xp(e.wire[1]) : e.cycle?.length ? xp(e.cycle[0]) : null);
 		if (!t || !(t in c.blocks)) return;
 		let r = [];
 		for (let e = Ip(c, t); e !== null; e = Ip(c, e)) r.unshift(e);
-		m(r), _(/* @__PURE__ */ new Set([t])), y(e.wire ? /* @__PURE__ */ new Set([um(e.wire)]) : /* @__PURE__ */ new Set()), ce("props");
+		m(r), _(/* @__PURE__ */ new Set([t])), y(e.wire ? /* @__PURE__ */ new Set([um(e.wire)]) : /* @__PURE__ */ new Set()), ue("props");
 		let i = c.editor?.layout?.[t];
 		i && setTimeout(() => n.setCenter(i[0] + 105, i[1] + 40, {
 			zoom: n.getZoom(),
 			duration: 200
 		}), 30);
-	}, [c, n]);
-	(0, S.useEffect)(() => {
+	}, [c, n]), lt = {
+		dialog: ae,
+		valid: Ye,
+		save: Qe,
+		copy: He,
+		pasteClip: Ue,
+		deleteSelection: Ve,
+		group: We,
+		ungroupSel: Ge,
+		openFiles: $e,
+		run: nt,
+		selected: g,
+		selectedEdges: v,
+		path: p,
+		leaveTo: Je,
+		doc: c,
+		openGroup: qe,
+		autoLayout: Ke,
+		rf: n,
+		flow: Pe
+	}, ut = (0, S.useRef)(lt);
+	ut.current = lt, (0, S.useEffect)(() => {
 		let e = (e) => {
-			let t = e.ctrlKey || e.metaKey, r = e.key.toLowerCase();
-			if (t && r === "s") e.preventDefault(), e.shiftKey ? ie({
+			let { dialog: t, valid: n, save: r, copy: i, pasteClip: a, deleteSelection: o, group: c, ungroupSel: l, openFiles: u, run: d, selected: f, selectedEdges: p, path: m, leaveTo: h, doc: g, openGroup: v, autoLayout: b, rf: x, flow: S } = ut.current, C = e.ctrlKey || e.metaKey, w = e.key.toLowerCase();
+			if (C && w === "s") e.preventDefault(), e.shiftKey ? oe({
 				kind: "saveas",
-				draft: !qe
-			}) : Xe();
-			else if (!re) {
-				if (t && r === "k") e.preventDefault(), Ce.current?.focus();
+				draft: !n
+			}) : r();
+			else if (!t) {
+				if (C && w === "k") e.preventDefault(), Te.current?.focus();
 				else if (!Jm(e)) {
-					if (t && r === "z" && !e.shiftKey) e.preventDefault(), s(Zp);
-					else if (t && (r === "z" && e.shiftKey || r === "y")) e.preventDefault(), s(Qp);
-					else if (t && r === "c") Be() && e.preventDefault();
-					else if (t && r === "x") Be() && (e.preventDefault(), ze());
-					else if (t && r === "v") e.preventDefault(), Ve();
-					else if (t && r === "d") e.preventDefault(), Be() && Ve();
-					else if (t && r === "a") e.preventDefault(), _(new Set(Me.nodes.filter((e) => e.type !== "boundary").map((e) => e.id)));
-					else if (t && r === "g") e.preventDefault(), e.shiftKey ? Ue() : He();
-					else if (t && r === "o") e.preventDefault(), Ze();
-					else if (t && e.key === "Enter") e.preventDefault(), et();
-					else if (e.key === "Delete" || e.key === "Backspace") e.preventDefault(), ze();
-					else if (e.key === "?") ie({ kind: "help" });
-					else if (e.key === "/") e.preventDefault(), Ce.current?.focus();
-					else if (e.key === "Escape") g.size || v.size ? (_(/* @__PURE__ */ new Set()), y(/* @__PURE__ */ new Set())) : p.length && Ke(p.length - 1), be(null);
-					else if (e.key === "Enter" && g.size === 1) {
-						let [e] = [...g];
-						e in (c.editor?.groups ?? {}) && Ge(e);
-					} else !t && r === "l" ? We() : !t && r === "f" && n.fitView({
+					if (C && w === "z" && !e.shiftKey) e.preventDefault(), s(Zp);
+					else if (C && (w === "z" && e.shiftKey || w === "y")) e.preventDefault(), s(Qp);
+					else if (C && w === "c") i() && e.preventDefault();
+					else if (C && w === "x") i() && (e.preventDefault(), o());
+					else if (C && w === "v") e.preventDefault(), a();
+					else if (C && w === "d") e.preventDefault(), i() && a();
+					else if (C && w === "a") e.preventDefault(), _(new Set(S.nodes.filter((e) => e.type !== "boundary").map((e) => e.id)));
+					else if (C && w === "g") e.preventDefault(), e.shiftKey ? l() : c();
+					else if (C && w === "o") e.preventDefault(), u();
+					else if (C && e.key === "Enter") e.preventDefault(), d();
+					else if (e.key === "Delete" || e.key === "Backspace") e.preventDefault(), o();
+					else if (e.key === "?") oe({ kind: "help" });
+					else if (e.key === "/") e.preventDefault(), Te.current?.focus();
+					else if (e.key === "Escape") f.size || p.size ? (_(/* @__PURE__ */ new Set()), y(/* @__PURE__ */ new Set())) : m.length && h(m.length - 1), Se(null);
+					else if (e.key === "Enter" && f.size === 1) {
+						let [e] = [...f];
+						e in (g.editor?.groups ?? {}) && v(e);
+					} else !C && w === "l" ? b() : !C && w === "f" && x.fitView({
 						padding: .15,
 						duration: 200,
 						maxZoom: 1.2
@@ -66126,84 +66152,64 @@ function Xm({ transport: e }) {
 			}
 		};
 		return window.addEventListener("keydown", e), () => window.removeEventListener("keydown", e);
-	}, [
-		re,
-		qe,
-		Xe,
-		Be,
-		Ve,
-		ze,
-		He,
-		Ue,
-		Ze,
-		et,
-		g,
-		v,
-		p,
-		Ke,
-		c,
-		Ge,
-		We,
-		n,
-		Me.nodes
-	]);
-	let st = b?.errors ?? [], ct = [...g], lt = ct.length === 1 ? ct[0] : null, ut = l.path ?? (l.builtin ? `${l.builtin} (built-in)` : "new diagram"), dt = _e?.status === "running", ft = c.simulation?.t_final, pt = c.simulation?.dt, mt;
-	if (lt && lt in c.blocks) mt = /* @__PURE__ */ (0, C.jsx)(See, {
+	}, []);
+	let dt = b?.errors ?? [], ft = [...g], pt = ft.length === 1 ? ft[0] : null, mt = l.path ?? (l.builtin ? `${l.builtin} (built-in)` : "new diagram"), ht = ye?.status === "running", gt = c.simulation?.t_final, _t = c.simulation?.dt, vt;
+	if (pt && pt in c.blocks) vt = /* @__PURE__ */ (0, C.jsx)(See, {
 		doc: c,
-		name: lt,
+		name: pt,
 		palette: i,
-		errors: st,
+		errors: dt,
 		onRename: (e) => {
 			try {
-				let t = Op(c, lt, e);
+				let t = Op(c, pt, e);
 				return s((e) => Yp(e, t)), _(/* @__PURE__ */ new Set([e])), null;
 			} catch (e) {
 				return e.message;
 			}
 		},
-		onParam: (e, t) => De((n) => kp(n, lt, e, t), `param:${lt}.${e}`)
+		onParam: (e, t) => ke((n) => kp(n, pt, e, t), `param:${pt}.${e}`)
 	});
-	else if (lt && lt in (c.editor?.groups ?? {})) mt = /* @__PURE__ */ (0, C.jsx)(wee, {
+	else if (pt && pt in (c.editor?.groups ?? {})) vt = /* @__PURE__ */ (0, C.jsx)(wee, {
 		doc: c,
-		name: lt,
-		onLabel: (e) => De((t) => Up(t, lt, e), `label:${lt}`),
-		onOpen: () => Ge(lt),
-		onUngroup: Ue
+		name: pt,
+		onLabel: (e) => ke((t) => Up(t, pt, e), `label:${pt}`),
+		onOpen: () => qe(pt),
+		onUngroup: Ge
 	});
-	else if (!ct.length && v.size === 1) {
-		let e = Me.edges.find((e) => v.has(e.id));
-		mt = e ? /* @__PURE__ */ (0, C.jsx)(Lm, {
+	else if (!ft.length && v.size === 1) {
+		let e = Pe.edges.find((e) => v.has(e.id));
+		vt = e ? /* @__PURE__ */ (0, C.jsx)(Lm, {
 			wire: e.data.wire,
 			shape: e.data.shape,
 			errors: e.data.errors,
-			logged: _e?.signals ?? null,
+			logged: ye?.signals ?? null,
 			inLog: Array.isArray(c.simulation?.log) && c.simulation.log.includes(e.data.wire[0]),
-			onLog: () => De((t) => jp(t, "log", [...(Array.isArray(t.simulation?.log) ? t.simulation.log : _e?.signals ?? []).filter((t) => t !== e.data.wire[0]), e.data.wire[0]])),
-			onDelete: ze
+			onLog: () => ke((t) => jp(t, "log", [...(Array.isArray(t.simulation?.log) ? t.simulation.log : ye?.signals ?? []).filter((t) => t !== e.data.wire[0]), e.data.wire[0]])),
+			onDelete: Ve
 		}) : null;
-	} else mt = ct.length > 1 ? /* @__PURE__ */ (0, C.jsxs)("div", {
+	} else vt = ft.length > 1 ? /* @__PURE__ */ (0, C.jsxs)("div", {
 		className: "inspector",
 		children: [/* @__PURE__ */ (0, C.jsxs)("div", {
 			className: "insp-section",
-			children: [ct.length, " selected"]
+			children: [ft.length, " selected"]
 		}), /* @__PURE__ */ (0, C.jsxs)("div", {
 			className: "row",
 			children: [/* @__PURE__ */ (0, C.jsx)("button", {
-				onClick: He,
+				onClick: We,
 				children: "Group (Ctrl+G)"
 			}), /* @__PURE__ */ (0, C.jsx)("button", {
-				onClick: ze,
+				onClick: Ve,
 				children: "Delete"
 			})]
 		})]
 	}) : /* @__PURE__ */ (0, C.jsx)(Cee, {
 		doc: c,
-		onField: (e, t) => De((n) => ({
+		onField: (e, t) => ke((n) => ({
 			...n,
 			[e]: t
 		}), `doc:${e}`),
-		onParameter: (e, t) => De((n) => Ap(n, e, t), `dparam:${e}`),
-		onSimulation: (e, t) => De((n) => jp(n, e, t), `sim:${e}`)
+		onParameter: (e, t) => ke((n) => Ap(n, e, t), `dparam:${e}`),
+		onSimulation: (e, t) => ke((n) => jp(n, e, t), `sim:${e}`)
 	});
 	return /* @__PURE__ */ (0, C.jsxs)("div", {
 		className: "app",
@@ -66220,9 +66226,9 @@ function Xm({ transport: e }) {
 					}),
 					/* @__PURE__ */ (0, C.jsxs)("div", {
 						className: "file-title",
-						title: ut,
+						title: mt,
 						"data-testid": "file-title",
-						children: [ut, Je ? /* @__PURE__ */ (0, C.jsx)("span", {
+						children: [mt, Xe ? /* @__PURE__ */ (0, C.jsx)("span", {
 							className: "dirty",
 							title: "unsaved changes",
 							children: " ●"
@@ -66232,25 +66238,25 @@ function Xm({ transport: e }) {
 						className: "tb-group",
 						children: [
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: Qe,
+								onClick: et,
 								title: "New diagram",
 								children: "New"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: Ze,
+								onClick: $e,
 								title: "Open (Ctrl+O)",
 								children: "Open"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: Xe,
+								onClick: Qe,
 								title: "Save (Ctrl+S)",
 								"data-testid": "save",
 								children: "Save"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: () => ie({
+								onClick: () => oe({
 									kind: "saveas",
-									draft: !qe
+									draft: !Ye
 								}),
 								title: "Save as (Ctrl+Shift+S)",
 								children: "Save as"
@@ -66275,12 +66281,12 @@ function Xm({ transport: e }) {
 								children: "↷"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: He,
+								onClick: We,
 								title: "Group the selection (Ctrl+G)",
 								children: "Group"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: We,
+								onClick: Ke,
 								title: "Automatic layout (L)",
 								children: "Layout"
 							})
@@ -66290,8 +66296,8 @@ function Xm({ transport: e }) {
 						className: "tb-group run-group",
 						children: [
 							/* @__PURE__ */ (0, C.jsxs)("select", {
-								value: le,
-								onChange: (e) => ue(e.target.value),
+								value: de,
+								onChange: (e) => fe(e.target.value),
 								"aria-label": "Backend",
 								title: "Backend",
 								children: [/* @__PURE__ */ (0, C.jsx)("option", {
@@ -66309,9 +66315,9 @@ function Xm({ transport: e }) {
 									/* @__PURE__ */ (0, C.jsx)("sub", { children: "f" }),
 									/* @__PURE__ */ (0, C.jsx)("input", {
 										className: "num",
-										value: de,
-										placeholder: ft === void 0 ? "" : $p(ft),
-										onChange: (e) => fe(e.target.value),
+										value: pe,
+										placeholder: gt === void 0 ? "" : $p(gt),
+										onChange: (e) => me(e.target.value),
 										"aria-label": "t_final"
 									})
 								]
@@ -66320,25 +66326,25 @@ function Xm({ transport: e }) {
 								title: "step [s] (empty: the diagram's)",
 								children: ["dt", /* @__PURE__ */ (0, C.jsx)("input", {
 									className: "num",
-									value: pe,
-									placeholder: pt === void 0 ? "" : $p(pt),
-									onChange: (e) => me(e.target.value),
+									value: he,
+									placeholder: _t === void 0 ? "" : $p(_t),
+									onChange: (e) => ge(e.target.value),
 									"aria-label": "dt"
 								})]
 							}),
-							dt ? /* @__PURE__ */ (0, C.jsx)("button", {
+							ht ? /* @__PURE__ */ (0, C.jsx)("button", {
 								className: "danger",
-								onClick: tt,
+								onClick: rt,
 								children: "Stop"
 							}) : /* @__PURE__ */ (0, C.jsx)("button", {
 								className: "primary",
-								onClick: et,
+								onClick: nt,
 								title: "Run (Ctrl+Enter)",
 								"data-testid": "run",
 								children: "▶ Run"
 							}),
 							/* @__PURE__ */ (0, C.jsx)("button", {
-								onClick: nt,
+								onClick: it,
 								title: "Open the drawn diagram in the live view",
 								children: "Live"
 							})
@@ -66348,7 +66354,7 @@ function Xm({ transport: e }) {
 						className: "tb-group",
 						children: [/* @__PURE__ */ (0, C.jsxs)("select", {
 							value: "",
-							onChange: (e) => e.target.value && rt(e.target.value),
+							onChange: (e) => e.target.value && at(e.target.value),
 							"aria-label": "Export",
 							title: "Export",
 							children: [
@@ -66370,21 +66376,27 @@ function Xm({ transport: e }) {
 								})
 							]
 						}), /* @__PURE__ */ (0, C.jsx)("button", {
-							onClick: () => ie({ kind: "help" }),
+							onClick: () => oe({ kind: "help" }),
 							title: "Keyboard shortcuts (?)",
 							children: "?"
 						})]
 					}),
 					/* @__PURE__ */ (0, C.jsx)("div", {
-						className: `check ${w ? "busy" : qe ? "ok" : "bad"}`,
+						className: `check ${w ? "busy" : Ye ? "ok" : "bad"}`,
 						"data-testid": "check",
-						onClick: () => ce("problems"),
-						children: w && !b ? "checking…" : qe ? "✓ builds" : `⚠ ${st.length} problem${st.length === 1 ? "" : "s"}`
+						"data-fresh": String(!w && [
+							c.blocks,
+							c.wires,
+							c.parameters,
+							c.simulation
+						].every((e, t) => e === te[t])),
+						onClick: () => ue("problems"),
+						children: w && !b ? "checking…" : Ye ? "✓ builds" : `⚠ ${dt.length} problem${dt.length === 1 ? "" : "s"}`
 					}),
-					dt ? /* @__PURE__ */ (0, C.jsx)("div", {
+					ht ? /* @__PURE__ */ (0, C.jsx)("div", {
 						className: "progress",
 						"data-testid": "progress",
-						children: /* @__PURE__ */ (0, C.jsx)("div", { style: { width: `${Math.round(100 * (_e?.progress ?? 0))}%` } })
+						children: /* @__PURE__ */ (0, C.jsx)("div", { style: { width: `${Math.round(100 * (ye?.progress ?? 0))}%` } })
 					}) : null
 				]
 			}),
@@ -66393,45 +66405,45 @@ function Xm({ transport: e }) {
 				children: [
 					/* @__PURE__ */ (0, C.jsx)(yee, {
 						palette: i,
-						onAdd: (e) => Le(e),
-						searchRef: Ce
+						onAdd: (e) => ze(e),
+						searchRef: Te
 					}),
 					/* @__PURE__ */ (0, C.jsxs)("div", {
 						className: `canvas ${r ? "far" : ""}`,
 						onDragOver: (e) => {
 							e.preventDefault(), e.dataTransfer.dropEffect = "copy";
 						},
-						onDrop: Re,
+						onDrop: Be,
 						children: [
 							/* @__PURE__ */ (0, C.jsxs)("div", {
 								className: "breadcrumb",
 								children: [/* @__PURE__ */ (0, C.jsx)("button", {
 									className: p.length ? "link" : "here",
-									onClick: () => Ke(0),
+									onClick: () => Je(0),
 									children: c.name || "diagram"
 								}), p.map((e, t) => /* @__PURE__ */ (0, C.jsxs)("span", { children: [" › ", /* @__PURE__ */ (0, C.jsx)("button", {
 									className: t === p.length - 1 ? "here" : "link",
-									onClick: () => Ke(t + 1),
+									onClick: () => Je(t + 1),
 									children: c.editor?.groups?.[e]?.label ?? e
 								})] }, e))]
 							}),
 							/* @__PURE__ */ (0, C.jsxs)(Nf, {
-								nodes: Me.nodes,
-								edges: Me.edges,
+								nodes: Pe.nodes,
+								edges: Pe.edges,
 								nodeTypes: km,
 								edgeTypes: Am,
-								onNodesChange: Ne,
-								onEdgesChange: Pe,
-								onConnect: Fe,
-								isValidConnection: Ie,
+								onNodesChange: Fe,
+								onEdgesChange: Ie,
+								onConnect: Le,
+								isValidConnection: Re,
 								onNodeDragStart: () => {
-									we.current = !0;
+									Ee.current = !0;
 								},
 								onNodeDoubleClick: (e, t) => {
-									t.type === "subsystem" && Ge(t.id);
+									t.type === "subsystem" && qe(t.id);
 								},
-								onEdgeClick: at,
-								onPaneClick: () => be(null),
+								onEdgeClick: st,
+								onPaneClick: () => Se(null),
 								deleteKeyCode: null,
 								selectionKeyCode: "Shift",
 								multiSelectionKeyCode: [
@@ -66481,14 +66493,14 @@ function Xm({ transport: e }) {
 									" lists the shortcuts."
 								] })]
 							}),
-							ye ? /* @__PURE__ */ (0, C.jsx)(Um, {
-								name: ye.name,
-								data: ye.data,
-								onClose: () => be(null)
+							xe ? /* @__PURE__ */ (0, C.jsx)(Um, {
+								name: xe.name,
+								data: xe.data,
+								onClose: () => Se(null)
 							}) : null,
 							/* @__PURE__ */ (0, C.jsx)("div", {
 								className: "toasts",
-								children: te.map((e) => /* @__PURE__ */ (0, C.jsx)("div", {
+								children: re.map((e) => /* @__PURE__ */ (0, C.jsx)("div", {
 									className: `toast ${e.kind}`,
 									"data-testid": "toast",
 									children: e.text
@@ -66502,22 +66514,22 @@ function Xm({ transport: e }) {
 							className: "tabs",
 							children: [
 								/* @__PURE__ */ (0, C.jsx)("button", {
-									className: se === "props" ? "on" : "",
-									onClick: () => ce("props"),
+									className: le === "props" ? "on" : "",
+									onClick: () => ue("props"),
 									children: "Properties"
 								}),
 								/* @__PURE__ */ (0, C.jsxs)("button", {
-									className: se === "problems" ? "on" : "",
-									onClick: () => ce("problems"),
+									className: le === "problems" ? "on" : "",
+									onClick: () => ue("problems"),
 									"data-testid": "tab-problems",
-									children: ["Problems ", st.length ? /* @__PURE__ */ (0, C.jsx)("span", {
+									children: ["Problems ", dt.length ? /* @__PURE__ */ (0, C.jsx)("span", {
 										className: "badge",
-										children: st.length
+										children: dt.length
 									}) : null]
 								}),
 								/* @__PURE__ */ (0, C.jsx)("button", {
-									className: se === "run" ? "on" : "",
-									onClick: () => ce("run"),
+									className: le === "run" ? "on" : "",
+									onClick: () => ue("run"),
 									"data-testid": "tab-run",
 									children: "Run"
 								})
@@ -66525,80 +66537,80 @@ function Xm({ transport: e }) {
 						}), /* @__PURE__ */ (0, C.jsxs)("div", {
 							className: "side-body",
 							children: [
-								se === "props" ? mt : null,
-								se === "problems" ? /* @__PURE__ */ (0, C.jsx)(Rm, {
-									errors: st,
-									onPick: ot,
+								le === "props" ? vt : null,
+								le === "problems" ? /* @__PURE__ */ (0, C.jsx)(Rm, {
+									errors: dt,
+									onPick: ct,
 									validating: w
 								}) : null,
-								se === "run" ? /* @__PURE__ */ (0, C.jsx)(zm, {
-									status: _e,
+								le === "run" ? /* @__PURE__ */ (0, C.jsx)(zm, {
+									status: ye,
 									fileUrl: (t) => e.fileUrl(t),
-									hasRun: !!he
+									hasRun: !!_e
 								}) : null
 							]
 						})]
 					})
 				]
 			}),
-			re?.kind === "open" ? /* @__PURE__ */ (0, C.jsx)(Gm, {
-				files: ae,
-				onOpen: Ae,
-				onClose: () => ie(null)
+			ae?.kind === "open" ? /* @__PURE__ */ (0, C.jsx)(Gm, {
+				files: se,
+				onOpen: Me,
+				onClose: () => oe(null)
 			}) : null,
-			re?.kind === "help" ? /* @__PURE__ */ (0, C.jsx)(qm, { onClose: () => ie(null) }) : null,
-			re?.kind === "saveas" ? /* @__PURE__ */ (0, C.jsx)(Zm, {
+			ae?.kind === "help" ? /* @__PURE__ */ (0, C.jsx)(qm, { onClose: () => oe(null) }) : null,
+			ae?.kind === "saveas" ? /* @__PURE__ */ (0, C.jsx)(Zm, {
 				initial: l.path ?? `${(c.name || "diagram").replace(/[^\w.-]/g, "_")}.yaml`,
-				draft: re.draft,
-				onSave: (e) => Ye(e),
-				onClose: () => ie(null)
+				draft: ae.draft,
+				onSave: (e) => Ze(e),
+				onClose: () => oe(null)
 			}) : null,
-			re?.kind === "conflict" ? /* @__PURE__ */ (0, C.jsxs)(Wm, {
+			ae?.kind === "conflict" ? /* @__PURE__ */ (0, C.jsxs)(Wm, {
 				title: "The file changed on disk",
-				onClose: () => ie(null),
+				onClose: () => oe(null),
 				children: [/* @__PURE__ */ (0, C.jsxs)("p", { children: [/* @__PURE__ */ (0, C.jsx)("span", {
 					className: "mono",
-					children: re.path
+					children: ae.path
 				}), " was changed by something else since it was opened."] }), /* @__PURE__ */ (0, C.jsxs)("div", {
 					className: "row",
 					children: [
 						/* @__PURE__ */ (0, C.jsx)("button", {
 							className: "danger",
-							onClick: () => Ye(re.path, {
+							onClick: () => Ze(ae.path, {
 								force: !0,
-								draft: re.draft
+								draft: ae.draft
 							}),
 							"data-testid": "overwrite",
 							children: "Overwrite it with this diagram"
 						}),
 						/* @__PURE__ */ (0, C.jsx)("button", {
-							onClick: () => Ae({ path: re.path }),
+							onClick: () => Me({ path: ae.path }),
 							children: "Reload it (drop my changes)"
 						}),
 						/* @__PURE__ */ (0, C.jsx)("button", {
-							onClick: () => ie({
+							onClick: () => oe({
 								kind: "saveas",
-								draft: re.draft
+								draft: ae.draft
 							}),
 							children: "Save as…"
 						})
 					]
 				})]
 			}) : null,
-			re?.kind === "export" ? /* @__PURE__ */ (0, C.jsxs)(Wm, {
-				title: `Export: ${re.filename}`,
-				onClose: () => ie(null),
+			ae?.kind === "export" ? /* @__PURE__ */ (0, C.jsxs)(Wm, {
+				title: `Export: ${ae.filename}`,
+				onClose: () => oe(null),
 				children: [/* @__PURE__ */ (0, C.jsx)("pre", {
 					className: "code",
-					children: re.text
+					children: ae.text
 				}), /* @__PURE__ */ (0, C.jsxs)("div", {
 					className: "row",
 					children: [/* @__PURE__ */ (0, C.jsx)("button", {
 						className: "primary",
-						onClick: () => Ym(re.filename, URL.createObjectURL(new Blob([re.text], { type: "text/x-python" }))),
+						onClick: () => Ym(ae.filename, URL.createObjectURL(new Blob([ae.text], { type: "text/x-python" }))),
 						children: "Download"
 					}), /* @__PURE__ */ (0, C.jsx)("button", {
-						onClick: () => navigator.clipboard?.writeText(re.text).then(() => Ee("copied")),
+						onClick: () => navigator.clipboard?.writeText(ae.text).then(() => Oe("copied")),
 						children: "Copy"
 					})]
 				})]

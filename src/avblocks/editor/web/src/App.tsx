@@ -77,6 +77,8 @@ function Editor({ transport }: { transport: Transport }) {
   const [selectedEdges, setSelectedEdges] = useState<Set<string>>(new Set());
   const [validation, setValidation] = useState<Validation | null>(null);
   const [validating, setValidating] = useState(false);
+  // what the last answer was about: the check is fresh when it is the document as it is now
+  const [checkedParts, setCheckedParts] = useState<unknown[]>([]);
   const [toasts, setToasts] = useState<Toast[]>([]);
   const [dialog, setDialog] = useState<Dialog>(null);
   const [files, setFiles] = useState<FileList | null>(null);
@@ -181,11 +183,18 @@ function Editor({ transport }: { transport: Transport }) {
     const my = ++seq.current;
     setValidating(true);
     const h = setTimeout(async () => {
+      const parts = [doc.blocks, doc.wires, doc.parameters, doc.simulation];
       try {
         const v = await api.validate(doc);
-        if (my === seq.current) setValidation(v);
+        if (my === seq.current) {
+          setValidation(v);
+          setCheckedParts(parts);
+        }
       } catch (e) {
-        if (my === seq.current) setValidation({ ok: false, errors: [{ message: (e as Error).message, kind: (e as ApiError).kind ?? 'Error' }], signals: {} });
+        if (my === seq.current) {
+          setValidation({ ok: false, errors: [{ message: (e as Error).message, kind: (e as ApiError).kind ?? 'Error' }], signals: {} });
+          setCheckedParts(parts);
+        }
       } finally {
         if (my === seq.current) setValidating(false);
       }
@@ -539,8 +548,20 @@ function Editor({ transport }: { transport: Transport }) {
 
   // ------------------------------------------------------------ keyboard
 
+  // the key handler reads the latest state through a ref (set while rendering), so a
+  // key pressed right after a click acts on that click's selection
+  const keyState = {
+    dialog, valid, save, copy, pasteClip, deleteSelection, group, ungroupSel, openFiles, run,
+    selected, selectedEdges, path, leaveTo, doc, openGroup, autoLayout, rf, flow,
+  };
+  const keyRef = useRef(keyState);
+  keyRef.current = keyState;
   useEffect(() => {
     const onKey = (e: KeyboardEvent) => {
+      const {
+        dialog, valid, save, copy, pasteClip, deleteSelection, group, ungroupSel, openFiles, run,
+        selected, selectedEdges, path, leaveTo, doc, openGroup, autoLayout, rf, flow,
+      } = keyRef.current;
       const mod = e.ctrlKey || e.metaKey;
       const k = e.key.toLowerCase();
       if (mod && k === 's') {
@@ -613,7 +634,7 @@ function Editor({ transport }: { transport: Transport }) {
     };
     window.addEventListener('keydown', onKey);
     return () => window.removeEventListener('keydown', onKey);
-  }, [dialog, valid, save, copy, pasteClip, deleteSelection, group, ungroupSel, openFiles, run, selected, selectedEdges, path, leaveTo, doc, openGroup, autoLayout, rf, flow.nodes]);
+  }, []);
 
   // ------------------------------------------------------------ render
 
@@ -746,7 +767,12 @@ function Editor({ transport }: { transport: Transport }) {
           </select>
           <button onClick={() => setDialog({ kind: 'help' })} title="Keyboard shortcuts (?)">?</button>
         </div>
-        <div className={`check ${validating ? 'busy' : valid ? 'ok' : 'bad'}`} data-testid="check" onClick={() => setTab('problems')}>
+        <div
+          className={`check ${validating ? 'busy' : valid ? 'ok' : 'bad'}`}
+          data-testid="check"
+          data-fresh={String(!validating && [doc.blocks, doc.wires, doc.parameters, doc.simulation].every((x, i) => x === checkedParts[i]))}
+          onClick={() => setTab('problems')}
+        >
           {validating && !validation ? 'checking…' : valid ? '✓ builds' : `⚠ ${errors.length} problem${errors.length === 1 ? '' : 's'}`}
         </div>
         {running ? (

@@ -350,6 +350,13 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
         for b in boxes[i + 1:]:
             assert not (a[0] < b[2] and b[0] < a[2] and a[1] < b[3] and b[1] < a[3]), (a, b)
     shot(pg, "formation")
+    # a built-in has no file here: Ctrl+S asks for one, and the file keeps the built-in's comments
+    pg.keyboard.press("Control+s")
+    pg.get_by_label("File path").fill("from_builtin.yaml")
+    pg.get_by_test_id("saveas-ok").click()
+    pg.get_by_test_id("toast").filter(has_text="saved from_builtin.yaml").wait_for()
+    assert "# the team is a leader and its followers" in (
+        editor_server.root / "from_builtin.yaml").read_text()
 
     # the same file under the server's folder: open it, save it
     import avblocks.scenarios

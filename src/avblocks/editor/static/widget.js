@@ -65932,17 +65932,18 @@ function Xm({ transport: e }) {
 	}, [n]), Ye = b?.ok ?? !1, Xe = d !== c && JSON.stringify(d) !== JSON.stringify(c), Ze = (0, S.useCallback)(async (e, n = {}) => {
 		let r = n.draft ?? !Ye;
 		try {
-			let i = await t.save({
+			let i = l.builtin ?? (l.path && l.path !== e ? l.path : null), a = await t.save({
 				path: e,
 				document: c,
 				revision: n.force ? null : l.path === e ? l.revision : null,
-				draft: r
+				draft: r,
+				...i ? { origin: i } : {}
 			});
 			u({
-				path: i.path,
+				path: a.path,
 				builtin: null,
-				revision: i.revision
-			}), f(c), oe(null), Oe(i.draft ? `saved ${i.path} as a draft (it has problems; avblocks run will report them)` : `saved ${i.path}`, i.draft ? "warn" : "info");
+				revision: a.revision
+			}), f(c), oe(null), Oe(r ? `saved ${a.path} as a draft (it has problems; avblocks run will report them)` : `saved ${a.path}`, r ? "warn" : "info");
 		} catch (t) {
 			t instanceof vee && t.status === 409 ? oe({
 				kind: "conflict",

@@ -409,11 +409,19 @@ function Editor({ transport }: { transport: Transport }) {
     async (p: string, opts: { force?: boolean; draft?: boolean } = {}) => {
       const draft = opts.draft ?? !valid;
       try {
-        const r = await api.save({ path: p, document: doc, revision: opts.force ? null : file.path === p ? file.revision : null, draft });
+        // a document opened from a built-in or another file keeps that file's comments and forms
+        const origin = file.builtin ?? (file.path && file.path !== p ? file.path : null);
+        const r = await api.save({
+          path: p,
+          document: doc,
+          revision: opts.force ? null : file.path === p ? file.revision : null,
+          draft,
+          ...(origin ? { origin } : {}),
+        });
         setFile({ path: r.path, builtin: null, revision: r.revision });
         setSavedDoc(doc);
         setDialog(null);
-        toast(r.draft ? `saved ${r.path} as a draft (it has problems; avblocks run will report them)` : `saved ${r.path}`, r.draft ? 'warn' : 'info');
+        toast(draft ? `saved ${r.path} as a draft (it has problems; avblocks run will report them)` : `saved ${r.path}`, draft ? 'warn' : 'info');
       } catch (e) {
         if (e instanceof ApiError && e.status === 409) setDialog({ kind: 'conflict', path: p, draft });
         else toast((e as Error).message, 'error');

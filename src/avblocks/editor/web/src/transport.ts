@@ -124,7 +124,7 @@ export class Api {
   validate(document: Doc) {
     return this.t.call<Validation>('validate', { document }, 'POST');
   }
-  save(args: { path: string; document: Doc; revision?: string | null; draft?: boolean }) {
+  save(args: { path: string; document: Doc; revision?: string | null; draft?: boolean; origin?: string }) {
     return this.t.call<{ path: string; revision: string; draft: boolean }>('save', args, 'POST');
   }
   run(args: { document: Doc; backend: string; t_final?: number; dt?: number }) {

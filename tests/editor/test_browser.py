@@ -103,15 +103,25 @@ def handle(pg, block, port, side):
 
 
 def wire(pg, src, dst):
+    """Drag a wire from output ``src`` to input ``dst`` ("block.port") and wait
+    for it on the canvas. A block that has just been added may not have its
+    handles measured yet (React Flow measures them after the first paint): then
+    the first drag misses, as a user's hurried one would, and is drawn again."""
     sb, sp = src.split(".")
     db, dp = dst.split(".")
-    a = handle(pg, sb, sp, "out").bounding_box()
-    b = handle(pg, db, dp, "in").bounding_box()
-    pg.mouse.move(a["x"] + a["width"] / 2, a["y"] + a["height"] / 2)
-    pg.mouse.down()
-    pg.mouse.move((a["x"] + b["x"]) / 2, (a["y"] + b["y"]) / 2 + 20, steps=6)
-    pg.mouse.move(b["x"] + b["width"] / 2, b["y"] + b["height"] / 2, steps=6)
-    pg.mouse.up()
+    for _ in range(3):
+        pg.wait_for_timeout(150)
+        a = handle(pg, sb, sp, "out").bounding_box()
+        b = handle(pg, db, dp, "in").bounding_box()
+        pg.mouse.move(a["x"] + a["width"] / 2, a["y"] + a["height"] / 2)
+        pg.mouse.down()
+        pg.mouse.move((a["x"] + b["x"]) / 2, (a["y"] + b["y"]) / 2 + 20, steps=6)
+        pg.mouse.move(b["x"] + b["width"] / 2, b["y"] + b["height"] / 2, steps=6)
+        pg.mouse.up()
+        if until(lambda: pg.locator(f'.react-flow__edge[data-id="{src}->{dst}"]').count() == 1,
+                 timeout=3.0):
+            return
+    raise AssertionError(f"could not draw the wire {src} -> {dst}")
 
 
 def wait_edge(pg, wire_id):

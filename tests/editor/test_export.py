@@ -11,7 +11,8 @@ from avblocks.editor.service import EditorService
 
 
 @pytest.mark.parametrize("name,steps", [("formation", "t_final=4"), ("nest", "t_final=4"),
-                                        ("flocking", "t_final=3"), ("swap", "t_final=3")])
+                                        ("flocking", "t_final=3"), ("swap", "t_final=3"),
+                                        ("honeybee", "t_final=5")])
 def test_exported_script_runs_to_the_scenario_results(tmp_path, name, steps):
     from avblocks.core.frontend import simulate
     from avblocks.scenarios.targets import load_any
@@ -68,3 +69,20 @@ def test_a_layout_only_edit_reuses_the_findings_a_real_edit_does_not(tmp_path):
     assert service.check(doc, fresh=True)[2] is not b1
     e2.append("changed by a caller")                            # copies handed out
     assert service.check(moved)[0] == []
+
+
+def test_a_function_block_named_by_import_path_is_no_unknown_type(tmp_path):
+    """honeybee.yaml's scouts choose their command with a blocks.Function whose
+    function the file names by import path: when another part of the document
+    is wrong, the editor reports that part, not the Function block."""
+    service = EditorService(tmp_path)
+    doc = service.load(builtin="honeybee")["document"]
+    assert service.validate(doc)["ok"]
+    fn_blocks = [n for n, b in doc["blocks"].items() if b["type"] == "blocks.Function"]
+    assert fn_blocks
+    broken = dict(doc, wires=doc["wires"][1:])               # one input left undriven
+    out = service.validate(broken)
+    assert not out["ok"]
+    dst = doc["wires"][0][1].partition(".")[0]
+    assert any(e.get("block") == dst for e in out["errors"]), out["errors"]
+    assert not any("unknown block type" in e["message"] for e in out["errors"]), out["errors"]

@@ -40,6 +40,7 @@ class _Writer:
         self.taken = {"av", "np", "GENERATORS", "diagram", "res", "parse_world"}
         self.uses_generators = False
         self.uses_world = False
+        self.functions = {}                 # "module:name" -> the name in the script
         self.params = {}
         for k in (data.get("parameters") or {}):
             self.params[k] = _ident(k, self.taken, "p_")
@@ -68,6 +69,13 @@ class _Writer:
                     return (f'GENERATORS["{k}"](**{{'
                             + ", ".join(f"{a!r}: {self.value(x)}" for a, x in args.items())
                             + "})")
+                if k == "function" and isinstance(args, str) and ":" in args:
+                    # a function the file names by import path (checked by the
+                    # loader when the document was validated)
+                    if args not in self.functions:
+                        self.functions[args] = _ident(args.rpartition(":")[2], self.taken,
+                                                      "f_")
+                    return self.functions[args]
                 if k == "world":
                     self.uses_world = True
                     return f'parse_world({self.value(args)}, "world", ".")'
@@ -82,8 +90,8 @@ class _Writer:
         imports = {}
         handles = {}
         from ..scenarios.loader import block_registry
-        own = block_registry()
-        reg = {**block_registry(modules=self.modules), **own}
+        own = block_registry(code_blocks=True)
+        reg = {**block_registry(code_blocks=True, modules=self.modules), **own}
         for name, spec in blocks.items():
             typ = spec["type"]
             cls = reg[typ]
@@ -136,6 +144,10 @@ class _Writer:
         lines.append("import avblocks as av")
         for module in sorted(imports):
             lines.append(f"from {module} import {', '.join(sorted(imports[module]))}")
+        for ref, alias in sorted(self.functions.items()):
+            module, _, name = ref.partition(":")
+            lines.append(f"from {module} import {name}"
+                         + (f" as {alias}" if alias != name else ""))
         if self.uses_generators:
             lines.append("from avblocks.scenarios.generators import GENERATORS")
         if self.uses_world:

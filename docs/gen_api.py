@@ -32,6 +32,8 @@ PAGES = [
     ("scenarios", "avblocks.scenarios", "Scenario files and the case studies."),
     ("sweep", "avblocks.sweep", "Parameter sweeps and Monte Carlo on Dask."),
     ("labs", "avblocks.labs", "The lab course: labs, their checks, the grader's reports."),
+    ("editor", "avblocks.editor",
+     "The browser diagram editor: its operations, its server, the Jupyter widget."),
     ("rl", "avblocks.rl", "Learning: diagrams as PettingZoo/Gymnasium environments, PPO, APG."),
     ("ros2", "avblocks.interfaces.ros2", "ROS 2 robots over Zenoh."),
     ("flight", "avblocks.interfaces.flight",

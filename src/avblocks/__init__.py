@@ -47,11 +47,14 @@ def __getattr__(name):
     if name in _LAZY:
         import importlib
         return importlib.import_module(f"avblocks.{name}")
+    if name == "edit":      # the editor in a Jupyter cell (extra [editor])
+        import importlib
+        return importlib.import_module("avblocks.editor").edit
     raise AttributeError(f"module 'avblocks' has no attribute '{name}'")
 
 __all__ = [
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
-    "scenarios", "sweep",
+    "scenarios", "sweep", "edit",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",
     "simulate", "compile", "grad", "Runner", "CompileError", "AvError", "ParameterError",
     "WiringError", "ShapeError",

@@ -9,9 +9,10 @@
     avblocks sweep formation --grid gain=0.5,1,2 --seeds 20 --out sweep.zarr
     avblocks cache clear
     avblocks lab check 1 my_unicycle.py
+    avblocks edit formation
     avblocks --version
 
-Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, cache) and the
+Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, cache, edit) and the
 ROS 2 commands (:mod:`avblocks.interfaces.ros2.cli`).
 
 Scripts may rely on the exit statuses of :data:`EXIT_STATUSES` (also the
@@ -29,6 +30,7 @@ import sys
 
 from .commands import cache as _cache
 from .commands import diagram as _diagram
+from .commands import edit as _edit
 from .commands import listing as _listing
 from .commands import run as _run
 from .commands import sweep as _sweep
@@ -72,6 +74,7 @@ def build_parser():
     _sweep.add_parser(sub)                                   # `avblocks sweep` (issue 14)
     _cache.add_parser(sub)                                   # `avblocks cache` (issue 32)
     _labs.add_parser(sub)                                    # `avblocks lab` (issue 34)
+    _edit.add_parser(sub)                                    # `avblocks edit` (issue 31)
     return ap
 
 

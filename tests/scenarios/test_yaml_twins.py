@@ -17,6 +17,8 @@ from avblocks.scenarios import builtin_scenarios, load_scenario
     ("swap", {"agents": 8, "t_final": 8.0, "mode": "joint"}),
     ("flocking", {"agents": 12, "t_final": 4.0}),
     ("formation", {"agents": 4, "t_final": 30.0, "dt": 0.05}),   # through the 1st switch
+    # a source near the nest: found, brought home and the whole nest alarmed
+    ("honeybee", {"agents": 60, "t_final": 60.0, "dt": 0.2, "source": [-22.0, 6.0]}),
 ])
 def test_yaml_and_python_forms_give_the_same_run(name, sets):
     assert builtin_scenarios()[name].suffix == ".yaml"     # the file is what runs
@@ -28,6 +30,9 @@ def test_yaml_and_python_forms_give_the_same_run(name, sets):
     np.testing.assert_allclose(r2.t, r1.t)
     if name == "formation":
         assert np.ptp(np.asarray(r2["supervisor.mode"])) == 1          # it switched
+    if name == "honeybee":      # every mode visited, every nest bee informed
+        assert set(np.unique(np.asarray(r2["modes.mode"]))) == {0, 1, 2}
+        assert np.asarray(r2["gossip.informed"])[-1, 12:].all()       # the nest
     assert len(r2.keys()) >= 2
     for k in r2.keys():
         np.testing.assert_allclose(np.asarray(r2[k], float), np.asarray(r1[k], float),
@@ -36,7 +41,7 @@ def test_yaml_and_python_forms_give_the_same_run(name, sets):
 
 def test_yaml_scenario_parameters_are_the_python_defaults():
     import inspect
-    for name in ("nest", "swap", "flocking", "formation"):
+    for name in ("nest", "swap", "flocking", "formation", "honeybee"):
         mod = importlib.import_module(f"avblocks.scenarios.{name}")
         defaults = {k: p.default for k, p in
                     inspect.signature(mod.make_diagram).parameters.items()}
@@ -55,3 +60,25 @@ def test_unknown_report_name():
     sc.data["report"] = "nets"
     with pytest.raises(av.ScenarioError, match="did you mean 'nest'"):
         sc.validate()
+
+
+def _summary(target, out, *sets):
+    import json
+
+    from avblocks.cli import main
+    assert main(["run", str(target), *sets, "--quiet", "--out", str(out)]) == 0
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_honeybee_file_and_module_give_the_same_summary(tmp_path):
+    """The case study's outcome numbers (detection, return, all informed)
+    from honeybee.yaml equal those of the module it twins."""
+    sets = ["--set", "agents=60", "--set", "t_final=60", "--set", "dt=0.2",
+            "--set", "source=[-22.0, 6.0]"]
+    module = builtin_scenarios()["honeybee"].with_suffix(".py")
+    a = _summary("honeybee", tmp_path / "yaml", *sets)
+    b = _summary(module, tmp_path / "py", *sets)
+    assert a["outcome"] == b["outcome"] and a["numbers"] == b["numbers"]
+    assert a["numbers"]["detected_s"] < a["numbers"]["returned_s"] \
+        < a["numbers"]["all_informed_s"] <= 60.0
+    assert a["numbers"]["informed_at_end"] == 1.0

@@ -26,6 +26,9 @@ class Integrator(Block):
         Whether the first axis of ``x0`` counts agents.
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"x0": {"zeros": {"shape": ["$agents", 2]}}}
+
     def __init__(self, x0, *, agents=True):
         super().__init__()
         x0 = finite_array(x0, "Integrator", "x0")

@@ -77,6 +77,9 @@ class Select(Block):
            [0., 1.]])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"indices": [0, 1]}
+
     def __init__(self, indices):
         super().__init__()
         self.declare_inherited()   # sample time of its drivers

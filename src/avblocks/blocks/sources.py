@@ -32,6 +32,9 @@ class Constant(Block):
     fixed); an integer or boolean one is structural.
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"value": {"zeros": {"shape": ["$agents", 2]}}}
+
     def __init__(self, value, *, agents=True, unit=""):
         super().__init__()
         v = np.asarray(value)

@@ -286,6 +286,9 @@ class CollisionAvoidance(Block):
     given) are numeric parameters; the rest are structural.
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "radius": 1.0}
+
     def __init__(self, n, radius, *, gamma=1.0, right_hand=0.0, dim=2,
                  sensing_range=None, k_max=6, mode="joint", solver="admm",
                  iterations=500, tol=1e-10, capacity=None):

@@ -200,6 +200,9 @@ class Coverage(Block):
     Equations, tolerances, references: module docstring.
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "polygon": [[0, 0], [50, 0], [50, 50], [0, 50]]}
+
     def __init__(self, n, polygon, *, gain=1.0, period=None, method="grid",
                  resolution=100, density=None):
         super().__init__()

@@ -50,6 +50,11 @@ class DisplacementFormation(Block):
     ``offsets``, ``gain`` (and ``radius``) are numeric parameters.
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'offsets': {'random_positions': {'n': '$agents',
+                                                'area': [10, 10],
+                                                'seed': '$seed'}}}
+
     def __init__(self, offsets, *, gain=1.0, adjacency=None, radius=None, k_max=None):
         super().__init__()
         c = finite_array(offsets, "DisplacementFormation", "offsets")

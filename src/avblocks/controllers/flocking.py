@@ -356,6 +356,9 @@ class Flocking(Block):
     (and the gamma term of Algorithm 2).
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "d": 7.0}
+
     def __init__(self, n, d, *, r=None, dim=2, eps=0.1, a=5.0, b=5.0, h=0.2,
                  c1=1.0, c2=1.0, gamma=False, target=0.0, target_velocity=0.0,
                  c1_gamma=0.2, c2_gamma=0.4, neighbors="port", k_max=None,

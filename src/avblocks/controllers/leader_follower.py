@@ -197,6 +197,15 @@ class LeaderFollower(Block):
     array([1., 1., 1.])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'leader': {'formation_references': {'n': '$agents',
+                                                   'spacing': 1.5,
+                                                   'd': 0.2,
+                                                   'tree': 'star',
+                                                   'state': 'leader'}},
+               'd': 0.2,
+               'references_input': True}
+
     def __init__(self, leader, l_ref=None, alpha_ref=None, *, d=0.1, k_l=1.0,
                  k_alpha=1.0, l_min=1e-3, references_input=False):
         super().__init__()

@@ -116,6 +116,10 @@ class Policy(Block):
     array([[0.5, 1. ]])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'params': {'w0': {'zeros': {'shape': [4, 2]}}, 'b0': {'zeros': {'shape': [2]}}},
+               'n': '$agents'}
+
     def __init__(self, params, *, fn=None, act_dim=None, activation="tanh", output="clip",
                  low=-1.0, high=1.0, n=None):
         super().__init__()

@@ -258,6 +258,23 @@ class Supervisor(_Machine):
     ('column', 0.5)
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'states': ['off', 'on'],
+               'transitions': [['off',
+                                'on',
+                                {'guard': {'input': 'u',
+                                           'index': [0],
+                                           'op': '>=',
+                                           'value': 1.0}}],
+                               ['on',
+                                'off',
+                                {'guard': {'input': 'u',
+                                           'index': [0],
+                                           'op': '<',
+                                           'value': 0.0}}]],
+               'initial': 'off',
+               'inputs': {'u': [1]}}
+
     @classmethod
     def from_statemachine(cls, machine, *, guards=None, outputs=None, inputs=None):
         """Build from a python-statemachine ``StateMachine`` class.
@@ -313,6 +330,15 @@ class AgentModes(_Machine):
     guard returns an (N,) bool array (vectorised over agents; a scalar is
     broadcast);  initial : one state name or (N,) names.
     """
+
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'n': '$agents',
+               'states': ['off', 'on'],
+               'transitions': [['off',
+                                'on',
+                                {'guard': {'input': 'u', 'op': '>=', 'value': 1.0}}]],
+               'initial': 'off',
+               'inputs': {'u': ['$agents']}}
 
     _per_agent = True
 

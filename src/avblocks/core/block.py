@@ -71,6 +71,31 @@ class Block:
     #: ``output`` (a distance, a mode test) is not repeated in ``update``.
     update_uses_outputs = False
 
+    #: Constructor arguments that build a small working instance, written as
+    #: a scenario file writes them (``"$agents"``, ``"$seed"``, generators):
+    #: what the editor's palette starts a dragged block with. None: derived
+    #: from the required arguments (``n`` is ``$agents``; poses, positions
+    #: and waypoints are random ones).
+    example = None
+
+    #: What the signature and docstring cannot say about a constructor
+    #: argument: ``{name: {"kind": ..., "bounds": [lo, hi], "unit": ...,
+    #: "choices": [...]}}`` (see :class:`avblocks.core.declarations.ParameterDecl`).
+    parameter_info: dict = {}
+
+    @classmethod
+    def constructor_parameters(cls) -> list:
+        """The constructor's arguments as declarations (kind, shape, default,
+        bounds, unit, description): :func:`avblocks.core.declarations.constructor_parameters`."""
+        from .declarations import constructor_parameters
+        return constructor_parameters(cls)
+
+    def port_table(self, n=None) -> dict:
+        """This instance's ports with the agent axis as ``N`` (the block's
+        ``n``, else ``n``): :func:`avblocks.core.declarations.port_table`."""
+        from .declarations import port_table
+        return port_table(self, n)
+
     def __init_subclass__(cls, **kw):
         super().__init_subclass__(**kw)
         if "__init__" in cls.__dict__ and not getattr(cls.__init__, "_av_guarded", False):

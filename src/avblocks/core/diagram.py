@@ -155,14 +155,15 @@ class Diagram:
                               expected="e.g. 'fleet'", found=repr(name))
         if name in self._handles:
             raise WiringError("a block of that name exists already", block=name)
-        for h in self._handles.values():
-            if h.block is block:
-                raise WiringError(f"this block object is already in the diagram as "
-                                  f"'{h.name}'", block=name,
-                                  hint="create a second block instance")
+        ref = _OWNER.get(block) if isinstance(block, Block) else None
+        other = ref() if ref is not None else None
+        if other is self or isinstance(block, Diagram):   # (a block: no scan of all)
+            for h in self._handles.values():
+                if h.block is block:
+                    raise WiringError(f"this block object is already in the diagram as "
+                                      f"'{h.name}'", block=name,
+                                      hint="create a second block instance")
         if isinstance(block, Block):
-            ref = _OWNER.get(block)
-            other = ref() if ref is not None else None
             if other is not None and other is not self:
                 raise WiringError("this block object is already in another diagram",
                                   block=name,
@@ -265,6 +266,16 @@ class Diagram:
     def build(self) -> CompiledDiagram:
         """Flatten, resolve shapes, check every input is driven, sort."""
         return CompiledDiagram(self)
+
+    def unconnected_inputs(self) -> list[str]:
+        """Every input of a leaf block that no wire drives, as ``"block.port"``
+        paths (dotted through subsystems), in the order blocks were added.
+        :meth:`build` stops at the first of them; this lists them all (the
+        editor marks each one)."""
+        leaves, wires = _flatten(self, "")
+        driven = {dst for _src, dst in wires}
+        return [f"{name}.{inp}" for name, b in leaves for inp in _inputs_of(b)
+                if (name, inp) not in driven]
 
     # ------------------------------------------------------------- pictures
     def to_graphviz(self) -> str:

@@ -129,8 +129,11 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
     realtime : float, optional
         Pace the run to the wall clock: 1.0 is real time, 2.0 twice as fast.
         Late steps are counted as overruns; the run keeps going.
-    progress : bool, optional
-        Progress bar (default: only when stderr is a terminal and not in CI).
+    progress : bool or callable, optional
+        Progress bar (default: only when stderr is a terminal and not in CI),
+        or ``progress(step, steps)`` called about 100 times a run by the
+        NumPy engine (raising ``KeyboardInterrupt`` there stops the run as
+        Ctrl-C does: the results so far come back, marked interrupted).
     check_finite : bool
         Stop at the first NaN/inf, naming the block and port.
     max_log_bytes : int

@@ -6,6 +6,39 @@ signature. :class:`~avblocks.core.block.Block` wraps every subclass's
 
 from __future__ import annotations
 
+import weakref
+
+#: The arguments each block was constructed with (outermost constructor
+#: call), kept beside the block so they never enter its attributes (the
+#: compiled engine's structure keys read those).
+_ARGUMENTS = weakref.WeakKeyDictionary()
+
+
+def constructor_arguments(block) -> dict:
+    """``{name: value}`` of the arguments ``block`` was constructed with, as
+    the call gave them (defaults not filled in); ``{}`` when unknown. Tools
+    that turn a diagram built in Python back into data (the editor) read
+    this."""
+    import inspect
+    try:
+        args, kwargs = _ARGUMENTS[block]
+    except (KeyError, TypeError):
+        return {}
+    try:
+        bound = inspect.signature(type(block).__init__).bind(block, *args, **kwargs)
+    except TypeError:
+        return {}
+    out = {}
+    for k, v in bound.arguments.items():
+        if k == "self":
+            continue
+        kind = inspect.signature(type(block).__init__).parameters[k].kind
+        if kind == inspect.Parameter.VAR_KEYWORD:
+            out.update(v)
+        elif kind != inspect.Parameter.VAR_POSITIONAL:
+            out[k] = v
+    return out
+
 
 def _guard_init(cls, init):
     """Wrap a block constructor so that a plain Python/NumPy error raised on
@@ -19,6 +52,11 @@ def _guard_init(cls, init):
 
     @functools.wraps(init)
     def __init__(self, *args, **kwargs):
+        try:
+            if self not in _ARGUMENTS:          # the outermost constructor's call
+                _ARGUMENTS[self] = (args, dict(kwargs))
+        except TypeError:                       # a block that cannot be weakly referenced
+            pass
         try:
             init(self, *args, **kwargs)
         except AvError:

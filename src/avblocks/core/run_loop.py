@@ -58,8 +58,12 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
     if realtime is not None and not (finite_number(realtime, "realtime") > 0):
         raise ParameterError("realtime factor must be > 0", param="realtime",
                              expected="> 0", found=realtime)
+    report = None
+    if callable(progress):          # progress(step, steps) about 100 times a run
+        report, progress = progress, False
     if progress is not None and not isinstance(progress, (bool, np.bool_)):
-        raise ParameterError("progress must be None, True or False", param="progress",
+        raise ParameterError("progress must be None, True, False or a callable "
+                             "progress(step, steps)", param="progress",
                              found=repr(progress)[:40])
     if isinstance(max_log_bytes, (bool, np.bool_)) or not isinstance(
             max_log_bytes, (int, float, np.integer, np.floating)) or \
@@ -171,8 +175,11 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
                         worst = max(worst, late)
                         if late > sim.dt / pace:
                             overruns += 1
-                if bar is not None and (k + 1) % tick == 0:
-                    bar.update(tick)
+                if (k + 1) % tick == 0:
+                    if bar is not None:
+                        bar.update(tick)
+                    if report is not None:
+                        report(k + 1, nsteps)
         except SimulationError as e:
             failure = e
         except KeyboardInterrupt as e:

@@ -309,6 +309,11 @@ class Collision(EdgeGridOwner, Block):
     ([True, False], [0, -1])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {'world': {'corridor': {'x0': 24.0, 'x1': 32.0, 'width': 2.0}},
+               'n': '$agents',
+               'footprint': {'disc': {'radius': 0.25}}}
+
     def __init__(self, world, n, *, footprint=None, input="pose", margin=0.0,
                  agents=True, period=None, method="auto", capacity=None,
                  reach=None):

@@ -125,6 +125,9 @@ class CommChannel(Block):
     ([[1], [0]], [7.0, 5.0])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "radius": 5.0}
+
     def __init__(self, n, *, radius, msg_dim=1, k=None, p_loss=0.0, latency=1,
                  input="pose", period=None, capacity=None, reach=None):
         super().__init__()
@@ -305,6 +308,9 @@ class Gossip(Block):
     [True, True, True]
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "radius": 5.0}
+
     def __init__(self, n, *, radius, p_loss=0.0, value_dim=None, input="pose",
                  period=None, capacity=None, reach=None):
         super().__init__()
@@ -372,6 +378,9 @@ class Broadcast(Gossip):
 
     Numeric parameters: ``radius`` and ``p_loss``, as :class:`Gossip`.
     """
+
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "radius": 5.0}
 
     def __init__(self, n, *, radius, value_dim=1, **kw):
         super().__init__(n, radius=radius, value_dim=value_dim, **kw)

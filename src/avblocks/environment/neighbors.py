@@ -317,6 +317,9 @@ class Neighbors(Block):
     [[1, -1], [0, -1], [-1, -1]]
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "k": 3}
+
     def __init__(self, n, k, *, radius=np.inf, fov=None, input="pose", period=None,
                  box=None, capacity=None, method="cells", skin=0.0):
         super().__init__()

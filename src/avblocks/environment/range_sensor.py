@@ -400,6 +400,9 @@ class RangeSensor(EdgeGridOwner, Block):
     array([[ 2., 10., 10., 10.]])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"world": {"corridor": {"x0": 24.0, "x1": 32.0, "width": 2.0}}, "n": "$agents"}
+
     def __init__(self, world, n, *, n_rays=32, fov=2 * np.pi, max_range=10.0,
                  noise_std=0.0, agent_radius=None, angles=None, input="pose",
                  period=None, method="auto", reach=None, capacity=None):

@@ -122,6 +122,9 @@ class TargetDetection(Block):
     ([True, True], [0, 0], [True, False])
     """
 
+    #: Arguments of a small instance (the editor's palette template).
+    example = {"n": "$agents", "targets": [[10.0, 10.0], [40.0, 40.0]], "sensing_radius": 2.0}
+
     def __init__(self, n, targets, *, sensing_radius, target_radius=0.0,
                  pickup=False, input="pose", period=None, capacity=None, reach=None):
         super().__init__()

@@ -16,7 +16,7 @@ import numpy as np
 from ..core.errors import ParameterError
 from ..core.params import count as _count
 from ..core.params import integer as _integer
-from . import formation, nest, swap
+from . import formation, honeybee, nest, swap
 from .limits import budget as _budget
 
 
@@ -98,13 +98,31 @@ def _zeros(shape):
     return np.zeros(shape)
 
 
-def _arange(n, dtype="int64"):
+def _arange(n, dtype="int64", start=0):
+    """``start, start + 1, ..., start + n - 1`` (e.g. the indices of a group
+    of agents for ``blocks.Select``)."""
     n = _n(n, "n")
+    start = _integer(start, None, "start")
     _budget(n, "arange")
     if dtype not in ("int64", "int32", "float64", "float32"):
         raise ParameterError("dtype must be int64, int32, float64 or float32",
                              param="dtype", found=repr(dtype)[:40])
-    return np.arange(n).astype(dtype)
+    return np.arange(start, start + n).astype(dtype)
+
+
+def _item(values, index):
+    """One element of a list parameter: ``{item: {values: $speed, index: 1}}``."""
+    v = list(np.atleast_1d(np.asarray(values, dtype=object)))
+    i = _integer(index, None, "index", lo=-len(v), hi=len(v) - 1)
+    return v[i]
+
+
+def _add(a, b):
+    """``a + b`` (whole numbers stay whole: ``n: {add: {a: $agents, b: $scouts}}``)."""
+    if all(isinstance(v, (int, np.integer)) and not isinstance(v, bool) for v in (a, b)):
+        return int(a) + int(b)
+    return np.asarray(a, float) + np.asarray(b, float) if np.ndim(a) or np.ndim(b) \
+        else float(a) + float(b)
 
 
 def _multiply(a, b):
@@ -133,9 +151,12 @@ _OPS = {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equ
         "==": np.equal, "!=": np.not_equal}
 
 
-def _guard(input=None, index=(), op=">=", value=0.0, all=None):
-    """A transition guard from data: ``u[input][index] <op> value``, or the
-    conjunction of several (``all: [{input, index, op, value}, ...]``)."""
+def _guard(input=None, index=(), op=">=", value=0.0, all=None, near=None, radius=None):
+    """A transition guard from data: ``u[input][index] <op> value``; or,
+    with ``near: [x, y]`` and ``radius``, whether each agent's position
+    (the first two columns of ``u[input]``) lies within ``radius`` of that
+    point, ``dx^2 + dy^2 <= radius^2``; or the conjunction of several
+    (``all: [{input, index, op, value}, ...]``)."""
     if all is not None:
         parts = [_guard(**g) for g in all]
 
@@ -149,6 +170,8 @@ def _guard(input=None, index=(), op=">=", value=0.0, all=None):
         raise ValueError(f"op must be one of {sorted(_OPS)}, got {op!r}")
     if input is None:
         raise ValueError("a guard names its 'input' (an input port of the block)")
+    if near is not None or radius is not None:
+        return _near_guard(str(input), near, radius)
     idx = tuple(int(i) for i in np.atleast_1d(index)) if np.size(index) else ()
     name, v, opname = str(input), float(value), op
 
@@ -159,11 +182,29 @@ def _guard(input=None, index=(), op=">=", value=0.0, all=None):
     return guard
 
 
+def _near_guard(name, near, radius):
+    c = np.asarray(near, dtype=float).ravel()
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise ValueError(f"'near' must be a point [x, y], got {near!r:.60}")
+    r = float(radius) if radius is not None else float("nan")
+    if not (np.isfinite(r) and r >= 0):
+        raise ValueError(f"'radius' must be a finite number >= 0, got {radius!r:.60}")
+    cx, cy, r2 = c[0], c[1], r ** 2
+
+    def guard(u, xp):
+        dx = u[name][:, 0] - cx
+        dy = u[name][:, 1] - cy
+        return dx * dx + dy * dy <= r2
+    return guard
+
+
 #: the generic generators; each case study adds its own (its ``GENERATORS``)
 GENERATORS = {
     "disc": _disc,
     "guard": _guard,
+    "add": _add,
     "multiply": _multiply,
+    "item": _item,
     "uniform": _uniform,
     "first_true": _first_true,
     "random_poses": _random_poses,
@@ -175,5 +216,5 @@ GENERATORS = {
     "zeros": _zeros,
     "arange": _arange,
 }
-for _case_study in (formation, nest, swap):
+for _case_study in (formation, honeybee, nest, swap):
     GENERATORS.update(_case_study.GENERATORS)

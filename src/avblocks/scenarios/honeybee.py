@@ -23,8 +23,13 @@ Scouts: ``controllers.AgentModes`` gives each scout a mode,
 
 Nest bees random-walk in the hexagon (as in :mod:`nest`); ``Gossip`` over
 all agents spreads the alarm to every agent within ``comm_range`` of an
-informed one at every step. A ``blocks.Function`` picks each scout's command
-by its mode and joins the nest's commands.
+informed one at every step. A ``blocks.Function`` running
+:func:`choose_command` picks each scout's command by its mode and joins the
+nest's commands.
+
+The scenario file ``honeybee.yaml`` is this module's twin (the same blocks,
+its guards as data, ``choose_command`` named by import path): it is what
+``avblocks run honeybee`` runs, to the same numbers.
 
 Logged: ``bees.pose`` (everyone), ``modes.mode`` (scouts: 0 search,
 1 return, 2 nest), ``detect.detected`` and ``gossip.informed``.
@@ -47,11 +52,6 @@ from avblocks.environment import Gossip, TargetDetection
 from avblocks.scenarios.nest import hexagon, hexagon_radius, nest_poses
 from avblocks.vehicles import Unicycle
 
-#: Options for ``viz.save_movie`` (``avblocks run honeybee --movie hb.gif``).
-MOVIE = {"pose": "bees.pose", "color": "gossip.informed", "size": 1.2,
-         "title": "honeybee search and alarm: informed in red",
-         "obstacles": [np.column_stack([-55.0 + 3.0 * np.cos(a := np.linspace(0, 6.2, 24)),
-                                        18.0 + 3.0 * np.sin(a)])]}
 MODES = ("search", "return", "nest")
 
 
@@ -72,6 +72,24 @@ def scout_poses(scouts, radius, seed):
     x = -radius - 6.0 - rng.uniform(0.0, 2.0, scouts)
     y = rng.uniform(-2.0, 2.0, scouts)
     return np.column_stack([x, y, np.pi + rng.uniform(-0.5, 0.5, scouts)])
+
+
+def choose_command(t, mode, search, home, inside, walk, xp):
+    """The ``choose`` block's function: each scout's command by its mode
+    (0 ``search``, 1 ``return``, 2 ``nest``), followed by the nest bees'
+    ``walk`` commands; ``flag`` marks the scouts in the nest (they seed the
+    alarm)."""
+    m_ = mode[:, None]
+    cmd = xp.where(m_ == 0, search, xp.where(m_ == 1, home, inside))
+    flag = xp.concatenate([mode == 2, xp.zeros(walk.shape[0], dtype=bool)])
+    return {"cmd": xp.concatenate([cmd, walk], axis=0), "flag": flag}
+
+
+def hazard_outline(source=(-55.0, 18.0), radius=3.0):
+    """A 24-point circle around the source (the movie draws it)."""
+    a = np.linspace(0, 6.2, 24)
+    s = np.asarray(source, float)
+    return np.column_stack([s[0] + radius * np.cos(a), s[1] + radius * np.sin(a)])
 
 
 def make_diagram(agents=500, scouts=12, source=(-55.0, 18.0), sensing_radius=3.0,
@@ -119,13 +137,7 @@ def make_diagram(agents=500, scouts=12, source=(-55.0, 18.0), sensing_radius=3.0
                              initial="search", inputs={"detected": (m,), "pose": (m, 3)}),
                   name="modes")
 
-    def choose(t, mode, search, home, inside, walk, xp):
-        m_ = mode[:, None]
-        cmd = xp.where(m_ == 0, search, xp.where(m_ == 1, home, inside))
-        flag = xp.concatenate([mode == 2, xp.zeros(walk.shape[0], dtype=bool)])
-        return {"cmd": xp.concatenate([cmd, walk], axis=0), "flag": flag}
-
-    brain = d.add(Function(choose, inputs={"mode": Port("mode", (m,), "int64"),
+    brain = d.add(Function(choose_command, inputs={"mode": Port("mode", (m,), "int64"),
                                            "search": (m, 2), "home": (m, 2),
                                            "inside": (m, 2), "walk": (n, 2)},
                            outputs={"cmd": (m + n, 2), "flag": Port("flag", (m + n,), "bool")}),
@@ -250,3 +262,41 @@ def figures(res, out, params):
 def _capacity(value):
     """``comm_capacity``: None (the compiled engine plans the search) or an int."""
     return None if value is None else int(value)
+
+
+def _radius(agents, density):
+    return hexagon_radius(int(agents), float(density))
+
+
+def _honeybee_poses(agents, scouts, density, seed):
+    r = _radius(agents, density)
+    return np.vstack([scout_poses(int(scouts), r, seed),
+                      nest_poses(int(agents), r, 0, seed)])
+
+
+def _honeybee_area(agents, density):
+    return [float(v) for v in search_area(_radius(agents, density))]
+
+
+def _honeybee_entrance(agents, density):
+    return entrance(_radius(agents, density))[None, :]
+
+
+def _hazard(source, radius=3.0):
+    return hazard_outline(source, float(radius))
+
+
+#: Generators of honeybee.yaml (the scenario file twin of this module): the
+#: scouts' and bees' start poses, the search rectangle, the entrance
+#: (as a 1 x 2 waypoint list) and the hazard's outline for the movie.
+GENERATORS = {
+    "honeybee_poses": _honeybee_poses,
+    "honeybee_area": _honeybee_area,
+    "honeybee_entrance": _honeybee_entrance,
+    "hazard_outline": _hazard,
+}
+
+#: Options for ``viz.save_movie`` (``avblocks run honeybee --movie hb.gif``).
+MOVIE = {"pose": "bees.pose", "color": "gossip.informed", "size": 1.2,
+         "title": "honeybee search and alarm: informed in red",
+         "obstacles": [hazard_outline()]}

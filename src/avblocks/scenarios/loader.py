@@ -27,8 +27,12 @@ A scenario file has five sections::
 :mod:`avblocks.scenarios.report`.)
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
-(also inside strings: ``"${agents}"``), or a one-key mapping naming one of
-the generators in :data:`GENERATORS`. Nothing in the file is executed.
+(also inside strings: ``"${agents}"``), a one-key mapping naming one of
+the generators in :data:`GENERATORS`, or ``{function: "module:name"}``: a
+function of the library (a module under ``avblocks``) or of a block module
+the user named (``--blocks``), by importable name, e.g. the ``fn`` of a
+``blocks.Function`` (see :func:`resolve_function`). Nothing in the file is
+executed.
 
 ``params`` sets numeric parameters of the built blocks by dotted path (see
 :mod:`avblocks.scenarios._numeric`); ``--set drive.gain=3`` overrides them.
@@ -43,7 +47,7 @@ from pathlib import Path
 
 from ..core.diagram import Diagram
 from ..core.errors import AvError, ScenarioError, did_you_mean
-from ._numeric import is_numeric_key, resolve
+from ._numeric import resolve, split_overrides
 from .files import _read
 from .generators import GENERATORS
 from .limits import (  # noqa: F401  (as before)
@@ -58,7 +62,7 @@ from .worlds import _parse_world
 
 _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
-             "movie", "params", "outcome", "figures", "report"}
+             "movie", "params", "outcome", "figures", "report", "editor"}
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
 REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
@@ -73,11 +77,129 @@ WRITE_KEYS = {"path", "movie", "file", "filename", "output", "save", "save_path"
 READ_KEYS = {"background", "image", "map", "geojson"}
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def check_editor(section, source="<scenario>"):
+    """The ``editor:`` section (the block-diagram editor's layout): checked
+    lightly, never used to build or run. ``layout`` maps block names to
+    ``[x, y]``; ``groups`` maps group names to ``{blocks: [names...],
+    position: [x, y], label: str, groups: [...]}``; ``viewport`` is
+    ``[x, y, zoom]``. Other keys are kept and ignored. A malformed section
+    is a :class:`ScenarioError` naming the entry."""
+    if section is None:
+        return
+    if not isinstance(section, dict):
+        raise ScenarioError("'editor' must be a mapping (layout, groups, viewport)",
+                            file=source, entry="editor")
+
+    def point(v, where, n=2):
+        if not (isinstance(v, list) and len(v) == n and all(_is_number(x) for x in v)):
+            raise ScenarioError(f"expected a list of {n} numbers, found {v!r:.60}",
+                                file=source, entry=where)
+
+    layout = section.get("layout")
+    if layout is not None:
+        if not isinstance(layout, dict):
+            raise ScenarioError("'editor.layout' must map block names to [x, y]",
+                                file=source, entry="editor.layout")
+        for k, v in layout.items():
+            point(v, f"editor.layout.{k}")
+    groups = section.get("groups")
+    if groups is not None:
+        if not isinstance(groups, dict):
+            raise ScenarioError("'editor.groups' must map group names to "
+                                "{blocks: [...], position: [x, y]}", file=source,
+                                entry="editor.groups")
+        for k, g in groups.items():
+            where = f"editor.groups.{k}"
+            if not isinstance(g, dict):
+                raise ScenarioError("a group is a mapping {blocks: [...], position: [x, y]}",
+                                    file=source, entry=where)
+            blocks = g.get("blocks", [])
+            if not (isinstance(blocks, list) and all(isinstance(b, str) for b in blocks)):
+                raise ScenarioError("'blocks' must be a list of block names",
+                                    file=source, entry=f"{where}.blocks")
+            if g.get("position") is not None:
+                point(g["position"], f"{where}.position")
+            if g.get("label") is not None and not isinstance(g["label"], str):
+                raise ScenarioError("'label' must be text", file=source,
+                                    entry=f"{where}.label")
+            sub = g.get("groups", [])
+            if not (isinstance(sub, list) and all(isinstance(b, str) for b in sub)):
+                raise ScenarioError("'groups' must be a list of group names",
+                                    file=source, entry=f"{where}.groups")
+    if section.get("viewport") is not None:
+        point(section["viewport"], "editor.viewport", 3)
+
+
+_FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
+                           r":([A-Za-z][A-Za-z0-9_]*)$")
+
+
+def resolve_function(ref, modules=(), source="<scenario>", where="function"):
+    """The function a file names as ``"package.module:name"``.
+
+    Only modules of the library (``avblocks`` and below) and the user's
+    block modules (``modules``, named on the command line, and below) are
+    imported; the name must be public (no leading underscore) and a plain
+    Python function (not a class, so nothing is constructed). Anything
+    else is a :class:`ScenarioError` naming the entry."""
+    import importlib
+    if not isinstance(ref, str) or not _FUNCTION_REF.match(ref):
+        raise ScenarioError(f"expected 'package.module:function', found {ref!r:.80}",
+                            file=source, entry=where,
+                            hint="e.g. avblocks.scenarios.honeybee:choose_command")
+    mod_name, name = ref.split(":")
+    allowed = ("avblocks", *[str(m) for m in modules or ()])
+    if not any(mod_name == a or mod_name.startswith(a + ".") for a in allowed):
+        raise ScenarioError(f"'{mod_name}' is not a module a file may name",
+                            file=source, entry=where,
+                            hint="functions come from avblocks or a block module "
+                                 "given with --blocks")
+    try:
+        mod = importlib.import_module(mod_name)
+    except ImportError as e:
+        raise ScenarioError(f"cannot import '{mod_name}': {e}", file=source,
+                            entry=where) from None
+    fn = getattr(mod, name, None)
+    if not inspect.isfunction(fn):
+        raise ScenarioError(f"'{ref}' is not a function", file=source, entry=where,
+                            hint=did_you_mean(name, [n for n in dir(mod)
+                                                     if inspect.isfunction(getattr(mod, n))
+                                                     and not n.startswith("_")]))
+    return fn
+
+
 # ------------------------------------------------------------------ registry
-def block_registry(code_blocks=False) -> dict:
+def module_blocks(module) -> dict:
+    """``{"module.Class": class}`` of the public block classes a user's
+    module defines (its ``__all__``, else its public names): the blocks of
+    ``avblocks edit --blocks mypackage.blocks``. Importing the module runs
+    it: it is named by the user on the command line, never by a file."""
+    import importlib
+
+    from ..core.block import Block
+    try:
+        mod = importlib.import_module(str(module))
+    except ImportError as e:
+        raise ScenarioError(f"cannot import the block module '{module}': {e}",
+                            entry="--blocks") from None
+    out = {}
+    for name in getattr(mod, "__all__", [n for n in dir(mod) if not n.startswith("_")]):
+        obj = getattr(mod, name, None)
+        if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+            out[f"{module}.{name}"] = obj
+    return out
+
+
+def block_registry(code_blocks=False, modules=()) -> dict:
     """``{"vehicles.Unicycle": class, ...}`` for every public block class
     that a scenario file can name (``code_blocks=True``: also those that
-    take Python code, such as ``blocks.Function``)."""
+    take Python code, such as ``blocks.Function``; ``modules``: user
+    modules whose blocks are named ``"module.Class"``, see
+    :func:`module_blocks`)."""
     import importlib
 
     from ..core.block import Block
@@ -94,6 +216,8 @@ def block_registry(code_blocks=False) -> dict:
                 if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
+    for m in modules or ():
+        reg.update(module_blocks(m))
     return reg
 
 
@@ -104,6 +228,8 @@ class Scenario:
     data: dict
     source: str = "<dict>"
     params: dict = field(default_factory=dict)
+    #: user block modules whose blocks the file may name (``module.Class``)
+    modules: tuple = ()
 
     @property
     def name(self) -> str:
@@ -121,6 +247,14 @@ class Scenario:
         return str(self.data.get("description", ""))
 
     # ----------------------------------------------------------- values
+    def value(self, v, where="value", params=None):
+        """A file value (``$parameter`` references, generators) resolved with
+        this scenario's parameters (``params`` on top), as :meth:`build`
+        resolves a block argument."""
+        self.params = {**dict(self.data.get("parameters") or {}), **dict(params or {})}
+        self._generated_bytes = 0
+        return self._value(v, where)
+
     def _value(self, v, where):
         if isinstance(v, str):
             m = _REF.match(v.strip())
@@ -166,6 +300,9 @@ class Scenario:
                         raise ScenarioError(f"'{k}' failed: {type(e).__name__}: {e}",
                                             file=self.source, entry=where,
                                             hint=f"'{k}' takes {sig}") from None
+                if k == "function":
+                    return resolve_function(self._value(args, f"{where}.function"),
+                                            self.modules, self.source, where)
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)
@@ -186,14 +323,25 @@ class Scenario:
                                 hint="use fewer agents or blocks (AVBLOCKS_MAX_MEMORY)")
         return value
 
+    def accepts(self, key) -> bool:
+        """Whether ``key`` is one of this scenario's parameters."""
+        return key in (self.data.get("parameters") or {})
+
     def with_overrides(self, overrides: dict) -> Scenario:
-        """A copy with ``--set`` values applied: parameter names, or
-        ``simulation.<key>``."""
+        """A copy with ``--set`` values applied: parameter names,
+        ``simulation.<key>``, the shortcuts ``t_final``/``dt``/``log_every``/
+        ``solver``, or ``block.param`` (checked against the built diagram by
+        :meth:`build`). The copy is validated when it is built."""
         import copy
-        self.validate()
+        if not isinstance(self.data, dict) or not isinstance(
+                self.data.get("parameters") or {}, dict):
+            self.validate()                 # raises, naming what is wrong
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
-        for key, val in overrides.items():
+        plain, numeric = split_overrides(overrides)
+        if numeric:                         # block.param: checked on build
+            data["params"] = {**(data.get("params") or {}), **numeric}
+        for key, val in plain.items():
             if key.startswith("simulation."):
                 sub = key.split(".", 1)[1]
                 if sub not in _SIM_KEYS:
@@ -202,8 +350,6 @@ class Scenario:
                                         hint=did_you_mean(sub, _SIM_KEYS)
                                         + f"known: {sorted(_SIM_KEYS)}")
                 data["simulation"] = {**(data.get("simulation") or {}), sub: val}
-            elif is_numeric_key(key):          # block.param: checked on build
-                data["params"] = {**(data.get("params") or {}), key: val}
             elif key in params:
                 params[key] = val
             elif key in _SIM_SHORTCUTS:     # --set t_final=30 as in Python scenarios
@@ -216,7 +362,26 @@ class Scenario:
                                       "(or t_final, dt, log_every, simulation.<setting>, "
                                       "block.param)")
         data["parameters"] = params
-        return Scenario(data, self.source)
+        return Scenario(data, self.source, modules=self.modules)
+
+    def hooks(self, diagram, sim):
+        """The ``outcome``/``figures`` of this scenario built as ``diagram``
+        with simulate kwargs ``sim`` (:mod:`avblocks.scenarios.report`):
+        its own sections, else those of the case study its ``report:`` names."""
+        from ._report_schema import logged_signals
+        from .report import hooks_from_data, hooks_from_report
+        d = self.data
+        hooks = hooks_from_data(d.get("outcome"), d.get("figures"), diagram, self.source,
+                                log=sim.get("log"))
+        if d.get("report"):
+            hooks = hooks_from_report(d["report"], d.get("parameters") or {}, hooks,
+                                      logged_signals(diagram, sim.get("log"), self.source),
+                                      self.source)
+        return hooks
+
+    def movie(self) -> dict:
+        """The movie options, values resolved (after :meth:`build`)."""
+        return self._value(self.movie_options(), "movie")       # generators too
 
     # ------------------------------------------------------------- build
     def validate(self):
@@ -238,6 +403,7 @@ class Scenario:
                                 entry="report",
                                 hint=did_you_mean(shown, REPORTS)
                                 + f"reports: {list(REPORTS)}")
+        check_editor(d.get("editor"), self.source)
         from ._report_schema import check_sections
         check_sections(d.get("outcome"), d.get("figures"), self.source)
         if not isinstance(d.get("blocks"), dict) or not d["blocks"]:
@@ -314,7 +480,9 @@ class Scenario:
         self.validate()
         self.params = dict(self.data.get("parameters") or {})
         self._generated_bytes = 0
-        reg = block_registry()
+        # a file may name blocks.Function: its fn can only be a function
+        # resolved by name ({function: "module:name"}), never code
+        reg = block_registry(code_blocks=True, modules=self.modules)
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():
             where = f"blocks.{name}"
@@ -406,7 +574,7 @@ def builtin_dir() -> Path:
 
 #: modules of this package that are machinery, not scenarios
 INFRASTRUCTURE = ("loader", "report", "paths", "targets", "generators", "limits",
-                  "worlds", "files")
+                  "worlds", "files", "document")
 
 
 def builtin_scenarios() -> dict:

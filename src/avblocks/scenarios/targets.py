@@ -1,18 +1,30 @@
-"""Loading what a command names: a built-in scenario, a YAML/TOML file or a Python file.
+"""What a command names, turned into a scenario and then a diagram: the one path.
 
-One place for what ``avblocks run``, ``avblocks diagram`` and a sweep's cases
-share: :func:`parse_overrides` reads ``--set key=value`` items,
-:func:`load_any` turns a target plus overrides into ``(diagram, simulate
-kwargs, name, movie options)`` with the scenario's report hooks attached, and
-:func:`from_namespace` does that for a Python scenario's names
-(``make_diagram(**params)`` or ``diagram``, ``simulation``, ``MOVIE``).
+Every entry point (``avblocks run``, ``avblocks diagram``, a sweep's cases,
+the editor) goes the same way, each step once and in one place::
+
+    target (built-in name | .yaml/.toml file | .py file)
+      -- open_scenario ------------> Scenario        (data: loader.py)
+                                     PythonScenario  (a module's names: here)
+      -- .with_overrides(--set) ---> the same kind; keys split once by
+                                     _numeric.split_overrides
+      -- .build(output_dir) -------> (Diagram, simulate kwargs); block.param
+                                     values checked once by _numeric.resolve
+      -- .hooks(diagram, sim) -----> outcome / figures (report.py)
+      -- .movie() -----------------> movie options
+
+:func:`load_any` is those steps; :func:`parse_overrides` reads ``--set
+key=value`` items. The other way, ``Scenario`` -> YAML, is
+:func:`avblocks.scenarios.document.dump_yaml`.
 """
 
 from __future__ import annotations
 
+import inspect
 from pathlib import Path
 
-from ..core.errors import AvError, ScenarioError
+from ..core.errors import AvError, ScenarioError, did_you_mean
+from ._numeric import resolve, split_overrides
 
 
 def parse_overrides(items):
@@ -31,54 +43,134 @@ def parse_overrides(items):
     return out
 
 
+class PythonScenario:
+    """A scenario given as Python names: ``make_diagram(**params)``
+    (returning a Diagram or ``(Diagram, simulate_kwargs)``) or ``diagram``,
+    with optional ``simulation`` and ``MOVIE`` dicts and ``outcome`` /
+    ``figures`` hooks (:mod:`avblocks.scenarios.report`). The Python twin of
+    :class:`~avblocks.scenarios.loader.Scenario`: the same ``with_overrides``,
+    ``build``, ``hooks`` and ``movie``."""
+
+    def __init__(self, ns, source, name=None, overrides=None):
+        self.ns = ns
+        self.source = str(source)
+        self.name = name or Path(self.source).stem
+        self.overrides = dict(overrides or {})
+
+    def accepts(self, key) -> bool:
+        """Whether ``key`` is one of this scenario's parameters."""
+        fn = self.ns.get("make_diagram")
+        if fn is None:
+            return False
+        sig = inspect.signature(fn)
+        return key in sig.parameters or any(p.kind == p.VAR_KEYWORD
+                                            for p in sig.parameters.values())
+
+    def with_overrides(self, overrides) -> PythonScenario:
+        """A copy with ``--set`` values: ``make_diagram`` arguments,
+        ``simulation.<key>`` settings and ``block.param`` numeric values."""
+        plain, _numeric = split_overrides(overrides)
+        params = [k for k in plain if not k.startswith("simulation.")]
+        fn = self.ns.get("make_diagram")
+        if fn is not None:
+            unknown = [k for k in params if not self.accepts(k)]
+            if unknown:
+                sig = inspect.signature(fn)
+                raise ScenarioError(f"unknown parameter(s) {unknown}", file=self.source,
+                                    entry="--set",
+                                    hint=did_you_mean(unknown[0], sig.parameters)
+                                    + f"this scenario's parameters: {list(sig.parameters)} "
+                                      "(or simulation.t_final, simulation.dt, ...)")
+        elif params and "diagram" in self.ns:
+            raise ScenarioError("this file defines `diagram`, so it takes no --set; "
+                                "define make_diagram(**params) instead", file=self.source)
+        return PythonScenario(self.ns, self.source, self.name,
+                              {**self.overrides, **dict(overrides or {})})
+
+    def build(self, output_dir=None):
+        """``(Diagram, simulate kwargs)``."""
+        from ..core.diagram import Diagram
+        ns, source = self.ns, self.source
+        plain, numeric = split_overrides(self.overrides)
+        params = {k: v for k, v in plain.items() if not k.startswith("simulation.")}
+        sim = dict(ns.get("simulation") or {})
+        if "make_diagram" in ns:
+            try:
+                out = ns["make_diagram"](**params)
+            except AvError as e:
+                raise ScenarioError(str(e), file=source, entry="--set") from None
+            if isinstance(out, tuple):
+                d, extra = out
+                sim.update(extra)
+            else:
+                d = out
+        elif "diagram" in ns:
+            d = ns["diagram"]
+        else:
+            raise ScenarioError("a Python scenario must define make_diagram(**params) or "
+                                "a variable `diagram`", file=source)
+        if not isinstance(d, Diagram):
+            raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
+                                file=source, hint=f"found {type(d).__name__}")
+        sim.update({k.split(".", 1)[1]: v for k, v in plain.items()
+                    if k.startswith("simulation.")})
+        if numeric:
+            sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
+        return d, sim
+
+    def hooks(self, diagram=None, sim=None):
+        """The module's ``outcome`` and ``figures`` (a :class:`report.Hooks`)."""
+        from .report import hooks_from_namespace
+        return hooks_from_namespace(self.ns, self.overrides)
+
+    def movie(self) -> dict:
+        return dict(self.ns.get("MOVIE") or {})
+
+
 def from_namespace(ns, overrides, source):
     """(diagram, simulate kwargs, movie options) from a scenario module's
-    names: ``make_diagram(**params)`` (returning a Diagram or ``(Diagram,
-    simulate_kwargs)``) or ``diagram``, optional ``simulation`` and ``MOVIE``
-    dicts. ``--set simulation.<key>=...`` goes to the simulate arguments."""
-    from ..core.diagram import Diagram
-    sim = dict(ns.get("simulation") or {})
-    sim_over = {k.split(".", 1)[1]: v for k, v in overrides.items()
-                if k.startswith("simulation.")}
-    from ._numeric import resolve, split_overrides
-    overrides, numeric = split_overrides(overrides)     # block.param keys
-    params = {k: v for k, v in overrides.items() if not k.startswith("simulation.")}
-    if "make_diagram" in ns:
-        import inspect
-        sig = inspect.signature(ns["make_diagram"])
-        takes_any = any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
-        unknown = [k for k in params if k not in sig.parameters and not takes_any]
-        if unknown:
-            from ..core.errors import did_you_mean
-            raise ScenarioError(f"unknown parameter(s) {unknown}", file=source,
-                                entry="--set",
-                                hint=did_you_mean(unknown[0], sig.parameters)
-                                + f"this scenario's parameters: {list(sig.parameters)} "
-                                  "(or simulation.t_final, simulation.dt, ...)")
-        try:
-            out = ns["make_diagram"](**params)
-        except AvError as e:
-            raise ScenarioError(str(e), file=source, entry="--set") from None
-        if isinstance(out, tuple):
-            d, extra = out
-            sim.update(extra)
+    names (see :class:`PythonScenario`)."""
+    sc = PythonScenario(ns, source).with_overrides(overrides)
+    d, sim = sc.build()
+    return d, sim, sc.movie()
+
+
+def run_python_file(path, text=None) -> PythonScenario:
+    """Run a user's Python scenario file (it may import anything it likes;
+    ``text``: its source, when it is not read from ``path``)."""
+    import runpy
+    path = Path(path)
+    try:
+        if text is None:
+            ns = runpy.run_path(str(path), run_name="avblocks_scenario")
         else:
-            d = out
-    elif "diagram" in ns:
-        if params:
-            raise ScenarioError("this file defines `diagram`, so it takes no --set; "
-                                "define make_diagram(**params) instead", file=source)
-        d = ns["diagram"]
-    else:
-        raise ScenarioError("a Python scenario must define make_diagram(**params) or "
-                            "a variable `diagram`", file=source)
-    if not isinstance(d, Diagram):
-        raise ScenarioError("make_diagram()/diagram must be an avblocks.Diagram",
-                            file=source, hint=f"found {type(d).__name__}")
-    sim.update(sim_over)
-    if numeric:
-        sim["params"] = {**(sim.get("params") or {}), **resolve(d, numeric, source)}
-    return d, sim, dict(ns.get("MOVIE") or {})
+            ns = {"__name__": "avblocks_scenario", "__file__": str(path)}
+            exec(compile(text, str(path), "exec"), ns)  # noqa: S102 - the user's own file
+    except AvError:
+        raise
+    except Exception as e:  # noqa: BLE001 - the user's file failed
+        raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
+                            file=str(path)) from e
+    return PythonScenario(ns, str(path), path.stem)
+
+
+def open_scenario(target):
+    """The scenario a command names, not yet overridden or built: a
+    built-in name (its YAML file, or its Python module where it has no
+    file), a ``.py`` file (run), or a YAML/TOML file."""
+    import importlib
+
+    from .loader import builtin_scenarios, load_scenario
+    p = Path(str(target))
+    builtin = builtin_scenarios()
+    if not p.is_file() and str(target) in builtin and builtin[str(target)].suffix == ".py":
+        mod = importlib.import_module(f"avblocks.scenarios.{target}")
+        return PythonScenario(vars(mod), str(target), str(target))
+    if p.suffix == ".py":
+        if not p.is_file():
+            raise ScenarioError("no such file", file=str(target))
+        return run_python_file(p)
+    return load_scenario(target)
 
 
 class Loaded(tuple):
@@ -92,24 +184,14 @@ class Loaded(tuple):
         return self
 
 
-def hooks_of(ns, overrides):
-    """The scenario's ``outcome`` and ``figures`` hooks from its names."""
-    from .report import hooks_from_namespace
-    return hooks_from_namespace(ns, overrides)
-
-
 def load_python(path: Path, overrides):
-    """Run a user's Python scenario file (it may import anything it likes)."""
-    import runpy
-    try:
-        ns = runpy.run_path(str(path), run_name="avblocks_scenario")
-    except AvError:
-        raise
-    except Exception as e:  # noqa: BLE001 - the user's file failed
-        raise ScenarioError(f"running the file failed: {type(e).__name__}: {e}",
-                            file=str(path)) from e
-    d, sim, movie = from_namespace(ns, overrides, str(path))
-    return Loaded(d, sim, path.stem, movie, hooks_of(ns, overrides))
+    """A user's Python scenario file, overridden and built (a :class:`Loaded`)."""
+    return _loaded(run_python_file(path).with_overrides(overrides), None)
+
+
+def _loaded(sc, out):
+    d, sim = sc.build(output_dir=out)
+    return Loaded(d, sim, sc.name, sc.movie(), sc.hooks(d, sim))
 
 
 def load_any(target, overrides, out=None):
@@ -118,27 +200,4 @@ def load_any(target, overrides, out=None):
     scenario file's blocks may write to), as a :class:`Loaded` whose
     ``.hooks`` holds the scenario's ``outcome`` and ``figures`` (see
     :mod:`avblocks.scenarios.report`)."""
-    import importlib
-
-    from .loader import builtin_scenarios, load_scenario
-    p = Path(target)
-    builtin = builtin_scenarios()
-    if not p.is_file() and target in builtin and builtin[target].suffix == ".py":
-        mod = importlib.import_module(f"avblocks.scenarios.{target}")
-        d, sim, movie = from_namespace(vars(mod), overrides, target)
-        return Loaded(d, sim, target, movie, hooks_of(vars(mod), overrides))
-    if p.suffix == ".py":
-        if not p.is_file():
-            raise ScenarioError("no such file", file=target)
-        return load_python(p, overrides)
-    sc = load_scenario(target).with_overrides(overrides)
-    d, sim = sc.build(output_dir=sc.output_dir(out))
-    from .report import hooks_from_data, hooks_from_report
-    hooks = hooks_from_data(sc.data.get("outcome"), sc.data.get("figures"), d, sc.source,
-                            log=sim.get("log"))
-    if sc.data.get("report"):
-        from ._report_schema import logged_signals
-        hooks = hooks_from_report(sc.data["report"], sc.data.get("parameters") or {}, hooks,
-                                  logged_signals(d, sim.get("log"), sc.source), sc.source)
-    movie = sc._value(sc.movie_options(), "movie")      # generators too
-    return Loaded(d, sim, sc.name, movie, hooks)
+    return _loaded(open_scenario(target).with_overrides(overrides), out)

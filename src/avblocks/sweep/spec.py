@@ -21,7 +21,6 @@ then needs it again (``metrics={name: fn}``), with an error saying so.
 
 from __future__ import annotations
 
-import inspect
 import math
 from pathlib import Path
 
@@ -115,34 +114,18 @@ def scenario_source(scenario) -> dict:
     return {"name": p.stem, "kind": kind, "path": str(p), "text": p.read_text()}
 
 
-def _namespace_of(src):
-    ns = {}
-    code = compile(src["text"], src["path"], "exec")
-    ns["__name__"] = "avblocks_scenario"
-    ns["__file__"] = src["path"]
-    exec(code, ns)  # noqa: S102 - the user's own scenario file, as `avblocks run` does
-    return ns
-
-
-def _accepts_seed(src, ns=None) -> bool:
+def scenario_of(src):
+    """The scenario (not yet overridden) a :func:`scenario_source` names:
+    the one path of :mod:`avblocks.scenarios.targets`."""
+    from ..scenarios.targets import open_scenario, run_python_file
     if src["kind"] == "builtin":
-        from ..scenarios import builtin_scenarios
-        path = builtin_scenarios()[src["name"]]
-        if path.suffix == ".py":
-            import importlib
-            mod = importlib.import_module(f"avblocks.scenarios.{src['name']}")
-            ns = vars(mod)
-        else:
-            from ..scenarios import load_scenario
-            return "seed" in (load_scenario(src["name"]).data.get("parameters") or {})
-    if src["kind"] in ("yaml", "toml"):
-        return "seed" in (_data_of(src).get("parameters") or {})
-    fn = (ns or {}).get("make_diagram")
-    if fn is None:
-        return False
-    sig = inspect.signature(fn)
-    return "seed" in sig.parameters or any(p.kind == p.VAR_KEYWORD
-                                           for p in sig.parameters.values())
+        return open_scenario(src["name"])
+    if src["kind"] == "py":
+        return run_python_file(src["path"], src["text"])
+    from ..scenarios import Scenario
+    sc = Scenario(_data_of(src), src["path"])
+    sc.validate()
+    return sc
 
 
 def _data_of(src):
@@ -154,39 +137,23 @@ def _data_of(src):
 
 
 def split_overrides(values: dict):
-    """``(scenario overrides, block parameters)`` from override names."""
-    scen, blocks = {}, {}
-    for k, v in values.items():
-        if "." in k and not k.startswith("simulation."):
-            blocks[k] = v
-        else:
-            scen[k] = v
-    return scen, blocks
+    """``(scenario overrides, block parameters)`` from override names
+    (:func:`avblocks.scenarios._numeric.split_overrides`)."""
+    from ..scenarios.targets import split_overrides as split
+    return split(values)
 
 
 def build_case(src, values: dict, seed: int):
     """``(diagram, simulate kwargs)`` of one case: the scenario with its
     overrides; the seed goes to the scenario's ``seed`` parameter when it
     has one and to ``simulate(seed=)`` always; block parameters go to
-    ``simulate(params=)``."""
-    from ..scenarios.targets import from_namespace, load_any
-    scen, blocks = split_overrides(values)
-    ns = _namespace_of(src) if src["kind"] == "py" else None
-    if _accepts_seed(src, ns):
-        scen = {**scen, "seed": int(seed)}
-    if src["kind"] == "builtin":
-        d, sim, *_ = load_any(src["name"], scen)      # (the hooks ride on .hooks)
-    elif src["kind"] == "py":
-        d, sim, _movie = from_namespace(ns, scen, src["path"])
-    else:
-        from ..scenarios import Scenario
-        sc = Scenario(_data_of(src), src["path"])
-        sc.validate()
-        d, sim = sc.with_overrides(scen).build()
+    ``simulate(params=)`` (checked against the built diagram)."""
+    sc = scenario_of(src)
+    if sc.accepts("seed"):
+        values = {**values, "seed": int(seed)}
+    d, sim = sc.with_overrides(values).build()
     sim = dict(sim)
     sim["seed"] = int(seed)
-    if blocks:
-        sim["params"] = {**dict(sim.get("params") or {}), **blocks}
     return d, sim
 
 

@@ -1,0 +1,132 @@
+"""Benchmark: the editor's canvas with a 500-block diagram in headless Chromium.
+
+Run: ``python benchmarks/editor_fps.py [--blocks 100 500] [--seconds 3]``.
+For each size, the document of ``benchmarks/editor.py`` (teams of a Unicycle
+and a PointToPoint, wired both ways, on a grid) is saved under a temporary
+folder and opened by a real editor server (``EditorServer``, loopback) in
+Debian's Chromium (headless, no GPU: software rendering). The script measures
+
+- open: from ``goto`` to every block drawn and the first check back [s];
+- pan: frames/s (``requestAnimationFrame`` callbacks counted in the page)
+  while the mouse drags the canvas continuously;
+- zoom: frames/s while the wheel zooms in and out continuously;
+- idle: frames/s with nothing happening (the browser's ceiling here);
+
+each at the whole diagram in view (zoomed out: every node drawn) and at zoom 1
+(only what is on screen is drawn). Prints a markdown table. Not part of the
+test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "src"))
+
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+
+COUNT = """() => { window.__frames = 0; const f = () => { window.__frames++;
+  window.__raf = requestAnimationFrame(f); }; window.__raf = requestAnimationFrame(f); }"""
+
+
+def fps_during(pg, seconds, action):
+    pg.evaluate(COUNT)
+    t0 = time.perf_counter()
+    n0 = pg.evaluate("window.__frames")
+    k = 0
+    while time.perf_counter() - t0 < seconds:
+        action(k)
+        k += 1
+    n1 = pg.evaluate("window.__frames")
+    dt = time.perf_counter() - t0
+    pg.evaluate("cancelAnimationFrame(window.__raf)")
+    return (n1 - n0) / dt
+
+
+def measure(browser, url, seconds, n_blocks):
+    pg = browser.new_page(viewport={"width": 1440, "height": 880})
+    t0 = time.perf_counter()
+    pg.goto(url)
+    pg.wait_for_function("n => document.querySelectorAll('.react-flow__node-block').length >= n",
+                         arg=n_blocks, timeout=300_000)
+    pg.wait_for_function("!document.querySelector('[data-testid=check]').classList.contains('busy')",
+                         timeout=300_000)
+    t_open = time.perf_counter() - t0
+    pane = pg.locator(".react-flow__pane").bounding_box()
+    cx, cy = pane["x"] + pane["width"] / 2, pane["y"] + pane["height"] / 2
+    rows = []
+    for view in ("all in view", "zoom 1"):
+        if view == "zoom 1":
+            pg.mouse.move(cx, cy)
+            for _ in range(12):
+                pg.mouse.wheel(0, -240)
+                pg.wait_for_timeout(30)
+        pg.wait_for_timeout(300)
+        drawn = pg.evaluate("document.querySelectorAll('.react-flow__node').length")
+        idle = fps_during(pg, seconds, lambda k: pg.wait_for_timeout(50))
+        pg.mouse.move(cx, cy)
+        pg.mouse.down()
+
+        def pan(k):
+            dx = 150 if (k // 20) % 2 == 0 else -150
+            pg.mouse.move(cx + dx * ((k % 20) / 20), cy + 0.3 * dx * ((k % 20) / 20))
+
+        f_pan = fps_during(pg, seconds, pan)
+        pg.mouse.up()
+
+        def zoom(k):
+            pg.mouse.move(cx, cy)
+            pg.mouse.wheel(0, 60 if (k // 10) % 2 == 0 else -60)
+
+        f_zoom = fps_during(pg, seconds, zoom)
+        rows.append((view, drawn, f_pan, f_zoom, idle))
+    pg.close()
+    return t_open, rows
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--blocks", type=int, nargs="*", default=[100, 500])
+    ap.add_argument("--seconds", type=float, default=3.0)
+    ap.add_argument("--query", default="", help="appended to the page URL")
+    args = ap.parse_args()
+    from playwright.sync_api import sync_playwright
+
+    from avblocks.editor.server import EditorServer
+    from avblocks.editor.service import EditorService
+    from editor import big_document
+
+    print(f"load: {os.getloadavg()[0]:.2f} (1 min), {os.cpu_count()} cores; "
+          "Chromium headless, software rendering\n")
+    print("| blocks | open [s] | view | nodes drawn | pan [frames/s] | zoom [frames/s] "
+          "| idle [frames/s] |")
+    print("|---:|---:|---|---:|---:|---:|---:|")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
+        for n in args.blocks:
+            with tempfile.TemporaryDirectory() as tmp:
+                svc = EditorService(tmp)
+                doc = big_document(n)
+                svc.save("big.yaml", doc)
+                svc.initial = {"path": "big.yaml"}
+                srv = EditorServer(svc).start()
+                try:
+                    t_open, rows = measure(browser, srv.url + args.query, args.seconds, n)
+                finally:
+                    srv.stop()
+            for view, drawn, f_pan, f_zoom, idle in rows:
+                print(f"| {n} | {t_open:.1f} | {view} | {drawn} | {f_pan:.0f} "
+                      f"| {f_zoom:.0f} | {idle:.0f} |")
+        browser.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,71 @@
+"""``avblocks edit [NAME | FILE]``: draw, wire and run a diagram in the browser.
+
+    avblocks edit                      # an empty diagram
+    avblocks edit formation            # a built-in case study
+    avblocks edit my_scenario.yaml     # a scenario file under this folder
+    avblocks edit --no-browser --port 8765 --blocks mypackage.blocks
+
+Serves the editor (:mod:`avblocks.editor.server`) on 127.0.0.1 with a
+random token in the URL, prints the URL, opens it in the browser unless
+``--no-browser``, and runs until Ctrl-C. The editor reads and writes files
+only under the folder it was started in.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+
+def add_parser(sub):
+    """The ``edit`` sub-command on an argparse sub-parser set."""
+    e = sub.add_parser("edit", help="draw, wire and run a diagram in the browser editor")
+    e.add_argument("target", nargs="?",
+                   help="built-in case study or scenario file to open (none: an empty "
+                        "diagram)")
+    e.add_argument("--no-browser", action="store_true", dest="no_browser",
+                   help="only print the URL")
+    e.add_argument("--port", type=int, default=0,
+                   help="port on 127.0.0.1 (default: a free one)")
+    e.add_argument("--blocks", nargs="+", default=[], metavar="MODULE",
+                   help="importable modules whose blocks join the palette")
+    e.set_defaults(fn=cmd_edit)
+    return e
+
+
+def cmd_edit(args):
+    import time
+
+    from ..editor.server import EditorServer
+    from ..editor.service import EditorError, EditorService
+    service = EditorService(Path.cwd(), extra_modules=args.blocks)
+    if args.target:
+        from ..scenarios.loader import builtin_scenarios
+        p = Path(args.target)
+        if p.is_file():
+            rel = service._path(str(p.resolve()))      # refused outside this folder
+            service.initial = {"path": service._rel(rel)}
+        elif args.target in builtin_scenarios():
+            service.load(builtin=args.target)           # a Python-only one is refused
+            service.initial = {"builtin": args.target}
+        else:
+            raise EditorError(f"no scenario file or built-in case study '{args.target}'",
+                              hint=f"built-in: {sorted(builtin_scenarios())}")
+    server = EditorServer(service, port=args.port).start()
+    print(f"avblocks editor: {server.url}", flush=True)
+    print("(Ctrl-C to stop)", flush=True)
+    if not args.no_browser:
+        import webbrowser
+        try:
+            webbrowser.open(server.url)
+        except Exception:  # noqa: BLE001 - no browser: the URL is printed
+            pass
+    try:
+        while server._thread.is_alive():
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        server.stop()
+    print("avblocks editor: stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,308 @@
+// Document -> React Flow nodes and edges (pure; the canvas draws what this returns).
+
+import type { Doc, Palette, PortDecl, Validation, ValidationError, Wire, XY } from './types';
+import { declOf, groupPorts, groupsOf, itemsAt, portsOf, refBlock, splitRef, visibleOwner } from './model';
+
+export const NODE_W = 210;
+export const HEADER_H = 34;
+export const ROW_H = 22;
+
+export const IN_NODE = '__in';
+export const OUT_NODE = '__out';
+
+const textLen = (p: PortView) => p.label.length + (p.shape ? p.shape.length + 1 : 0);
+
+/** Wide enough for the longest input and output row side by side, and the title. */
+export function nodeWidth(inputs: PortView[], outputs: PortView[], title = ''): number {
+  const li = Math.max(0, ...inputs.map(textLen));
+  const lo = Math.max(0, ...outputs.map(textLen));
+  const w = Math.max(6.6 * (li + lo) + 48, 7 * title.length + 40);
+  return Math.max(NODE_W, Math.min(420, Math.ceil(w / 10) * 10));
+}
+
+export function nodeHeight(nIn: number, nOut: number): number {
+  return HEADER_H + Math.max(1, nIn, nOut) * ROW_H + 10;
+}
+
+export interface PortView {
+  id: string; // handle id
+  label: string;
+  shape?: string;
+  unit?: string | null;
+  doc?: string;
+  errors: string[];
+  driven?: boolean;
+}
+
+export interface BlockData {
+  kind: 'block';
+  name: string;
+  type: string;
+  title: string;
+  summary?: string;
+  inputs: PortView[];
+  outputs: PortView[];
+  errors: string[];
+  known: boolean;
+  [k: string]: unknown;
+}
+
+export interface GroupData {
+  kind: 'group';
+  name: string;
+  label: string;
+  count: number;
+  inputs: PortView[];
+  outputs: PortView[];
+  errors: string[];
+  [k: string]: unknown;
+}
+
+export interface BoundaryData {
+  kind: 'boundary';
+  side: 'in' | 'out';
+  ports: PortView[];
+  [k: string]: unknown;
+}
+
+export type NodeData = BlockData | GroupData | BoundaryData;
+
+export interface FlowNode {
+  id: string;
+  type: 'block' | 'subsystem' | 'boundary';
+  position: { x: number; y: number };
+  data: NodeData;
+  selected?: boolean;
+  width?: number;
+  height?: number;
+  className?: string;
+  deletable?: boolean;
+}
+
+export interface EdgeData {
+  wire: Wire;
+  shape?: string;
+  errors: string[];
+  [k: string]: unknown;
+}
+
+export interface FlowEdge {
+  id: string;
+  source: string;
+  target: string;
+  sourceHandle: string;
+  targetHandle: string;
+  type: 'wire';
+  data: EdgeData;
+  selected?: boolean;
+  className?: string;
+}
+
+export function wireId(w: Wire): string {
+  return `${w[0]}->${w[1]}`;
+}
+
+function portView(decl: PortDecl | undefined, id: string, label: string): PortView {
+  return { id, label, shape: decl?.shape, unit: decl?.unit, doc: decl?.doc, errors: [] };
+}
+
+export function sameWire(a: Wire | null | undefined, b: Wire): boolean {
+  return !!a && a[0] === b[0] && a[1] === b[1];
+}
+
+/** Errors a validation gives about a block (and, when `port` is given, its port). */
+function errorsFor(errors: ValidationError[], block: string, port?: string): string[] {
+  return errors
+    .filter((e) => e.block === block && (port === undefined ? !e.port : e.port === port))
+    .map((e) => e.message);
+}
+
+export interface ToFlowOptions {
+  level?: string | null;
+  validation?: Validation | null;
+  selected?: Set<string>;
+  selectedEdges?: Set<string>;
+  positions?: Record<string, XY>;
+}
+
+export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = {}): { nodes: FlowNode[]; edges: FlowEdge[] } {
+  const level = opts.level ?? null;
+  const val = opts.validation ?? null;
+  const errors = val?.errors ?? [];
+  const selected = opts.selected ?? new Set<string>();
+  const layout = doc.editor?.layout ?? {};
+  const groups = groupsOf(doc);
+  const { blocks, groups: shownGroups } = itemsAt(doc, level);
+  const nodes: FlowNode[] = [];
+  const driven = new Set(doc.wires.map(([, b]) => b));
+
+  for (const name of blocks) {
+    const b = doc.blocks[name];
+    if (!b) continue;
+    const decl = declOf(palette, b.type);
+    const ports = portsOf(doc, name, palette, val?.ports);
+    // ports the last check named (outputs with a signal, inputs an error is about)
+    for (const ref of Object.keys(val?.signals ?? {})) {
+      const [sb, sp] = splitRef(ref);
+      if (sb === name && sp && !ports.outputs.includes(sp) && !ports.inputs.includes(sp)) ports.outputs.push(sp);
+    }
+    for (const e of errors) {
+      if (e.block === name && e.port && !ports.inputs.includes(e.port) && !ports.outputs.includes(e.port)) ports.inputs.push(e.port);
+    }
+    const inputs = ports.inputs.map((p) => {
+      const v = portView(decl?.inputs.find((d) => d.name === p), p, p);
+      v.errors = errorsFor(errors, name, p);
+      v.driven = driven.has(`${name}.${p}`);
+      return v;
+    });
+    const outputs = ports.outputs.map((p) => {
+      const v = portView(decl?.outputs.find((d) => d.name === p), p, p);
+      v.errors = errorsFor(errors, name, p);
+      const sig = val?.signals?.[`${name}.${p}`];
+      if (sig) v.shape = sig.shape;
+      return v;
+    });
+    // errors naming a parameter are the block's
+    const blockErrors = errors.filter((e) => e.block === name && (!e.port || !ports.inputs.concat(ports.outputs).includes(e.port))).map((e) => e.message);
+    const p = opts.positions?.[name] ?? layout[name] ?? [0, 0];
+    nodes.push({
+      id: name,
+      type: 'block',
+      position: { x: p[0], y: p[1] },
+      selected: selected.has(name),
+      width: nodeWidth(inputs, outputs, `${decl?.name ?? b.type} ${name}`),
+      height: nodeHeight(inputs.length, outputs.length),
+      data: {
+        kind: 'block',
+        name,
+        type: b.type,
+        title: decl?.name ?? b.type.split('.').pop() ?? b.type,
+        summary: decl?.summary,
+        inputs,
+        outputs,
+        errors: blockErrors,
+        known: !!decl,
+      },
+    });
+  }
+
+  for (const g of shownGroups) {
+    const grp = groups[g];
+    const gp = groupPorts(doc, g);
+    const inside = (ref: string) => visibleOwner(doc, refBlock(ref), level) === g;
+    const label = (ref: string) => ref;
+    const inputs = gp.inputs.map((r) => {
+      const [b, p] = splitRef(r);
+      const v = portView(undefined, r, label(r));
+      v.errors = errorsFor(errors, b, p);
+      return v;
+    });
+    const outputs = gp.outputs.map((r) => {
+      const v = portView(undefined, r, label(r));
+      const sig = val?.signals?.[r];
+      if (sig) v.shape = sig.shape;
+      return v;
+    });
+    const groupErrors = errors.filter((e) => e.block && inside(`${e.block}.x`)).map((e) => e.message);
+    const p = opts.positions?.[g] ?? grp.position ?? [0, 0];
+    nodes.push({
+      id: g,
+      type: 'subsystem',
+      position: { x: p[0], y: p[1] },
+      selected: selected.has(g),
+      width: nodeWidth(inputs, outputs, grp.label ?? g) + 40,
+      height: nodeHeight(inputs.length, outputs.length) + 16,
+      data: { kind: 'group', name: g, label: grp.label ?? g, count: blocks.length, inputs, outputs, errors: groupErrors },
+    });
+    (nodes[nodes.length - 1].data as GroupData).count = countBlocks(doc, g);
+  }
+
+  const edges: FlowEdge[] = [];
+  const boundaryIn: PortView[] = [];
+  const boundaryOut: PortView[] = [];
+  const selectedEdges = opts.selectedEdges ?? new Set<string>();
+  for (const w of doc.wires) {
+    const [a, b] = w;
+    const sa = visibleOwner(doc, refBlock(a), level);
+    const sb = visibleOwner(doc, refBlock(b), level);
+    if (sa === null && sb === null) continue;
+    if (sa !== null && sa === sb && sa in groups) continue;
+    let source: string;
+    let sourceHandle: string;
+    let target: string;
+    let targetHandle: string;
+    if (sa === null) {
+      source = IN_NODE;
+      sourceHandle = a;
+      if (!boundaryIn.some((p) => p.id === a)) {
+        const v = portView(undefined, a, a);
+        v.shape = val?.signals?.[a]?.shape;
+        boundaryIn.push(v);
+      }
+    } else {
+      source = sa;
+      sourceHandle = sa in groups ? a : splitRef(a)[1];
+    }
+    if (sb === null) {
+      target = OUT_NODE;
+      targetHandle = a;
+      if (boundaryOut.some((p) => p.id === a)) continue;
+      boundaryOut.push(portView(undefined, a, a));
+    } else {
+      target = sb;
+      targetHandle = sb in groups ? b : splitRef(b)[1];
+    }
+    const wErrors = errors
+      .filter((e) => sameWire(e.wire, w) || (e.cycle && e.cycle.includes(a) && e.cycle.includes(b)))
+      .map((e) => e.message);
+    const id = wireId(w);
+    edges.push({
+      id,
+      source,
+      target,
+      sourceHandle,
+      targetHandle,
+      type: 'wire',
+      selected: selectedEdges.has(id),
+      data: { wire: w, shape: val?.signals?.[a]?.shape, errors: wErrors },
+    });
+  }
+
+  if (level !== null) {
+    const inner = nodes.filter((n) => n.type !== 'boundary');
+    const minX = inner.length ? Math.min(...inner.map((n) => n.position.x)) : 0;
+    const maxX = inner.length ? Math.max(...inner.map((n) => n.position.x + (n.width ?? NODE_W))) : 400;
+    const minY = inner.length ? Math.min(...inner.map((n) => n.position.y)) : 0;
+    nodes.push({
+      id: IN_NODE,
+      type: 'boundary',
+      position: { x: minX - nodeWidth([], boundaryIn) - 100, y: minY },
+      width: nodeWidth([], boundaryIn),
+      height: nodeHeight(0, boundaryIn.length),
+      deletable: false,
+      data: { kind: 'boundary', side: 'in', ports: boundaryIn },
+    });
+    nodes.push({
+      id: OUT_NODE,
+      type: 'boundary',
+      position: { x: maxX + 120, y: minY },
+      width: nodeWidth(boundaryOut, []),
+      height: nodeHeight(boundaryOut.length, 0),
+      deletable: false,
+      data: { kind: 'boundary', side: 'out', ports: boundaryOut },
+    });
+  }
+  return { nodes, edges };
+}
+
+function countBlocks(doc: Doc, g: string): number {
+  const grp = groupsOf(doc)[g];
+  if (!grp) return 0;
+  return grp.blocks.length + (grp.groups ?? []).reduce((s, x) => s + countBlocks(doc, x), 0);
+}
+
+/** The wire end a connection drawn between two handles means ("block.port"). */
+export function handleRef(doc: Doc, node: string, handle: string): string {
+  if (node in doc.blocks) return `${node}.${handle}`;
+  return handle; // groups and boundary nodes carry full refs
+}

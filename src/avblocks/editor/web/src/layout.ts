@@ -1,0 +1,87 @@
+// Automatic layout with elkjs: layered, left to right, ports fixed on the sides.
+
+import ELK from 'elkjs/lib/elk.bundled.js';
+import type { Doc, Palette, XY } from './types';
+import { groupsOf, itemsAt, moveItems } from './model';
+import { toFlow } from './flow';
+
+const elk = new ELK();
+
+const OPTIONS: Record<string, string> = {
+  'elk.algorithm': 'layered',
+  'elk.direction': 'RIGHT',
+  'elk.portConstraints': 'FIXED_ORDER',
+  'elk.layered.spacing.nodeNodeBetweenLayers': '90',
+  'elk.spacing.nodeNode': '40',
+  'elk.layered.nodePlacement.strategy': 'BRANDES_KOEPF',
+  'elk.layered.crossingMinimization.strategy': 'LAYER_SWEEP',
+  'elk.edgeRouting': 'ORTHOGONAL',
+  'elk.separateConnectedComponents': 'true',
+  'elk.spacing.componentComponent': '60',
+};
+
+/** Positions for the items shown at one level. */
+export async function layoutLevel(doc: Doc, palette: Palette | null, level: string | null): Promise<Record<string, XY>> {
+  const { nodes, edges } = toFlow(doc, palette, { level });
+  const items = nodes.filter((n) => n.type !== 'boundary');
+  if (!items.length) return {};
+  const ids = new Set(items.map((n) => n.id));
+  const graph = {
+    id: 'root',
+    layoutOptions: OPTIONS,
+    children: items.map((n) => {
+      const d = n.data as { inputs: { id: string }[]; outputs: { id: string }[] };
+      return {
+        id: n.id,
+        width: n.width ?? 200,
+        height: n.height ?? 60,
+        layoutOptions: { 'elk.portConstraints': 'FIXED_ORDER' },
+        ports: [
+          ...d.inputs.map((p, i) => ({
+            id: `${n.id}::in::${p.id}`,
+            width: 1,
+            height: 1,
+            layoutOptions: { 'elk.port.side': 'WEST', 'elk.port.index': String(d.inputs.length - i) },
+          })),
+          ...d.outputs.map((p, i) => ({
+            id: `${n.id}::out::${p.id}`,
+            width: 1,
+            height: 1,
+            layoutOptions: { 'elk.port.side': 'EAST', 'elk.port.index': String(i) },
+          })),
+        ],
+      };
+    }),
+    edges: edges
+      .filter((e) => ids.has(e.source) && ids.has(e.target))
+      .map((e) => ({
+        id: e.id,
+        sources: [`${e.source}::out::${e.sourceHandle}`],
+        targets: [`${e.target}::in::${e.targetHandle}`],
+      })),
+  };
+  const out = await elk.layout(graph);
+  const pos: Record<string, XY> = {};
+  for (const c of out.children ?? []) pos[c.id] = [Math.round((c.x ?? 0) + 40), Math.round((c.y ?? 0) + 40)];
+  return pos;
+}
+
+/** Lay out every level (the top and each group's inside). */
+export async function layoutAll(doc: Doc, palette: Palette | null): Promise<Doc> {
+  let d = doc;
+  for (const level of [null, ...Object.keys(groupsOf(doc))]) {
+    d = moveItems(d, await layoutLevel(d, palette, level));
+  }
+  return d;
+}
+
+/** True when some block or group has no position (most built-in files). */
+export function needsLayout(doc: Doc): boolean {
+  const layout = doc.editor?.layout ?? {};
+  const groups = groupsOf(doc);
+  return (
+    Object.keys(doc.blocks).some((b) => !layout[b]) ||
+    Object.values(groups).some((g) => !g.position) ||
+    (Object.keys(doc.blocks).length > 0 && itemsAt(doc, null).blocks.length + itemsAt(doc, null).groups.length === 0)
+  );
+}

@@ -1,0 +1,148 @@
+// One interface to the Python side, two ways to reach it (HTTP page, anywidget).
+
+import type { Doc, FileList, Loaded, Palette, RunStatus, SignalData, Validation } from './types';
+
+export class ApiError extends Error {
+  status: number;
+  kind: string;
+  constructor(message: string, status = 400, kind = 'Error') {
+    super(message);
+    this.status = status;
+    this.kind = kind;
+  }
+}
+
+export interface Transport {
+  call<T>(op: string, args?: Record<string, unknown>, method?: 'GET' | 'POST'): Promise<T>;
+  /** A URL (or data URL) the page can show for a figure the server returned. */
+  fileUrl(url: string): string;
+}
+
+export class HttpTransport implements Transport {
+  base: string;
+  constructor(base?: string) {
+    if (base === undefined) {
+      // everything up to and including "/<token>/"
+      const m = location.pathname.match(/^\/[^/]+\//);
+      base = m ? m[0] : '/';
+    }
+    this.base = base;
+  }
+  async call<T>(op: string, args?: Record<string, unknown>, method?: 'GET' | 'POST'): Promise<T> {
+    const m = method ?? (args === undefined ? 'GET' : 'POST');
+    let url = `${this.base}api/${op}`;
+    const init: RequestInit = { method: m, headers: {} };
+    if (m === 'GET' && args) {
+      const q = new URLSearchParams(Object.entries(args).map(([k, v]) => [k, String(v)]));
+      url += `?${q}`;
+    } else if (m === 'POST') {
+      init.body = JSON.stringify(args ?? {});
+      (init.headers as Record<string, string>)['Content-Type'] = 'application/json';
+    }
+    let res: Response;
+    try {
+      res = await fetch(url, init);
+    } catch (e) {
+      throw new ApiError(`the editor server does not answer (${(e as Error).message})`, 0, 'Network');
+    }
+    let body: unknown = null;
+    try {
+      body = await res.json();
+    } catch {
+      body = null;
+    }
+    if (!res.ok) {
+      const err = (body as { error?: { message?: string; kind?: string } } | null)?.error;
+      throw new ApiError(err?.message ?? `${res.status} ${res.statusText}`, res.status, err?.kind ?? 'Error');
+    }
+    return body as T;
+  }
+  fileUrl(url: string): string {
+    if (/^(data:|https?:|\/)/.test(url)) return url;
+    return this.base + url.replace(/^\.?\//, '');
+  }
+}
+
+interface WidgetModel {
+  send(msg: unknown): void;
+  on(event: string, cb: (msg: unknown) => void): void;
+  off?(event: string, cb?: (msg: unknown) => void): void;
+}
+
+export class WidgetTransport implements Transport {
+  private model: WidgetModel;
+  private next = 1;
+  private pending = new Map<number, { resolve: (v: unknown) => void; reject: (e: Error) => void }>();
+  constructor(model: WidgetModel) {
+    this.model = model;
+    model.on('msg:custom', (msg: unknown) => {
+      const m = msg as { id?: number; ok?: boolean; result?: unknown; error?: { message?: string; kind?: string; status?: number } | string };
+      if (typeof m?.id !== 'number') return;
+      const p = this.pending.get(m.id);
+      if (!p) return;
+      this.pending.delete(m.id);
+      if (m.ok) p.resolve(m.result);
+      else {
+        const e = typeof m.error === 'string' ? { message: m.error } : (m.error ?? {});
+        p.reject(new ApiError(e.message ?? 'error', e.status ?? 400, e.kind ?? 'Error'));
+      }
+    });
+  }
+  call<T>(op: string, args?: Record<string, unknown>): Promise<T> {
+    const id = this.next++;
+    // the HTTP routes run/<id>[/cancel|/signal] are the service's status/cancel/signal
+    const m = op.match(/^run\/([^/]+)(?:\/(cancel|signal))?$/);
+    if (m) {
+      args = { ...(args ?? {}), run: m[1] };
+      op = m[2] ?? 'status';
+    }
+    return new Promise<T>((resolve, reject) => {
+      this.pending.set(id, { resolve: resolve as (v: unknown) => void, reject });
+      this.model.send({ id, op, args: args ?? {} });
+    });
+  }
+  fileUrl(url: string): string {
+    return url;
+  }
+}
+
+/** The operations of API.md, typed. */
+export class Api {
+  t: Transport;
+  constructor(t: Transport) {
+    this.t = t;
+  }
+  palette() {
+    return this.t.call<Palette>('palette');
+  }
+  files() {
+    return this.t.call<FileList>('files');
+  }
+  load(args: { path?: string; builtin?: string }) {
+    return this.t.call<Loaded>('load', args, 'POST');
+  }
+  validate(document: Doc) {
+    return this.t.call<Validation>('validate', { document }, 'POST');
+  }
+  save(args: { path: string; document: Doc; revision?: string | null; draft?: boolean; origin?: string }) {
+    return this.t.call<{ path: string; revision: string; draft: boolean }>('save', args, 'POST');
+  }
+  run(args: { document: Doc; backend: string; t_final?: number; dt?: number }) {
+    return this.t.call<{ run: string }>('run', args, 'POST');
+  }
+  runStatus(run: string) {
+    return this.t.call<RunStatus>(`run/${run}`);
+  }
+  cancel(run: string) {
+    return this.t.call<unknown>(`run/${run}/cancel`, {}, 'POST');
+  }
+  signal(run: string, name: string) {
+    return this.t.call<SignalData>(`run/${run}/signal`, { name }, 'GET');
+  }
+  live(document: Doc) {
+    return this.t.call<{ url: string }>('live', { document }, 'POST');
+  }
+  export(document: Doc, format: 'python' | 'svg' | 'png') {
+    return this.t.call<{ text?: string; data_url?: string }>('export', { document, format }, 'POST');
+  }
+}

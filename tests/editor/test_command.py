@@ -1,0 +1,78 @@
+"""``avblocks edit`` as a user starts it: a process, its printed URL, Ctrl-C."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+
+
+def _start(args, cwd):
+    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+           "BROWSER": "true"}
+    p = subprocess.Popen([sys.executable, "-m", "avblocks", "edit", *args], cwd=cwd,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    line = p.stdout.readline()
+    return p, line
+
+
+def test_edit_prints_a_tokened_url_and_stops_on_ctrl_c(tmp_path, need_editor_extra):
+    need_editor_extra("starlette", "uvicorn")
+    (tmp_path / "mine.yaml").write_text((SRC / "avblocks/scenarios/swap.yaml").read_text())
+    p, line = _start(["mine.yaml", "--no-browser"], tmp_path)
+    try:
+        m = re.match(r"avblocks editor: (http://127\.0\.0\.1:(\d+)/([\w-]+)/)$", line.strip())
+        assert m, line
+        url, port, token = m.group(1), m.group(2), m.group(3)
+        assert len(token) >= 24
+        with urllib.request.urlopen(url + "api/files", timeout=30) as r:
+            files = json.loads(r.read())
+        assert files["initial"] == {"path": "mine.yaml"}
+        assert files["root"] == str(tmp_path.resolve())
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/api/files", timeout=30)
+        assert e.value.code == 403
+    finally:
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err
+    assert "Traceback" not in err and "stopped" in err
+
+
+def test_edit_refuses_a_file_outside_its_folder(tmp_path, need_editor_extra):
+    need_editor_extra("starlette", "uvicorn")
+    inner = tmp_path / "inner"
+    inner.mkdir()
+    (tmp_path / "x.yaml").write_text("name: x\n")
+    r = subprocess.run([sys.executable, "-m", "avblocks", "edit", "../x.yaml",
+                        "--no-browser"], cwd=inner, capture_output=True, text=True,
+                       env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
+    assert r.returncode == 2
+    assert "outside the editor's folder" in r.stderr
+
+
+def test_a_missing_extra_names_the_install_command(tmp_path):
+    code = ("import sys; sys.modules['uvicorn'] = None\n"
+            "from avblocks.cli import main\n"
+            "sys.exit(main(['edit', '--no-browser']))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
+    assert r.returncode == 2
+    assert 'pip install "avblocks[editor]"' in r.stderr
+    assert "Traceback" not in r.stderr
+    code = ("import sys; sys.modules['anywidget'] = None\n"
+            "import avblocks as av\n"
+            "try:\n    av.edit()\nexcept av.AvError as e:\n    print(e)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
+    assert 'pip install "avblocks[editor]"' in r.stdout, r.stderr

@@ -234,6 +234,11 @@ PRODUCERS = {
     "robots-wiring": (_script([sys.executable, "docs/images/robots_wiring.py"]), False),
     "robots-formation-diagram": (_script([sys.executable, "docs/images/robots_wiring.py",
                                           "--formation"]), False),
+    # the editor's screenshots: taken by its browser tests (system Chromium)
+    **{f"editor-{shot}": (_script([sys.executable, "-m", "pytest", "-q", "-p",
+                                   "no:cacheprovider", "tests/editor/test_browser.py"]), True)
+       for shot in ("empty", "wired", "error", "run", "formation", "group",
+                    "group-inside")},
     # the drone case study in simulation, and flown on the emulators in real time
     "drones-formation-sim": (_script([sys.executable, "-m", "avblocks", "run",
                                       "drone_formation", "--out", "{tmp}", "--quiet"],

@@ -4,6 +4,10 @@ import matplotlib
 
 matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the compiled engine's cache (programs and grown plans) of the CLI runs the
+# tests start: never the user's own folder
+os.environ.setdefault("AVBLOCKS_CACHE_DIR", __import__("tempfile").mkdtemp(
+    prefix="avblocks-test-cache-"))
 
 
 import sys  # noqa: E402
@@ -19,5 +23,6 @@ def _no_kept_plans():
     plans = sys.modules.get("avblocks.core.compiled.plans")
     if plans is not None:
         plans.forget_plans()
+        plans.use_plan_store(None)      # a CLI run in this process may have turned it on
     yield
 

@@ -44,7 +44,7 @@ from avblocks.vehicles import Quadrotor, velocity_controlled_quadrotor
 #: Parameters (``--set name=value``).
 PARAMS = {"agents": 5, "spacing": 1.0, "height": 1.5, "radius": 1.0, "dz": 0.3,
           "path_radius": 1.5, "climb": 0.3, "period": 24.0, "gather": 6.0, "gain": 1.5,
-          "v_max": 1.5, "t_final": 24.0, "dt": 0.02}
+          "v_max": 1.5, "t_final": 24.0, "dt": 0.02, "seed": 1}
 
 
 def start_positions(n=5, height=1.5, spacing=1.0):
@@ -166,7 +166,7 @@ class Tracker(Block):
 
 def make_diagram(agents=5, spacing=1.0, height=1.5, radius=1.0, dz=0.3, path_radius=1.5,
                  climb=0.3, period=24.0, gather=6.0, gain=1.5, v_max=1.5, t_final=24.0,
-                 dt=0.02):
+                 dt=0.02, seed=1):
     """The diagram and its simulation settings (see the module docstring)."""
     n = int(agents)
     p0 = start_positions(n, height, spacing)
@@ -180,7 +180,8 @@ def make_diagram(agents=5, spacing=1.0, height=1.5, radius=1.0, dz=0.3, path_rad
     d.connect(ref.velocity, trk.ref_velocity)
     d.connect(trk.velocity, fleet.velocity)
     sim = {"t_final": float(t_final), "dt": float(dt), "solver": "rk4",
-           "log": ["fleet.position", "ref.position", "track.velocity"], "log_every": 5}
+           "log": ["fleet.position", "ref.position", "track.velocity"], "log_every": 5,
+           "seed": int(seed)}     # nothing is random here; the name all scenarios share
     return d, sim
 
 

@@ -94,3 +94,37 @@ def test_graphviz_svg(tmp_path):
 def test_bad_format():
     with pytest.raises(av.ParameterError, match="unknown picture format"):
         viz.draw_diagram(three_blocks(), "d.jpg")
+
+
+@pytest.mark.parametrize("name", ["formation", "honeybee"])
+def test_matplotlib_wires_go_around_the_blocks_they_skip(name):
+    """A wire that skips a column passes through the gaps between that
+    column's blocks: no point of any wire lies inside a block other than
+    its own two ends (formation's fleet.pose -> lf.pose crossed the
+    collision block's title)."""
+    from avblocks.scenarios.loader import load_scenario
+    from avblocks.viz.diagram import draw_diagram_matplotlib
+
+    d = load_scenario(name).build()[0]
+    fig = draw_diagram_matplotlib(d)
+    ax = fig.axes[0]
+    boxes = {}
+    for p in ax.patches:
+        gid = p.get_gid() or ""
+        if gid.startswith("block "):
+            bb = p.get_bbox()
+            boxes[gid[6:]] = (bb.x0, bb.y0, bb.x1, bb.y1)
+    wires = [p for p in ax.patches if (p.get_gid() or "").startswith("wire ")]
+    assert len(boxes) >= 6
+    assert wires
+    for w in wires:
+        src, dst = re.match(r"wire (.+)\.\w+ -> (.+)\.\w+", w.get_gid()).groups()
+        # the patch's own path in data coordinates, curves sampled finely
+        pts = np.concatenate([seg(np.linspace(0, 1, 50))
+                              for seg, _ in w.get_path().iter_bezier()])
+        for blk, (x0, y0, x1, y1) in boxes.items():
+            if blk in (src, dst):
+                continue
+            inside = ((pts[:, 0] > x0 + 0.05) & (pts[:, 0] < x1 - 0.05)
+                      & (pts[:, 1] > y0 + 0.05) & (pts[:, 1] < y1 - 0.05))
+            assert not inside.any(), f"{w.get_gid()} crosses block {blk}"

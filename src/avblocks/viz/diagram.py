@@ -332,25 +332,61 @@ def draw_diagram_matplotlib(diagram: Diagram):
     from matplotlib.path import Path as MplPath
     bottom = min(g["y"] for g in geo.values())
     nback = 0
+    columns: dict[int, list] = {}
+    for gm in geo.values():
+        columns.setdefault(int(round(gm["x"] / DX)), []).append((gm["y"], gm["y"] + gm["h"]))
+    used: dict[tuple, int] = {}
+
+    def through(col, y_want):
+        """A height at which a wire crosses column ``col`` clear of its
+        blocks: the free gap nearest ``y_want`` (wires sharing a gap are
+        spread apart)."""
+        spans = sorted(columns.get(col, []))
+        gaps = [spans[0][0] - 0.35] if spans else [y_want]
+        gaps += [(hi + lo2) / 2 for (_lo, hi), (lo2, _hi) in zip(spans, spans[1:])]
+        if spans:
+            gaps.append(spans[-1][1] + 0.35)
+        y = min(gaps, key=lambda g: abs(g - y_want))
+        k = used.get((col, y), 0)
+        used[(col, y)] = k + 1
+        return y + 0.14 * ((k + 1) // 2) * (1 if k % 2 else -1)
+
     for (sp, so), (dp, di) in wires:
         a = np.array(port_xy(sp, so, "out"))
         b = np.array(port_xy(dp, di, "in"))
-        if b[0] > a[0] + 0.3:                   # forward: an S curve
-            dx = (b[0] - a[0]) / 2
-            c1, c2 = a + [dx, 0], b - [dx, 0]
-            path = MplPath([a, c1, c2, b], [MplPath.MOVETO] + [MplPath.CURVE4] * 3)
+        if b[0] > a[0] + 0.3:                   # forward: S curves, around the
+            la, lb = layer[sp], layer[dp]       # blocks of the columns it skips
+            pts = [a]
+            for col in range(la + 1, lb):
+                y = through(col, a[1] + (b[1] - a[1]) * (col - la) / (lb - la))
+                pts += [np.array([col * DX - 0.3, y]), np.array([col * DX + W + 0.3, y])]
+            pts.append(b)
+            verts, codes = [pts[0]], [MplPath.MOVETO]
+            for i, (p, q) in enumerate(zip(pts, pts[1:])):
+                if i % 2:                       # straight across a column
+                    verts.append(q)
+                    codes.append(MplPath.LINETO)
+                else:
+                    dx = (q[0] - p[0]) / 2
+                    verts += [p + [dx, 0], q - [dx, 0], q]
+                    codes += [MplPath.CURVE4] * 3
+            path = MplPath(verts, codes)
+            c1, c2 = verts[1], verts[2]         # label on the first curve
+            a_lab, b_lab = verts[0], verts[3]
         else:                                   # feedback: a channel under the blocks
             ch = bottom - 0.5 - 0.22 * nback
             nback += 1
             pts = [a, a + [0.35, 0], [a[0] + 0.35, ch], [b[0] - 0.35, ch], b - [0.35, 0], b]
             path = MplPath(pts)
             c1 = c2 = np.array([(a[0] + b[0]) / 2, ch])    # label on the channel
+            a_lab, b_lab = a, b
         arr = FancyArrowPatch(path=path, arrowstyle="-|>", mutation_scale=10, lw=1.1,
                               color="#33475b", shrinkA=1, shrinkB=3, zorder=1)
         arr.set_gid(f"wire {sp}.{so} -> {dp}.{di}")
         ax.add_patch(arr)
         spec = _ports_out(blocks[names.index(sp)]).get(so)
-        mid = (a + 3 * c1 + 3 * c2 + b) / 8 if path.codes is not None else c1
+        mid = ((a_lab + 3 * c1 + 3 * c2 + b_lab) / 8 if path.codes is not None
+               else c1)
         ax.text(mid[0], mid[1] + 0.04, _shape_text(spec), ha="center", va="bottom",
                 fontsize=7, color="#33475b", zorder=4,
                 bbox=dict(fc="white", ec="none", alpha=0.8, pad=0.5))

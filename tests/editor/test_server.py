@@ -226,7 +226,7 @@ def _summary(tmp, target, sets=()):
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["formation", "nest"])
+@pytest.mark.parametrize("name", ["formation", "nest", "pursuit", "spread", "navigation"])
 def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory):
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]

@@ -89,7 +89,7 @@ from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, 
 from avblocks.tasks import REWARD, NavigationLaw, NavigationTask, scripted_law  # noqa: F401
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, free_points
+from avblocks.scenarios._task import command_source, drive_at_speed, free_points
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 
@@ -131,8 +131,8 @@ def _draw(n, half, grid, seed, clearance):
 
 
 def _checked(agents, seed, obstacles):
-    from ..core.params import count, integer
-    from .limits import budget
+    from avblocks.core.params import count, integer
+    from avblocks.scenarios.limits import budget
     n = count(agents, None, "agents", lo=1)
     budget(24 * 2 * n, "navigation_starts")
     obs = np.asarray(obstacles, dtype=float).reshape(-1, 4) if np.size(obstacles) else ()
@@ -167,7 +167,7 @@ def navigation_starts(agents, seed, half=1.5, clearance=0.25, obstacles=OBSTACLE
 def navigation_rays(rays=12):
     """:func:`ray_angles` as a scenario-file generator (the range sensor's
     ``angles``): ``{navigation_rays: {rays: $rays}}``."""
-    from ..core.params import count
+    from avblocks.core.params import count
     return ray_angles(count(rays, None, "rays", lo=1, hi=10**6))
 
 

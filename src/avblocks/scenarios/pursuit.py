@@ -43,7 +43,7 @@ from avblocks.core.diagram import Diagram
 from avblocks.tasks import Chase, Flee, PursuitTask
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed
+from avblocks.scenarios._task import command_source, drive_at_speed
 
 MOVIE = {"pose": "pursuers.position", "trail": 3.0}
 
@@ -68,7 +68,7 @@ def pursuit_starts(agents, half, seed, which="pursuers"):
     positions on the ring (``which: pursuers``) or the evader's (1, 2)
     (``which: evader``). A scenario-file generator
     (``{pursuit_starts: {agents: $agents, half: $half, seed: $seed}}``)."""
-    from ..core.params import count, integer
+    from avblocks.core.params import count, integer
     n = count(agents, None, "agents", lo=1)
     if which not in ("pursuers", "evader"):
         raise ValueError(f"which must be 'pursuers' or 'evader', got {which!r:.40}")

@@ -46,7 +46,7 @@ from avblocks.core.diagram import Diagram
 from avblocks.tasks import SpreadTask, assign_landmarks
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, uniform_points
+from avblocks.scenarios._task import command_source, drive_at_speed, uniform_points
 
 MOVIE = {"pose": "fleet.position", "trail": 2.0}
 
@@ -57,8 +57,8 @@ def _starts(n, half, seed):
 
 
 def _checked(agents, seed):
-    from ..core.params import count, integer
-    from .limits import budget
+    from avblocks.core.params import count, integer
+    from avblocks.scenarios.limits import budget
     n = count(agents, None, "agents", lo=1)
     budget(n * n + 4 * n, "spread_starts")
     return n, integer(seed, None, "seed")

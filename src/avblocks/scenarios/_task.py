@@ -14,13 +14,13 @@ and a task block (``task``, from :mod:`avblocks.tasks`) computes, with
 ``xp``, the per-agent observation ``obs``, the ``reward``, the per-agent
 ``done`` flag and the ``success`` measure from the vehicles' outputs, so a
 plain run logs the same numbers an environment returns. The array helpers
-live beside the task blocks (:mod:`avblocks.tasks._common`) and are
+live beside the task blocks (:mod:`avblocks.tasks.common`) and are
 re-exported here.
 """
 
 from __future__ import annotations
 
-from avblocks.tasks._common import (  # noqa: F401  (re-exported)
+from avblocks.tasks.common import (  # noqa: F401  (re-exported)
     RANK_SORT_MAX,
     drop_diagonal,
     free_points,

@@ -54,6 +54,7 @@ class TaskCommand(Block):
     """
 
     example = {"n": "$agents"}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n, *, policy="scripted", speed=1.0):
         super().__init__()

@@ -26,7 +26,7 @@ from ..core.errors import ParameterError
 from ..core.params import count
 from ..environment.boxes import boundary_distance, split_boxes
 from ..utility.arrays import fold, norm2
-from ._common import drop_diagonal, pairwise, sort_rows
+from .common import drop_diagonal, pairwise, sort_rows
 
 
 class NavigationTask(Block):
@@ -100,6 +100,7 @@ class NavigationTask(Block):
     batch_axes = True
     example = {"n": "$agents", "world": {"world": {"bounds": [-1.5, -1.5, 1.5, 1.5],
                                                    "walls": True}}}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
                  max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
@@ -301,6 +302,7 @@ class NavigationLaw(Block):
 
     example = {"n": "$agents", "world": {"world": {"bounds": [-1.5, -1.5, 1.5, 1.5],
                                                    "walls": True}}}
+    parameter_info = {"n": {"bounds": [1, None]}, "half": {"bounds": [0, None], "unit": "m"}}
 
     def __init__(self, n, world, *, half=1.5):
         super().__init__()

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from ..core.block import Block
 from ..core.params import count
-from ._common import others_index
+from .common import others_index
 
 
 class PursuitTask(Block):
@@ -59,6 +59,7 @@ class PursuitTask(Block):
     """
 
     example = {"n": "$agents"}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n, *, half=1.5, capture=0.15):
         super().__init__()
@@ -140,6 +141,7 @@ class Flee(Block):
     """
 
     example = {"n": "$agents"}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n, *, half=1.5, speed=0.7):
         super().__init__()
@@ -184,6 +186,7 @@ class Chase(Block):
     """
 
     example = {"n": "$agents"}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n):
         super().__init__()

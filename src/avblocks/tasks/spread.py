@@ -16,7 +16,7 @@ import numpy as np
 
 from ..core.block import Block
 from ..core.params import count
-from ._common import others_index, pairwise
+from .common import others_index, pairwise
 
 
 class SpreadTask(Block):
@@ -57,11 +57,12 @@ class SpreadTask(Block):
     >>> t = SpreadTask(2, cover=0.1)
     >>> p = np.array([[0.0, 0.0], [1.0, 0.0]])
     >>> y = t.output(0.0, {}, {"position": p, "landmarks": p[::-1]}, np)
-    >>> bool(y["success"]), y["reward"].tolist()
-    (True, [0.0, 0.0])
+    >>> bool(y["success"]), float(abs(y["reward"]).max())
+    (True, 0.0)
     """
 
     example = {"n": "$agents"}
+    parameter_info = {"n": {"bounds": [1, None]}}
 
     def __init__(self, n, *, radius=0.1, cover=0.1, collision=1.0):
         super().__init__()

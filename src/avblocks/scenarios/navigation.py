@@ -80,6 +80,8 @@ runs a trained policy there too (a ``tasks.TaskCommand``).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from avblocks.blocks import Constant
@@ -139,6 +141,22 @@ def _checked(agents, seed, obstacles):
     return n, integer(seed, None, "seed"), tuple(map(tuple, obs))
 
 
+@functools.lru_cache(maxsize=8)
+def _cached_grid(half, clearance, obstacles):
+    return EdgeGrid(arena(half, obstacles), clearance)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_draw(n, half, seed, clearance, obstacles):
+    """The starts and goals of a seed; a file asks three times (starts,
+    goals, their distances) and the editor at every check: the obstacle
+    grid (most of the time: 0.1 s) and the draws are made once."""
+    p0, g = _draw(n, half, _cached_grid(half, clearance, obstacles), seed, clearance)
+    p0.setflags(write=False)
+    g.setflags(write=False)
+    return p0, g
+
+
 def navigation_arena(half=1.5, obstacles=OBSTACLES):
     """:func:`arena` as a scenario-file generator:
     ``world: {navigation_arena: {half: $half, obstacles: $obstacles}}``."""
@@ -157,8 +175,8 @@ def navigation_starts(agents, seed, half=1.5, clearance=0.25, obstacles=OBSTACLE
     n, seed, obs = _checked(agents, seed, obstacles)
     if which not in ("starts", "goals", "distance"):
         raise ValueError(f"which must be 'starts', 'goals' or 'distance', got {which!r:.40}")
-    h, c = float(half), float(clearance)
-    p0, g = _draw(n, h, EdgeGrid(arena(h, obs), c), seed, c)
+    p0, g = _cached_draw(n, float(half), seed, float(clearance), obs)
+    p0, g = p0.copy(), g.copy()
     if which == "distance":
         return np.linalg.norm(g - p0, axis=1)
     return p0 if which == "starts" else g

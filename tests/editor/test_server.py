@@ -240,7 +240,7 @@ def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path
         assert a[k] == b[k], k
 
 
-@pytest.mark.parametrize("name", ["formation", "flocking"])
+@pytest.mark.parametrize("name", ["formation", "flocking", "pursuit", "spread", "navigation"])
 def test_save_as_keeps_the_files_comments_and_changes_only_the_edit(editor_server, name):
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]

@@ -171,3 +171,24 @@ def test_the_policy_file_is_named_in_the_error_when_it_is_missing(tmp_path):
         load_scenario("navigation").with_overrides(
             {"controller": str(tmp_path / "none.npz")}).build()
     assert "blocks.command" in str(e.value)
+
+
+@pytest.mark.parametrize("name", ["pursuit", "spread", "navigation"])
+def test_the_file_compiles_to_the_numpy_runs_numbers(name, tmp_path):
+    """`avblocks run NAME --backend jax` of the file: the NumPy run's outcome
+    (capture time, cover time, agents at their goals) and numbers (floats
+    within 1e-6 relative: float64 on both, different operation order)."""
+    pytest.importorskip("jax")
+    sets = ("t_final=3", "seed=2")
+    a = _summary(name, tmp_path / "np", sets)
+    argv = ["run", name, "--backend", "jax", "--quiet", "--out", str(tmp_path / "jax")]
+    for s in sets:
+        argv += ["--set", s]
+    assert main(argv) == 0
+    b = json.loads((tmp_path / "jax" / "summary.json").read_text())
+    assert b["outcome"] == a["outcome"]
+    for k, v in a["numbers"].items():
+        if isinstance(v, float):
+            assert b["numbers"][k] == pytest.approx(v, rel=1e-6, abs=1e-9), k
+        else:
+            assert b["numbers"][k] == v, k

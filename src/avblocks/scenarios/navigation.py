@@ -88,10 +88,9 @@ from avblocks.blocks import Constant
 from avblocks.core.diagram import Diagram
 from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
+from avblocks.scenarios._task import command_source, drive_at_speed, free_points
 from avblocks.tasks import REWARD, NavigationLaw, NavigationTask, scripted_law  # noqa: F401
 from avblocks.vehicles import SingleIntegrator
-
-from avblocks.scenarios._task import command_source, drive_at_speed, free_points
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 

@@ -40,10 +40,9 @@ from __future__ import annotations
 import numpy as np
 
 from avblocks.core.diagram import Diagram
+from avblocks.scenarios._task import command_source, drive_at_speed
 from avblocks.tasks import Chase, Flee, PursuitTask
 from avblocks.vehicles import SingleIntegrator
-
-from avblocks.scenarios._task import command_source, drive_at_speed
 
 MOVIE = {"pose": "pursuers.position", "trail": 3.0}
 

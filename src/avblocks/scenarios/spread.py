@@ -43,10 +43,9 @@ import numpy as np
 
 from avblocks.blocks import Constant
 from avblocks.core.diagram import Diagram
+from avblocks.scenarios._task import command_source, drive_at_speed, uniform_points
 from avblocks.tasks import SpreadTask, assign_landmarks
 from avblocks.vehicles import SingleIntegrator
-
-from avblocks.scenarios._task import command_source, drive_at_speed, uniform_points
 
 MOVIE = {"pose": "fleet.position", "trail": 2.0}
 

@@ -26,6 +26,8 @@ PAGES = [
     ("controllers", "avblocks.controllers", "Controllers and their pure laws."),
     ("environment", "avblocks.environment",
      "World, collision, neighbours, communication, range sensors, targets."),
+    ("tasks", "avblocks.tasks",
+     "Learning tasks as blocks: observation, reward, success; their scripted laws."),
     ("compiled", "avblocks.core.compiled", "The compiled (JAX) engine: compile, ensembles, gradients."),
     ("viz", "avblocks.viz", "Animation, movies, scopes, 3D views, diagram pictures."),
     ("live", "avblocks.viz.live", "The live browser view."),

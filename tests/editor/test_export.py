@@ -12,7 +12,8 @@ from avblocks.editor.service import EditorService
 
 @pytest.mark.parametrize("name,steps", [("formation", "t_final=4"), ("nest", "t_final=4"),
                                         ("flocking", "t_final=3"), ("swap", "t_final=3"),
-                                        ("honeybee", "t_final=5")])
+                                        ("honeybee", "t_final=5"), ("pursuit", "t_final=3"),
+                                        ("spread", "t_final=2"), ("navigation", "t_final=2")])
 def test_exported_script_runs_to_the_scenario_results(tmp_path, name, steps):
     from avblocks.core.frontend import simulate
     from avblocks.scenarios.targets import load_any

@@ -56,7 +56,7 @@ def test_palette_lists_every_registry_block(editor_server):
     types = [b["type"] for f in body["families"] for b in f["blocks"]]
     assert set(types) == set(block_registry())       # the loader's registry, no more
     names = [f["name"] for f in body["families"]]
-    order = ["vehicles", "controllers", "environment", "blocks", "viz", "interfaces"]
+    order = ["vehicles", "controllers", "environment", "tasks", "blocks", "viz", "interfaces"]
     assert names == [n for n in order if n in names]
     assert "vehicles.Unicycle" in types and "blocks.Function" not in types
 
@@ -226,7 +226,7 @@ def _summary(tmp, target, sets=()):
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["formation", "nest"])
+@pytest.mark.parametrize("name", ["formation", "nest", "pursuit", "spread", "navigation"])
 def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory):
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]
@@ -240,7 +240,7 @@ def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path
         assert a[k] == b[k], k
 
 
-@pytest.mark.parametrize("name", ["formation", "flocking"])
+@pytest.mark.parametrize("name", ["formation", "flocking", "pursuit", "spread", "navigation"])
 def test_save_as_keeps_the_files_comments_and_changes_only_the_edit(editor_server, name):
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]

@@ -5,6 +5,7 @@ scenario file, a Python-only built-in and a user's .py file."""
 import numpy as np
 import pytest
 
+from avblocks.scenarios import builtin_scenarios
 from avblocks.scenarios.targets import PythonScenario, load_any, open_scenario
 from avblocks.sweep.spec import build_case, scenario_source
 
@@ -69,9 +70,11 @@ def test_a_run_and_a_sweep_case_build_the_same(target, values, tmp_path, monkeyp
 
 
 def test_open_scenario_tells_files_from_python():
-    assert isinstance(open_scenario("pursuit"), PythonScenario)
+    module = str(builtin_scenarios()["pursuit"].with_suffix(".py"))    # pursuit.yaml's twin
+    assert isinstance(open_scenario(module), PythonScenario)
+    assert not isinstance(open_scenario("pursuit"), PythonScenario)
     assert not isinstance(open_scenario("waypoints"), PythonScenario)
-    sc = open_scenario("pursuit")
+    sc = open_scenario(module)
     assert sc.accepts("agents") and not sc.accepts("agent")
     with pytest.raises(Exception, match="did you mean 'agents'"):
         sc.with_overrides({"agent": 3})

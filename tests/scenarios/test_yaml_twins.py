@@ -19,6 +19,12 @@ from avblocks.scenarios import builtin_scenarios, load_scenario
     ("formation", {"agents": 4, "t_final": 30.0, "dt": 0.05}),   # through the 1st switch
     # a source near the nest: found, brought home and the whole nest alarmed
     ("honeybee", {"agents": 60, "t_final": 60.0, "dt": 0.2, "source": [-22.0, 6.0]}),
+    # the learning tasks: other counts, seeds, sizes and speeds than the defaults
+    ("pursuit", {"agents": 5, "t_final": 4.0, "seed": 4, "half": 2.0, "speed": 1.3,
+                 "evader_speed": 0.9}),
+    ("spread", {"agents": 6, "t_final": 3.0, "seed": 5, "half": 1.5, "speed": 0.8}),
+    ("navigation", {"agents": 5, "t_final": 3.0, "seed": 6, "rays": 8, "speed": 0.9,
+                    "obstacles": [[0.2, 0.1, 0.6, 0.4], [-0.8, -0.7, 0.4, 0.4]]}),
 ])
 def test_yaml_and_python_forms_give_the_same_run(name, sets):
     assert builtin_scenarios()[name].suffix == ".yaml"     # the file is what runs
@@ -41,7 +47,8 @@ def test_yaml_and_python_forms_give_the_same_run(name, sets):
 
 def test_yaml_scenario_parameters_are_the_python_defaults():
     import inspect
-    for name in ("nest", "swap", "flocking", "formation", "honeybee"):
+    for name in ("nest", "swap", "flocking", "formation", "honeybee", "pursuit", "spread",
+                 "navigation"):
         mod = importlib.import_module(f"avblocks.scenarios.{name}")
         defaults = {k: p.default for k, p in
                     inspect.signature(mod.make_diagram).parameters.items()}

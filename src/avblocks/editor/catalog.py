@@ -23,10 +23,10 @@ from ..core.declarations import constructor_parameters, doc_sections, shape_text
 from ..core.errors import AvError
 
 #: Families in the palette's order (then each ``--blocks`` module).
-FAMILIES = ("vehicles", "controllers", "environment", "blocks", "viz", "interfaces")
+FAMILIES = ("vehicles", "controllers", "environment", "tasks", "blocks", "viz", "interfaces")
 TITLES = {"vehicles": "Vehicles", "controllers": "Controllers",
-          "environment": "Environment", "blocks": "Blocks", "viz": "Visualization",
-          "interfaces": "Interfaces"}
+          "environment": "Environment", "tasks": "Learning tasks", "blocks": "Blocks",
+          "viz": "Visualization", "interfaces": "Interfaces"}
 #: The agent count the palette builds templates with (any count would do;
 #: the ports are shown with the agent axis as ``N``).
 TEMPLATE_AGENTS = 7

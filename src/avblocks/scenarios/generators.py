@@ -4,7 +4,8 @@
 ``GENERATORS["random_poses"](n=..., area=..., seed=...)``. The generic ones
 (random poses and positions, lines, tiles, guards, ...) are here; each case
 study module adds the geometry it owns (its own ``GENERATORS`` mapping: the
-nest's hexagon, the swap's circle, the formation's references and corridor).
+nest's hexagon, the swap's circle, the formation's references and corridor,
+the learning tasks' seeded starts).
 Every generator refuses an array past the scenario memory limit before
 allocating it.
 """
@@ -16,7 +17,7 @@ import numpy as np
 from ..core.errors import ParameterError
 from ..core.params import count as _count
 from ..core.params import integer as _integer
-from . import formation, honeybee, nest, swap
+from . import formation, honeybee, navigation, nest, pursuit, spread, swap
 from .limits import budget as _budget
 
 
@@ -216,5 +217,5 @@ GENERATORS = {
     "zeros": _zeros,
     "arange": _arange,
 }
-for _case_study in (formation, honeybee, nest, swap):
+for _case_study in (formation, honeybee, nest, swap, pursuit, spread, navigation):
     GENERATORS.update(_case_study.GENERATORS)

@@ -65,7 +65,8 @@ _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation
              "movie", "params", "outcome", "figures", "report", "editor"}
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
-REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "pursuit", "spread",
+           "navigation")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -205,7 +206,7 @@ def block_registry(code_blocks=False, modules=()) -> dict:
     from ..core.block import Block
 
     reg = {}
-    for fam in ("blocks", "vehicles", "controllers", "environment", "viz"):
+    for fam in ("blocks", "vehicles", "controllers", "environment", "tasks", "viz"):
         try:
             mod = importlib.import_module(f"avblocks.{fam}")
         except ImportError:  # optional family whose extra is missing

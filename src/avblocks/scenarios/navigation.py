@@ -64,32 +64,33 @@ without contact (9 %), rarely obstacles or walls (2 %).
 ``avblocks run navigation`` runs the scripted controller (goal attraction
 plus repulsion from the nearest obstacle points and agents);
 ``controller="policy.npz"`` runs a trained
-:class:`~avblocks.controllers.Policy` instead.
+:class:`~avblocks.controllers.Policy` instead. The task block and the
+scripted law are :class:`avblocks.tasks.NavigationTask` and
+:class:`avblocks.tasks.NavigationLaw`.
+
+The scenario file ``navigation.yaml`` is this module's twin (the same
+blocks; arena, starts, goals and ray angles from the
+:func:`navigation_arena`, :func:`navigation_starts` and
+:func:`navigation_rays` generators): it is what ``avblocks run
+navigation`` runs, to the same numbers; ``--set controller=policy.npz``
+runs a trained policy there too (a ``tasks.TaskCommand``).
+:func:`make_diagram` (with ``vehicles=``, ``weights=``,
+``observe_velocity=``) and :func:`rl_task` remain the Python API.
 """
 
 from __future__ import annotations
 
-import inspect
+import functools
 
 import numpy as np
 
-from avblocks.blocks import Constant, Function
-from avblocks.core.block import Block
+from avblocks.blocks import Constant
 from avblocks.core.diagram import Diagram
 from avblocks.core.errors import ParameterError
 from avblocks.environment import Collision, Disc, EdgeGrid, RangeSensor, World, rectangle
-from avblocks.environment.boxes import boundary_distance, split_boxes
-from avblocks.utility.arrays import fold, norm2
+from avblocks.scenarios._task import command_source, drive_at_speed, free_points
+from avblocks.tasks import REWARD, NavigationLaw, NavigationTask, scripted_law  # noqa: F401
 from avblocks.vehicles import SingleIntegrator
-
-from ._task import (
-    command_source,
-    drive_at_speed,
-    drop_diagonal,
-    free_points,
-    pairwise,
-    sort_rows,
-)
 
 MOVIE = {"pose": "fleet.position", "trail": 3.0}
 
@@ -110,140 +111,6 @@ def ray_angles(rays):
     return np.linspace(-np.pi, np.pi, int(rays), endpoint=False)
 
 
-class NavigationTask(Block):
-    """Observation, reward and success of the navigation task.
-
-    Ports
-    -----
-    position : in, (N, 2) [m]
-    goals : in, (N, 2) [m]
-    ranges : in, (N, rays) [m], the range sensor's readings
-    contact : in, (N,) bool, the collision block's ``collision``
-    obs : out, (N, 4 + rays + 2(N-1))
-    reward : out, (N,)
-    done : out, (N,) bool (always false)
-    collision : out, (N,) bool: touching an obstacle, a wall or an agent now
-    at_goal : out, (N,) bool
-    success : out, (N,) bool: at the goal and no collision so far
-
-    State
-    -----
-    prev : discrete (N,), distance to the goal at the previous step
-    hit : discrete (N,) bool, a collision happened this episode
-
-    Parameters
-    ----------
-    world : World, the obstacles and walls (their edges: the closeness term).
-    half, radius, goal_radius, max_range, progress, collision, proximity,
-    margin, goal_bonus, first_hit, success_bonus : numeric (module docstring).
-    rays : int (structural), number of range rays.
-    sort_others : bool (structural), other agents nearest first.
-    observe_velocity : bool (structural), also observe the other agents'
-        velocity commands of the last step relative to its own (input
-        ``velocity``, not direct feedthrough).
-
-    The functions broadcast over leading batch axes (``batch_axes``: the
-    NumPy vector environment steps K copies in one call).
-    """
-
-    batch_axes = True
-
-    def __init__(self, n, world, *, rays=12, half=1.5, radius=0.1, goal_radius=0.15,
-                 max_range=1.0, progress=5.0, collision=2.5, proximity=0.5, margin=0.2,
-                 goal_bonus=0.1, first_hit=0.0, success_bonus=0.0, sort_others=True,
-                 observe_velocity=False):
-        super().__init__()
-        self.n = n
-        self.rays = int(rays)
-        self.sort_others = bool(sort_others)
-        self.observe_velocity = bool(observe_velocity)
-        seg = np.asarray(world.segments, float).reshape(-1, 4)        # walls included
-        # rectangles (the walls too) as boxes in closed form, other edges as such
-        self.boxes, _, rest = split_boxes(seg.reshape(-1, 2, 2), world.segment_owner)
-        self.rest_seg = seg[rest]
-        self.declare_parameter("half", half, bounds=(0, None), unit="m")
-        self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
-        self.declare_parameter("goal_radius", goal_radius, bounds=(0, None), unit="m")
-        self.declare_parameter("max_range", max_range, bounds=(0, None), unit="m")
-        self.declare_parameter("progress", progress, bounds=(0, None))
-        self.declare_parameter("collision", collision, bounds=(0, None))
-        self.declare_parameter("proximity", proximity, bounds=(0, None))
-        self.declare_parameter("margin", margin, bounds=(1e-6, None), unit="m")
-        self.declare_parameter("goal_bonus", goal_bonus, bounds=(0, None))
-        self.declare_parameter("first_hit", first_hit, bounds=(0, None))
-        self.declare_parameter("success_bonus", success_bonus, bounds=(0, None))
-        self.declare_input("position", (n, 2), unit="m")
-        self.declare_input("goals", (n, 2), unit="m")
-        self.declare_input("ranges", (n, self.rays), unit="m")
-        self.declare_input("contact", (n,), "bool")
-        self.declare_discrete_state("prev", np.zeros(n), dtype="float64")
-        self.declare_discrete_state("hit", np.zeros(n, dtype=bool))
-        if self.observe_velocity:
-            # the commands of the last step (not feedthrough: read from state)
-            self.declare_input("velocity", (n, 2), unit="m/s", feedthrough=False)
-            self.declare_discrete_state("vel", np.zeros((n, 2)), dtype="float64")
-        self.declare_output("obs", (n, 4 + self.rays + 2 * (n - 1)
-                                    * (2 if self.observe_velocity else 1)))
-        self.declare_output("reward", (n,))
-        self.declare_output("done", (n,), "bool")
-        self.declare_output("collision", (n,), "bool")
-        self.declare_output("at_goal", (n,), "bool")
-        self.declare_output("success", (n,), "bool")
-
-    def _closeness(self, p, xp):
-        """Sum over the other agents and the nearest obstacle or wall of
-        ``clip(1 - gap / margin, 0, 1)`` (gap: distance minus the contact
-        distance): a smooth warning before contact."""
-        r, m = self.radius, self.margin
-        gap_a = pairwise(p, xp) - 2 * r
-        near_a = fold(xp.add, xp.clip(1.0 - gap_a / m, 0.0, 1.0), -1, xp)
-        gap = boundary_distance(p[..., 0:1], p[..., 1:2], self.boxes, self.rest_seg,
-                                xp) - r                                   # (..., N)
-        return near_a + xp.clip(1.0 - gap / m, 0.0, 1.0)
-
-    def output(self, t, x, u, xp):
-        p, g, col = u["position"], u["goals"], u["contact"]
-        rel = g - p
-        d = xp.sqrt(norm2(rel) + 1e-12)
-        # every agent relative to each (row i, column j: j - i), the diagonal
-        # dropped by two shifted slices (no gather), then sorted by ranks
-        rel_a = p[..., None, :, :] - p[..., :, None, :]                 # (..., n, n, 2)
-        parts = [rel_a]
-        if self.observe_velocity:
-            v = x["vel"]
-            parts.append(v[..., None, :, :] - v[..., :, None, :])
-        parts = [drop_diagonal(q, xp) for q in parts]                 # (..., n, n-1, k)
-        if self.sort_others and self.n > 2:
-            parts = sort_rows(norm2(parts[0]), parts, xp)
-        others = [xp.reshape(q, p.shape[:-2] + (self.n, -1)) for q in parts]
-        obs = xp.concatenate([rel, p / self.half, u["ranges"] / self.max_range, *others],
-                             axis=-1)
-        at = d < self.goal_radius
-        success = at & ~(x["hit"] | col)
-        first = col & ~x["hit"]
-        reward = (self.progress * (x["prev"] - d) + self.goal_bonus * at
-                  + self.success_bonus * success - self.first_hit * first
-                  - self.collision * col - self.proximity * self._closeness(p, xp))
-        return {"obs": obs, "reward": reward, "done": xp.zeros(d.shape, dtype=bool),
-                "collision": col, "at_goal": at, "success": success}
-
-    def update(self, t, x, u, xp):
-        p, g = u["position"], u["goals"]
-        rel = g - p
-        new = {"prev": xp.sqrt(norm2(rel) + 1e-12),
-               "hit": x["hit"] | u["contact"]}
-        if self.observe_velocity:
-            new["vel"] = u["velocity"]
-        return new
-
-
-#: The reward's weights (the task block's parameters) and their defaults,
-#: read from :class:`NavigationTask`'s signature (one place for the values).
-REWARD = {k: inspect.signature(NavigationTask).parameters[k].default
-          for k in ("progress", "goal_bonus", "success_bonus", "collision", "first_hit",
-                    "proximity", "margin")}
-
-
 def _weights(weights):
     w = dict(REWARD)
     for k, v in (weights or {}).items():
@@ -254,57 +121,6 @@ def _weights(weights):
     return w
 
 
-def scripted_law(edges, half, speed, radius):
-    """The hand-written controller: unit attraction to the goal (slowing
-    within 0.3 m), repulsion from the nearest point of each obstacle edge,
-    the walls and other agents within 0.35 m, plus a sideways term that
-    slides around an obstacle in front. Returns ``f(t, position, goals, xp)``
-    giving a command in ``[-1, 1]^2``."""
-    edges = np.asarray(edges, float)
-    d0 = 0.35
-
-    def law(t, position, goals, xp):
-        p = position
-        rel = goals - p
-        dist = xp.sqrt(xp.sum(rel * rel, -1, keepdims=True) + 1e-12)
-        att = rel / dist * xp.minimum(1.0, dist / 0.3)
-        # nearest points on edges
-        a, b = edges[:, :2], edges[:, 2:]
-        ab = b - a
-        ap = p[:, None, :] - a
-        s = xp.clip(xp.sum(ap * ab, -1) / xp.sum(ab * ab, -1), 0.0, 1.0)
-        away = ap - s[..., None] * ab                              # (n, E, 2)
-        da = xp.sqrt(xp.sum(away * away, -1) + 1e-12)
-        w = xp.where(da < d0, (1.0 / da - 1.0 / d0) * 0.15, 0.0)
-        rep = xp.sum(away / da[..., None] * w[..., None], axis=1)
-        # walls
-        for k in (0, 1):
-            lo = p[:, k] + half
-            hi = half - p[:, k]
-            f = xp.where(lo < d0, (1.0 / lo - 1.0 / d0) * 0.15, 0.0) - \
-                xp.where(hi < d0, (1.0 / hi - 1.0 / d0) * 0.15, 0.0)
-            rep = rep + f[:, None] * np.eye(2)[k]
-        # agents
-        dp = p[:, None, :] - p[None, :, :]
-        dd = xp.sqrt(xp.sum(dp * dp, -1) + 1e-12) + np.eye(p.shape[0]) * 1e3
-        wa = xp.where(dd < d0, (1.0 / dd - 1.0 / d0) * 0.1, 0.0)
-        rep = rep + xp.sum(dp / dd[..., None] * wa[..., None], axis=1)
-        # slide: the repulsion turned 90 degrees towards the goal's side
-        perp = xp.stack([-rep[:, 1], rep[:, 0]], axis=-1)
-        side = xp.sign(xp.sum(perp * rel, -1, keepdims=True) + 1e-9)
-        v = att + rep + 0.5 * side * perp
-        nv = xp.sqrt(xp.sum(v * v, -1, keepdims=True) + 1e-12)
-        return v / xp.maximum(nv, 1.0)
-
-    return law
-
-
-def _obstacle_edges(world):
-    """(E, 4) edges of the obstacles (walls excluded): the scripted law's."""
-    keep = np.asarray(world.segment_owner) < world.n_user
-    return np.asarray(world.segments, float)[keep]
-
-
 def _draw(n, half, grid, seed, clearance):
     rng = np.random.default_rng([int(seed), 57])
     from avblocks.core import rng as avrng
@@ -313,6 +129,68 @@ def _draw(n, half, grid, seed, clearance):
     p0 = free_points(k1, n, half, grid, clearance, np, min_sep=0.4)
     g = free_points(k2, n, half, grid, clearance, np, min_sep=0.4)
     return p0, g
+
+
+def _checked(agents, seed, obstacles):
+    from avblocks.core.params import count, integer
+    from avblocks.scenarios.limits import budget
+    n = count(agents, None, "agents", lo=1)
+    budget(24 * 2 * n, "navigation_starts")
+    obs = np.asarray(obstacles, dtype=float).reshape(-1, 4) if np.size(obstacles) else ()
+    return n, integer(seed, None, "seed"), tuple(map(tuple, obs))
+
+
+@functools.lru_cache(maxsize=8)
+def _cached_grid(half, clearance, obstacles):
+    return EdgeGrid(arena(half, obstacles), clearance)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_draw(n, half, seed, clearance, obstacles):
+    """The starts and goals of a seed; a file asks three times (starts,
+    goals, their distances) and the editor at every check: the obstacle
+    grid (most of the time: 0.1 s) and the draws are made once."""
+    p0, g = _draw(n, half, _cached_grid(half, clearance, obstacles), seed, clearance)
+    p0.setflags(write=False)
+    g.setflags(write=False)
+    return p0, g
+
+
+def navigation_arena(half=1.5, obstacles=OBSTACLES):
+    """:func:`arena` as a scenario-file generator:
+    ``world: {navigation_arena: {half: $half, obstacles: $obstacles}}``."""
+    obs = np.asarray(obstacles, dtype=float).reshape(-1, 4) if np.size(obstacles) else ()
+    return arena(float(half), tuple(map(tuple, obs)))
+
+
+def navigation_starts(agents, seed, half=1.5, clearance=0.25, obstacles=OBSTACLES,
+                      which="starts"):
+    """The draws of :func:`make_diagram` for a seed: the agents' (N, 2)
+    starts (``which: starts``), their (N, 2) goals (``goals``) or the (N,)
+    distances between them (``distance``: the task block's ``prev0``), at
+    least ``clearance`` from the obstacles and walls of the arena. A
+    scenario-file generator (``{navigation_starts: {agents: $agents, seed:
+    $seed, ...}}``)."""
+    n, seed, obs = _checked(agents, seed, obstacles)
+    if which not in ("starts", "goals", "distance"):
+        raise ValueError(f"which must be 'starts', 'goals' or 'distance', got {which!r:.40}")
+    p0, g = _cached_draw(n, float(half), seed, float(clearance), obs)
+    p0, g = p0.copy(), g.copy()
+    if which == "distance":
+        return np.linalg.norm(g - p0, axis=1)
+    return p0 if which == "starts" else g
+
+
+def navigation_rays(rays=12):
+    """:func:`ray_angles` as a scenario-file generator (the range sensor's
+    ``angles``): ``{navigation_rays: {rays: $rays}}``."""
+    from avblocks.core.params import count
+    return ray_angles(count(rays, None, "rays", lo=1, hi=10**6))
+
+
+#: this case study's scenario-file generators
+GENERATORS = {"navigation_arena": navigation_arena, "navigation_starts": navigation_starts,
+              "navigation_rays": navigation_rays}
 
 
 def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, rays=12,
@@ -347,17 +225,15 @@ def make_diagram(agents=4, half=1.5, speed=1.0, radius=0.1, goal_radius=0.15, ra
                                 goal_radius=float(goal_radius),
                                 max_range=float(max_range),
                                 sort_others=bool(sort_others),
-                                observe_velocity=bool(observe_velocity), **w), name="task")
-    task.block.set_initial("prev", np.linalg.norm(goals - p0, axis=1))
+                                observe_velocity=bool(observe_velocity),
+                                prev0=np.linalg.norm(goals - p0, axis=1), **w), name="task")
     for b in (lidar, contact, task):
         d.connect(position, b.position)
     d.connect(gl.y, task.goals)
     d.connect(lidar.ranges, task.ranges)
     d.connect(contact.collision, task.contact)
     if controller == "scripted":
-        law = scripted_law(_obstacle_edges(world), h, float(speed), r)
-        src = d.add(Function(law, inputs={"position": (n, 2), "goals": (n, 2)},
-                             outputs={"cmd": (n, 2)}), name="drive")
+        src = d.add(NavigationLaw(n, world, half=h), name="drive")
         d.connect(position, src.position)
         d.connect(gl.y, src.goals)
         cmd = src.cmd

@@ -5,7 +5,7 @@ Set-up
 ``agents`` pursuers and one evader, all single integrators
 (``vehicles.SingleIntegrator``) in the square arena ``[-half, half]^2``.
 The evader (speed ``evader_speed`` < ``speed``) runs a scripted flee law
-(a ``blocks.Function`` written with ``xp``): away from the pursuers
+(``tasks.Flee``): away from the pursuers
 weighted by inverse squared distance, pushed back from the walls within
 ``0.3 half``. Capture: a pursuer within ``capture`` of the evader.
 
@@ -15,7 +15,7 @@ Task (what :func:`avblocks.rl.parallel_env` ``("pursuit")`` exposes)
   ``speed`` [m/s].
 - **observation** (per pursuer, ``4 + 2(N-1)``): own position divided by
   ``half``, the evader relative to it, the other pursuers relative to it
-  (``task.obs``).
+  (``task.obs``, a ``tasks.PursuitTask``).
 - **reward** (per pursuer, shared): ``-0.1 min_i |p_i - e|`` per step and
   ``+10`` at capture (``task.reward``).
 - **done**: capture (every pursuer's flag; the episode then terminates),
@@ -24,83 +24,27 @@ Task (what :func:`avblocks.rl.parallel_env` ``("pursuit")`` exposes)
 
 Starts are drawn anew at every reset: pursuers on a ring of radius
 ``0.9 half``, the evader near the centre. ``avblocks run pursuit`` runs the
-scripted pursuers: pure pursuit (each heads straight at the evader).
+scripted pursuers: pure pursuit (each heads straight at the evader,
+``tasks.Chase``).
+
+The scenario file ``pursuit.yaml`` is this module's twin (the same blocks,
+the starts from the :func:`pursuit_starts` generator): it is what
+``avblocks run pursuit`` runs, to the same numbers; ``--set
+controller=policy.npz`` runs a trained policy in both (a
+``tasks.TaskCommand`` in the file). :func:`make_diagram` and
+:func:`rl_task` remain the Python API (the learning environments).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from avblocks.blocks import Function
-from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
+from avblocks.scenarios._task import command_source, drive_at_speed
+from avblocks.tasks import Chase, Flee, PursuitTask
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, others_index
-
 MOVIE = {"pose": "pursuers.position", "trail": 3.0}
-
-
-class PursuitTask(Block):
-    """Observation, reward, capture of the pursuit task (module docstring).
-
-    Ports
-    -----
-    pursuers : in, (N, 2) [m]
-    evader : in, (1, 2) [m]
-    obs : out, (N, 4 + 2(N-1))
-    reward : out, (N,)
-    done : out, (N,) bool: captured
-    success : out, (N,) bool: captured
-    distance : out, () closest pursuer to the evader [m]
-    """
-
-    def __init__(self, n, *, half=1.5, capture=0.15):
-        super().__init__()
-        self.n = n
-        self.idx = others_index(n)
-        self.declare_parameter("half", half, bounds=(0, None), unit="m")
-        self.declare_parameter("capture", capture, bounds=(0, None), unit="m")
-        self.declare_input("pursuers", (n, 2), unit="m")
-        self.declare_input("evader", (1, 2), unit="m", agents=False)
-        self.declare_output("obs", (n, 4 + 2 * (n - 1)))
-        self.declare_output("reward", (n,))
-        self.declare_output("done", (n,), "bool")
-        self.declare_output("success", (n,), "bool")
-        self.declare_output("distance", (), agents=False, unit="m")
-
-    def output(self, t, x, u, xp):
-        p, e = u["pursuers"], u["evader"]
-        n = self.n
-        rel = e - p                                             # (n, 2)
-        rel_o = p[self.idx] - p[:, None, :]
-        obs = xp.concatenate([p / self.half, rel, xp.reshape(rel_o, (n, -1))], axis=1)
-        dmin = xp.min(xp.sqrt(xp.sum(rel * rel, -1) + 1e-12))
-        caught = dmin < self.capture
-        reward = xp.broadcast_to(-0.1 * dmin + 10.0 * caught, (n,))
-        flag = xp.broadcast_to(caught, (n,))
-        return {"obs": obs, "reward": reward, "done": flag, "success": flag, "distance": dmin}
-
-
-def flee_law(half, evader_speed):
-    """The evader's law ``f(t, pursuers, evader, xp) -> velocity (1, 2)``."""
-    margin = 0.3 * half
-
-    def law(t, pursuers, evader, xp):
-        d = evader - pursuers                                   # (n, 2)
-        r2 = xp.sum(d * d, -1, keepdims=True) + 1e-6
-        away = xp.sum(d / r2, axis=0, keepdims=True)            # (1, 2)
-        away = away / xp.sqrt(xp.sum(away * away) + 1e-12)
-        # walls: push inwards within the margin, growing to 2 at the wall
-        gap_hi = half - evader
-        gap_lo = evader + half
-        push = xp.clip((margin - gap_lo) / margin, 0.0, 1.0) - \
-            xp.clip((margin - gap_hi) / margin, 0.0, 1.0)
-        v = away + 2.0 * push
-        nv = xp.sqrt(xp.sum(v * v) + 1e-12)
-        return evader_speed * v / xp.maximum(nv, 1e-6)
-
-    return law
 
 
 def ring_starts(key, n, half, xp):
@@ -118,6 +62,23 @@ def _starts(n, half, seed):
     return ring_starts(rng.key(int(seed), "pursuit"), n, half, np)
 
 
+def pursuit_starts(agents, half, seed, which="pursuers"):
+    """The starts of :func:`make_diagram` for a seed: the pursuers' (N, 2)
+    positions on the ring (``which: pursuers``) or the evader's (1, 2)
+    (``which: evader``). A scenario-file generator
+    (``{pursuit_starts: {agents: $agents, half: $half, seed: $seed}}``)."""
+    from avblocks.core.params import count, integer
+    n = count(agents, None, "agents", lo=1)
+    if which not in ("pursuers", "evader"):
+        raise ValueError(f"which must be 'pursuers' or 'evader', got {which!r:.40}")
+    p, e = _starts(n, float(half), integer(seed, None, "seed"))
+    return p if which == "pursuers" else e
+
+
+#: this case study's scenario-file generators
+GENERATORS = {"pursuit_starts": pursuit_starts}
+
+
 def make_diagram(agents=3, half=1.5, speed=1.0, evader_speed=0.7, capture=0.15,
                  controller="scripted", seed=1, t_final=8.0, dt=0.1):
     """The pursuit diagram and its simulation settings (module docstring)."""
@@ -126,9 +87,7 @@ def make_diagram(agents=3, half=1.5, speed=1.0, evader_speed=0.7, capture=0.15,
     d = Diagram("pursuit")
     purs = d.add(SingleIntegrator(p0, v_max=float(speed) * np.sqrt(2)), name="pursuers")
     ev = d.add(SingleIntegrator(e0, v_max=float(evader_speed)), name="evader")
-    flee = d.add(Function(flee_law(h, float(evader_speed)),
-                          inputs={"pursuers": (n, 2), "evader": (1, 2)},
-                          outputs={"velocity": (1, 2)}), name="flee")
+    flee = d.add(Flee(n, half=h, speed=float(evader_speed)), name="flee")
     task = d.add(PursuitTask(n, half=h, capture=float(capture)), name="task")
     d.connect(purs.position, flee.pursuers)
     d.connect(ev.position, flee.evader)
@@ -136,11 +95,7 @@ def make_diagram(agents=3, half=1.5, speed=1.0, evader_speed=0.7, capture=0.15,
     d.connect(purs.position, task.pursuers)
     d.connect(ev.position, task.evader)
     if controller == "scripted":
-        def chase(t, pursuers, evader, xp):
-            rel = evader - pursuers
-            return rel / xp.sqrt(xp.sum(rel * rel, -1, keepdims=True) + 1e-12)
-        src = d.add(Function(chase, inputs={"pursuers": (n, 2), "evader": (1, 2)},
-                             outputs={"cmd": (n, 2)}), name="chase")
+        src = d.add(Chase(n), name="chase")
         d.connect(purs.position, src.pursuers)
         d.connect(ev.position, src.evader)
         cmd = src.cmd

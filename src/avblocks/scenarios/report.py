@@ -168,6 +168,9 @@ REPORT_SIGNALS = {
     "flocking": ("flock.position", "flock.velocity"),
     "swap": ("fleet.position", "drive.done"),
     "honeybee": ("bees.pose", "gossip.informed", "modes.mode"),
+    "pursuit": ("pursuers.position", "evader.position", "task.distance"),
+    "spread": ("fleet.position", "task.reward", "task.success", "landmarks.y"),
+    "navigation": ("fleet.position", "goals.y", "task.success", "task.collision"),
 }
 
 

@@ -14,7 +14,7 @@ Task (what :func:`avblocks.rl.parallel_env` ``("spread")`` exposes)
   ``speed`` [m/s] (``action`` block).
 - **observation** (per agent, ``2 + 2N + 2(N-1)``): own position, every
   landmark relative to the agent, every other agent relative to it
-  (``task.obs``).
+  (``task.obs``, a ``tasks.SpreadTask``).
 - **reward** (per agent): ``-sum_l min_i |p_i - l|`` (shared: how far the
   landmarks are from being covered), minus ``collision`` for each other
   agent closer than ``2 * radius`` (``task.reward``).
@@ -25,7 +25,16 @@ Task (what :func:`avblocks.rl.parallel_env` ``("spread")`` exposes)
 Starts and landmarks are drawn anew at every reset (uniform in the square).
 ``avblocks run spread`` runs the scripted controller: each agent is assigned
 a landmark by a minimum-total-distance matching (Hungarian method) and
-drives to it (``controllers.HolonomicPointToPoint``).
+drives to it (``controllers.HolonomicPointToPoint``; the matching is
+:func:`avblocks.tasks.assign_landmarks`, ``scipy.optimize.linear_sum_assignment``
+at build time, from the starts).
+
+The scenario file ``spread.yaml`` is this module's twin (the same blocks,
+starts, landmarks and assignment from the :func:`spread_starts` and
+:func:`spread_targets` generators): it is what ``avblocks run spread``
+runs, to the same numbers; ``--set controller=policy.npz`` runs a trained
+policy in both (a ``tasks.TaskCommand`` in the file). :func:`make_diagram`
+and :func:`rl_task` remain the Python API (the learning environments).
 """
 
 from __future__ import annotations
@@ -33,60 +42,51 @@ from __future__ import annotations
 import numpy as np
 
 from avblocks.blocks import Constant
-from avblocks.core.block import Block
 from avblocks.core.diagram import Diagram
+from avblocks.scenarios._task import command_source, drive_at_speed, uniform_points
+from avblocks.tasks import SpreadTask, assign_landmarks
 from avblocks.vehicles import SingleIntegrator
 
-from ._task import command_source, drive_at_speed, others_index, pairwise, uniform_points
-
 MOVIE = {"pose": "fleet.position", "trail": 2.0}
-
-
-class SpreadTask(Block):
-    """Observation, reward and success of the spread task (module docstring).
-
-    Ports
-    -----
-    position : in, (N, 2) [m]
-    landmarks : in, (N, 2) [m]
-    obs : out, (N, 2 + 2N + 2(N-1))
-    reward : out, (N,)
-    done : out, (N,) bool (always false)
-    success : out, () bool: every landmark covered within ``cover``.
-    """
-
-    def __init__(self, n, *, radius=0.1, cover=0.1, collision=1.0):
-        super().__init__()
-        self.n = n
-        self.idx = others_index(n)
-        self.declare_parameter("radius", radius, bounds=(0, None), unit="m")
-        self.declare_parameter("cover", cover, bounds=(0, None), unit="m")
-        self.declare_parameter("collision", collision, bounds=(0, None))
-        self.declare_input("position", (n, 2), unit="m")
-        self.declare_input("landmarks", (n, 2), unit="m")
-        self.declare_output("obs", (n, 2 + 2 * n + 2 * (n - 1)))
-        self.declare_output("reward", (n,))
-        self.declare_output("done", (n,), "bool")
-        self.declare_output("success", (), "bool", agents=False)
-
-    def output(self, t, x, u, xp):
-        p, lm = u["position"], u["landmarks"]
-        n = self.n
-        rel_l = lm[None, :, :] - p[:, None, :]                    # (n, L, 2)
-        rel_o = p[self.idx] - p[:, None, :]                       # (n, n-1, 2)
-        obs = xp.concatenate([p, xp.reshape(rel_l, (n, -1)), xp.reshape(rel_o, (n, -1))],
-                             axis=1)
-        dl = xp.sqrt(xp.sum(rel_l * rel_l, axis=-1))              # (agent, landmark)
-        near = xp.min(dl, axis=0)                                 # per landmark
-        hits = xp.sum(pairwise(p, xp) < 2 * self.radius, axis=1)
-        reward = -xp.sum(near) - self.collision * hits
-        return {"obs": obs, "reward": reward, "done": xp.zeros((n,), dtype=bool),
-                "success": xp.all(near < self.cover)}
 
 
 def _starts(n, half, seed):
     rng = np.random.default_rng([int(seed), 31])
     return rng.uniform(-half, half, (n, 2)), rng.uniform(-half, half, (n, 2))
+
+
+def _checked(agents, seed):
+    from avblocks.core.params import count, integer
+    from avblocks.scenarios.limits import budget
+    n = count(agents, None, "agents", lo=1)
+    budget(n * n + 4 * n, "spread_starts")
+    return n, integer(seed, None, "seed")
+
+
+def spread_starts(agents, half, seed, which="agents"):
+    """The draws of :func:`make_diagram` for a seed: the agents' (N, 2)
+    starts (``which: agents``) or the (N, 2) landmarks (``which:
+    landmarks``), uniform in ``[-half, half]^2``. A scenario-file generator
+    (``{spread_starts: {agents: $agents, half: $half, seed: $seed}}``)."""
+    n, seed = _checked(agents, seed)
+    if which not in ("agents", "landmarks"):
+        raise ValueError(f"which must be 'agents' or 'landmarks', got {which!r:.40}")
+    p0, lm = _starts(n, float(half), seed)
+    return p0 if which == "agents" else lm
+
+
+def spread_targets(agents, half, seed):
+    """(N, 1, 2): each agent's landmark by the minimum-total-distance
+    matching of the starts and landmarks :func:`spread_starts` draws
+    (:func:`avblocks.tasks.assign_landmarks`), as one-waypoint lists for
+    ``controllers.HolonomicPointToPoint``. A scenario-file generator."""
+    n, seed = _checked(agents, seed)
+    p0, lm = _starts(n, float(half), seed)
+    return assign_landmarks(p0, lm)[:, None, :]
+
+
+#: this case study's scenario-file generators
+GENERATORS = {"spread_starts": spread_starts, "spread_targets": spread_targets}
 
 
 def make_diagram(agents=3, half=1.0, speed=1.0, radius=0.1, cover=0.1, controller="scripted",
@@ -101,12 +101,8 @@ def make_diagram(agents=3, half=1.0, speed=1.0, radius=0.1, cover=0.1, controlle
     d.connect(fleet.position, task.position)
     d.connect(marks.y, task.landmarks)
     if controller == "scripted":
-        from scipy.optimize import linear_sum_assignment
-
         from avblocks.controllers import HolonomicPointToPoint
-        cost = np.linalg.norm(p0[:, None, :] - lm[None, :, :], axis=-1)
-        _, col = linear_sum_assignment(cost)
-        drive = d.add(HolonomicPointToPoint(lm[col][:, None, :], gain=2.0,
+        drive = d.add(HolonomicPointToPoint(assign_landmarks(p0, lm)[:, None, :], gain=2.0,
                                             v_max=float(speed), radius=0.01), name="drive")
         d.connect(fleet.position, drive.position)
         d.connect(drive.velocity, fleet.velocity)

@@ -19,8 +19,11 @@ carried state of the last one and the index it starts at as arguments. So
   them (``meta["interrupted"]``, ``"interrupted_at"``, ``"interrupted_by"``),
   with the state reached in ``final_state``.
 
-The cost is one dispatch and one copy of the segment's log rows per
-segment (docs/compiled.md gives the figures measured on ``flocking``).
+The next segment is queued before the rows of the last one are read, so
+the device runs segment after segment without waiting for Python; what a
+segment costs is its dispatch and the copy of its log rows
+(docs/compiled.md gives the figures measured on ``flocking``). A stop
+drops the segment queued after the last one reported.
 """
 
 from __future__ import annotations
@@ -94,8 +97,16 @@ def run(runner, theta, X0, seed, params, progress):
     try:
         with _jax.x64(prog.x64):
             carry = args[1]
-            for start in range(0, nlog, length):
-                new, rows = exe(theta_p, carry, place(np.asarray(start, np.int32)))
+            starts = list(range(0, nlog, length))
+            pending = exe(theta_p, carry, args[2])
+            for j, start in enumerate(starts):
+                new, rows = pending
+                if j + 1 < len(starts):
+                    # queue the next segment before waiting for this one's
+                    # rows: the device never waits for Python (dropped
+                    # unread if the run is stopped here)
+                    pending = exe(theta_p, place(new),
+                                  place(np.asarray(starts[j + 1], np.int32)))
                 take = min(length, nlog - start)
                 for b, r in zip(bufs, rows):
                     b[count:count + take] = np.asarray(r)[:take]
@@ -107,8 +118,6 @@ def run(runner, theta, X0, seed, params, progress):
                     bar.update(done - was)
                 if report is not None:
                     report(done, nsteps)
-                if start + length < nlog:
-                    carry = place(carry)
     except KeyboardInterrupt as e:
         interrupt = e
     finally:

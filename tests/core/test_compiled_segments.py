@@ -22,34 +22,16 @@ else:
 pytestmark = pytest.mark.jax
 
 
-class Law(av.Block):
-    """Go-to-goal law with gain ``k`` (a parameter)."""
-
-    def __init__(self, goal, k=1.0):
-        super().__init__()
-        self.goal = np.asarray(goal, float)
-        n = len(self.goal)
-        self.declare_parameter("k", k, ())
-        self.declare_input("pose", (n, 3))
-        self.declare_output("cmd", (n, 2))
-
-    def output(self, t, x, u, xp):
-        p = u["pose"]
-        c, s = xp.cos(p[:, 2]), xp.sin(p[:, 2])
-        ex = self.goal[:, 0] - p[:, 0] - 0.2 * c
-        ey = self.goal[:, 1] - p[:, 1] - 0.2 * s
-        return {"cmd": xp.stack([self.k * (c * ex + s * ey),
-                                 self.k * (c * ey - s * ex) / 0.2], axis=-1)}
-
-
 def fleet(n=4, seed=0):
-    """Unicycles driven by a go-to-goal law through a zero-order hold of
-    three steps (a periodic block: held outputs in the carry)."""
+    """Unicycles driven by the point-to-point law (integer and boolean
+    discrete states) through a zero-order hold of three steps (a periodic
+    block: held outputs in the carry)."""
     rng = np.random.default_rng(seed)
     p0 = np.column_stack([rng.uniform(-2, 2, (n, 2)), rng.uniform(-3, 3, n)])
     d = av.Diagram()
     f = d.add(av.vehicles.Unicycle(pose0=p0), name="fleet")
-    law = d.add(Law(rng.uniform(-2, 2, (n, 2)), k=0.8), name="law")
+    law = d.add(av.controllers.PointToPoint(rng.uniform(-2, 2, (n, 1, 2)), gain=0.8),
+                name="law")
     hold = d.add(av.blocks.ZeroOrderHold(0.15), name="hold")
     d.connect(f.pose, law.pose)
     d.connect(law.cmd, hold.u)
@@ -92,7 +74,7 @@ def test_segments_give_the_one_scan_run_bit_for_bit_without_more_compiles():
     # one segment program for every later run: other values, seeds, x0
     before = cache_info()
     traces = runner.compilations
-    for kw in ({}, {"params": {"law.k": 0.3}, "seed": 4},
+    for kw in ({}, {"params": {"law.gain": 0.3}, "seed": 4},
                {"x0": {"fleet.pose": np.zeros((4, 3))}}):
         a = runner(progress=lambda k, n: None, **kw)
         b = runner(**kw)

@@ -13,8 +13,9 @@ carried state of the last one and the index it starts at as arguments. So
   (the start index is data: no compile per segment, none per run);
 * the values are those of the whole scan, bit for bit (the segment is
   traced from the same body; tested);
-* between segments ``progress(step, steps)`` is called, as the NumPy engine
-  calls it; a ``KeyboardInterrupt`` raised there (or Ctrl-C) stops the run
+* between segments ``progress(step, steps)`` is called with the steps done,
+  as the NumPy engine calls it (not again for a last segment that only
+  logs the final sample); a ``KeyboardInterrupt`` raised there (or Ctrl-C) stops the run
   and the samples logged so far come back, marked as the NumPy engine marks
   them (``meta["interrupted"]``, ``"interrupted_at"``, ``"interrupted_by"``),
   with the state reached in ``final_state``.
@@ -116,7 +117,7 @@ def run(runner, theta, X0, seed, params, progress):
                 segments += 1
                 if bar is not None:
                     bar.update(done - was)
-                if report is not None:
+                if report is not None and done > was:
                     report(done, nsteps)
     except KeyboardInterrupt as e:
         interrupt = e

@@ -240,7 +240,7 @@ class Runner:
         or ``False``: the whole run in one call."""
         jax = _jax.jax()
         seed = self.seed if seed is None else int(seed)
-        report = _segments.reporter(progress)[0]
+        report = _segments.reporter(progress)
         # no overrides (the common repeated call): the blocks' own values,
         # read afresh each call, without the validation an override needs
         theta = self._theta_plain() if params is None else self._theta(params)[0]
@@ -248,9 +248,17 @@ class Runner:
         prog = self.program
         if report is not None:
             res, needs, stopped = _segments.run(self, theta, X0, seed, params, report)
-            over = _plans.overflows(self.compiled, prog.needs(needs)) \
-                if prog.need_rows and not stopped else ()
-            if over:
+            over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows \
+                else ()
+            if over and stopped:
+                # not repeated (it was stopped), but its samples are suspect
+                import warnings
+                names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
+                res.meta["overflowed"] = [n for n, *_ in over]
+                warnings.warn(f"the stopped compiled run's neighbour search overflowed its "
+                              f"plan: {names}; its results may miss neighbours",
+                              RuntimeWarning, stacklevel=2)
+            elif over:
                 return _plans.settle(self, over, lambda: self(params, x0, seed,
                                                               progress=progress))
             if self.check_finite:

@@ -57,15 +57,13 @@ def segment_length(nlog: int, log_every: int = 1) -> int:
 
 
 def reporter(progress):
-    """``(report(step, steps) or None, bar or None)`` for a ``progress``
-    argument: a callable is called, ``True`` shows a bar, ``None`` and
-    ``False`` run the whole scan at once (no segments)."""
+    """What a ``progress`` argument asks for: a callable (called between
+    segments), ``True`` (a bar), or None for ``None`` and ``False`` (the
+    whole run in one call); anything else raises :class:`ParameterError`."""
     if progress is None or (isinstance(progress, (bool, np.bool_)) and not progress):
-        return None, None
-    if callable(progress):
-        return progress, None
-    if isinstance(progress, (bool, np.bool_)):
-        return True, None
+        return None
+    if callable(progress) or isinstance(progress, (bool, np.bool_)):
+        return progress if callable(progress) else True
     raise ParameterError("progress must be None, True, False or a callable "
                          "progress(step, steps)", param="progress",
                          found=repr(progress)[:40])
@@ -74,7 +72,9 @@ def reporter(progress):
 def run(runner, theta, X0, seed, params, progress):
     """One run of ``runner`` in segments (see the module docstring);
     ``progress`` is a callable ``progress(step, steps)`` or ``True`` (a bar).
-    Returns ``(Results, needs)``: the needs tally of the steps run."""
+    Returns ``(Results, needs, stopped)``: ``needs`` the neighbour
+    searches' tally over the steps run, ``stopped`` whether a
+    ``KeyboardInterrupt`` ended it early."""
     from ..runguard import progress_bar
     jax = _jax.jax()
     prog = runner.program

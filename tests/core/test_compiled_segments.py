@@ -148,3 +148,13 @@ def test_segment_length_policy():
     assert segments.segment_length(201, 5) == 10           # 50 steps at least
     assert segments.segment_length(3, 100) == 1            # one sample at least
     assert segments.segment_length(2, 1) == 2              # never more than the run
+
+
+def test_progress_true_shows_a_bar_over_the_segments(capsys):
+    d = fleet(seed=3)
+    whole = av.simulate(d, backend="jax", **KW)
+    res = av.simulate(d, backend="jax", progress=True, **KW)
+    assert res.meta["segments"] == 8
+    np.testing.assert_array_equal(res["fleet.pose"], whole["fleet.pose"])
+    err = capsys.readouterr().err
+    assert "0/401" in err and "step/s" in err     # tqdm's bar over the 401 steps

@@ -3,12 +3,12 @@ stop between segments; :mod:`avblocks.core.compiled.segments`).
 
 The ``flocking`` scenario's diagram (50 agents, a neighbour search every
 step, dt = 0.02 s, every 5th step logged), 20 s = 1000 steps, run by one
-``Runner``: the whole scan in one call, and in segments of about
-the default policy (:func:`~avblocks.core.compiled.segments.segment_length`)
-and of the other lengths listed,
-alternating for ``--rounds`` rounds. Prints the median wall time of each and
-and best wall time of each and their excess over the whole scan, and checks that every way gives the whole
-scan's values bit for bit. Compiles once per way (not timed).
+``Runner``: the whole scan in one call, in segments of the default policy
+(:func:`~avblocks.core.compiled.segments.segment_length`) and in segments
+of the other lengths listed, alternating for ``--rounds`` rounds. Prints
+the median and the best wall time of each and their excess over the whole
+scan, and checks that every way gives the whole scan's values bit for bit.
+Compiles once per way (not timed).
 
     python benchmarks/segments.py [--agents 50] [--t-final 20] [--rounds 7]
 """

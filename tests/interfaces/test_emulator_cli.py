@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import env
 from ._mavlink import free_base_port, need_pymavlink
+from .conftest import env
 
 
 def _started(p, log, timeout=30):

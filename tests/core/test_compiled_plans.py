@@ -232,3 +232,28 @@ def test_the_cli_reuses_compiled_programs_and_plans_across_processes(tmp_path):
                       "--out", "o4", out="o4")
     assert "cache off" in out4 and s4["compile"]["from_disk"] == 0
     assert not (cache / "jax").exists() and not (cache / "plans").exists()
+
+
+def test_a_run_in_segments_replans_and_a_stopped_one_says_it_overflowed():
+    """With ``progress`` the run goes in segments (core.compiled.segments):
+    an overflow re-plans and repeats it as the one-call run does; a run
+    stopped from the callback is not repeated, and says it overflowed."""
+    calls = []
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        res = av.simulate(contracting(), backend="jax",
+                          progress=lambda k, n: calls.append(k), **KW)
+    assert len([x for x in w if "re-planned" in str(x.message)]) == 1
+    assert calls == [40, 40]                     # the run, then its repetition
+    np.testing.assert_array_equal(res["nb.neighbors"], numpy_neighbors(contracting()))
+    _plans.forget_plans()
+    av.core.compiled.clear_cache()
+
+    def stop(k, n):
+        raise KeyboardInterrupt
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        part = av.simulate(contracting(), backend="jax", progress=stop, **KW)
+    assert part.meta["interrupted"] and part.meta["overflowed"] == ["nb"]
+    assert any("stopped compiled run" in str(x.message) for x in w)
+    assert not any("re-planned" in str(x.message) for x in w)

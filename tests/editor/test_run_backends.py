@@ -55,3 +55,33 @@ def test_live_opens_the_drawn_diagram_in_the_live_view(editor_server):
     view = editor_server.server.service._lives[-1]
     view.stop()
     assert view.wait(30) is not None          # the run ended when told to
+
+
+@pytest.mark.jax
+def test_a_jax_run_reports_progress_and_can_be_cancelled(editor_server):
+    """The compiled run goes in segments (core.compiled.segments): a poll sees
+    it part-way, and a cancel ends it ``cancelled`` with the samples so far."""
+    pytest.importorskip("jax")
+    status, loaded = editor_server.post("load", {"builtin": "nest"})
+    status, body = editor_server.post("run", {"document": loaded["document"],
+                                              "backend": "jax", "t_final": 400})
+    assert status == 200, body
+    rid = body["run"]
+    seen = []
+    t_end = time.monotonic() + 300
+    while time.monotonic() < t_end:
+        status, st = editor_server.get(f"run/{rid}")
+        seen.append(st["progress"])
+        if st["status"] != "running" or 0 < st["progress"] < 1:
+            break
+        time.sleep(0.02)
+    assert st["status"] == "running" and 0 < st["progress"] < 1, st
+    status, _ = editor_server.post(f"run/{rid}/cancel")
+    assert status == 200
+    st = _wait(editor_server, rid, timeout=120)
+    assert st["status"] == "cancelled", st
+    assert seen == sorted(seen)                     # progress never goes back
+    assert 0 < st["progress"] < 1 and 0 < st["t"] < 400
+    # the samples logged up to the stop came back: a wire can be plotted
+    status, sig = editor_server.get(f"run/{rid}/signal?name=bees.pose")
+    assert status == 200 and sig["t"][-1] == pytest.approx(st["t"])

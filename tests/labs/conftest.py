@@ -1,2 +1,2 @@
 # the submissions graded by these tests are students' files, not test modules
-collect_ignore_glob = ["solutions/*.py", "wrong/*.py"]
+collect_ignore_glob = ["solutions/*.py"]

@@ -22,10 +22,11 @@ import pytest
 from avblocks.cli import main
 from avblocks.labs import get, labs
 
+from .mutations import MUTATIONS, source, write
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 SOLUTIONS = HERE / "solutions"
-WRONG = HERE / "wrong"
 NUMBERS = [lab.number for lab in labs()]
 
 
@@ -53,7 +54,7 @@ def test_every_lab_has_a_solution_wrong_solutions_a_template_and_a_page():
     for lab in labs():
         assert lab.template.is_file() and _solution(lab.number).is_file()
         for kind in ("wrong_sign", "wrong_shape", "crash"):
-            assert (WRONG / f"lab{lab.number}_{kind}.py").is_file()
+            assert (lab.number, kind) in MUTATIONS
         assert (ROOT / "docs" / "labs" / f"lab{lab.number}.md").is_file()
         # the reference solution is not shipped in the template
         assert "NotImplementedError" in lab.template.read_text()
@@ -132,18 +133,22 @@ WRONG_EXPECTED = {
 }
 
 
-def test_the_flocking_wrong_sign_breaks_the_flock(capsys):
+def test_every_wrong_solution_has_its_expected_message():
+    assert sorted(MUTATIONS) == sorted(WRONG_EXPECTED)
+
+
+def test_the_flocking_wrong_sign_breaks_the_flock(capsys, tmp_path):
     """The closed-loop property, not only the pointwise comparison, catches
     attraction in place of separation."""
-    rc, out, _ = check(capsys, 5, WRONG / "lab5_flock_wrong_sign.py", "--json")
+    rc, out, _ = check(capsys, 5, write(tmp_path, 5, "flock_wrong_sign"), "--json")
     failed = {c["name"]: c["message"] for c in json.loads(out)["checks"] if not c["passed"]}
     assert rc == 1 and "flocking: a flock forms" in failed
     assert "expected at least 0.35 d = 0.35 m" in failed["flocking: a flock forms"]
 
 
 @pytest.mark.parametrize("number,kind", sorted(WRONG_EXPECTED))
-def test_a_wrong_solution_gets_the_right_message(capsys, number, kind):
-    path = WRONG / f"lab{number}_{kind}.py"
+def test_a_wrong_solution_gets_the_right_message(capsys, tmp_path, number, kind):
+    path = write(tmp_path, number, kind)
     rc, out, _ = check(capsys, number, path, "--json")
     assert rc == 1
     doc = json.loads(out)
@@ -208,7 +213,7 @@ def test_grading_a_folder_as_csv_through_a_pipe(tmp_path):
     status 1 because one submission fails."""
     for name in ("alice.py", "bob.py"):
         shutil.copyfile(_solution(1), tmp_path / name)
-    shutil.copyfile(WRONG / "lab1_wrong_sign.py", tmp_path / "carol.py")
+    (tmp_path / "carol.py").write_text(source(1, "wrong_sign"))
     env = {**os.environ, "PYTHONPATH": str(ROOT / "src") + os.pathsep
            + os.environ.get("PYTHONPATH", "")}
     p = subprocess.run(_cmd() + ["lab", "check", "1", str(tmp_path), "--csv"],

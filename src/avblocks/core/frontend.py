@@ -134,6 +134,10 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         or ``progress(step, steps)`` called about 100 times a run by the
         NumPy engine (raising ``KeyboardInterrupt`` there stops the run as
         Ctrl-C does: the results so far come back, marked interrupted).
+        ``backend="jax"`` with a callable or ``True`` runs the compiled
+        program in segments and does the same between them (up to 50
+        times a run; :mod:`avblocks.core.compiled.segments`); without
+        ``progress`` it runs in one call.
     check_finite : bool
         Stop at the first NaN/inf, naming the block and port.
     max_log_bytes : int

@@ -21,14 +21,13 @@ thread.
 from __future__ import annotations
 
 import asyncio
-import hmac
 import json
-import secrets
 import socket
 import threading
 from pathlib import Path
 
 from ..core.errors import AvError
+from ..core.urltoken import make_token, under_token
 from .service import EditorError, EditorService, error_json
 
 #: Where the built front end lies (``index.html``, ``assets/``, ``widget.js``).
@@ -56,17 +55,15 @@ class _TokenGate:
 
     def __init__(self, app, token):
         self.app = app
+        self.token = token
         self.prefix = f"/{token}".encode()
 
     async def __call__(self, scope, receive, send):
         if scope["type"] not in ("http", "websocket"):
             return await self.app(scope, receive, send)
         raw = scope.get("raw_path") or scope["path"].encode()
-        raw = raw.split(b"?", 1)[0]
-        head, after = raw[: len(self.prefix)], raw[len(self.prefix):]
-        ok = hmac.compare_digest(head, self.prefix) and (after == b"" or
-                                                         after.startswith(b"/"))
-        if not ok:
+        after = under_token(raw.split(b"?", 1)[0], self.token)
+        if after is None:
             if scope["type"] == "websocket":
                 await send({"type": "websocket.close", "code": 1008})
                 return
@@ -201,9 +198,7 @@ class EditorServer:
     def __init__(self, service: EditorService, port=0, token=None, host="127.0.0.1"):
         _imports()
         self.service = service
-        self.token = token or secrets.token_urlsafe(24)
-        if not self.token.replace("-", "").replace("_", "").isalnum():
-            raise EditorServerError("token must be URL-safe (letters, digits, - and _)")
+        self.token = make_token(token, EditorServerError)
         self.host = host
         self.port = int(port)
         self.url = None

@@ -765,19 +765,22 @@ class _Run:
         sim.setdefault("t_final", 10.0)
         self.t_final = float(sim["t_final"])
         if self.backend == "jax":
+            # the compiled run goes in segments that report (and can be
+            # stopped) between them: core.compiled.segments
             sim["backend"] = "jax"
-        else:
-            sim["progress"] = self._tick
+        sim["progress"] = self._tick
         try:
             res = simulate(d, **sim)
         except SimulationError as e:
             self.results = e.results
             raise
         self.results = res
-        self.progress, self.t = 1.0, float(res.t[-1]) if len(res.t) else 0.0
+        self.t = float(res.t[-1]) if len(res.t) else 0.0
         if res.meta.get("interrupted"):
+            # progress stays where the run stopped
             self.status = "cancelled"
             return
+        self.progress = 1.0
         if hooks is not None and hooks.outcome is not None:
             self.outcome, numbers = hooks.outcome(res)
         else:

@@ -13,6 +13,7 @@ from ..solvers import make_solver
 from . import _jax
 from . import devices as _devices
 from . import plans as _plans
+from . import segments as _segments
 from .program import Program, get_program
 from .runner import Runner, _solver_key
 from .structure import Snapshot, diagram_key
@@ -218,13 +219,18 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
                       max_log_bytes=2 * 1024**3, params=None, x0=None, backend="jax",
                       dtype="float64"):
     """:func:`avblocks.simulate` with ``backend="jax"`` (same arguments and
-    Results; plus ``dtype``). ``realtime`` pacing needs the NumPy backend;
-    ``progress`` is ignored (the run is one call). A second call on the same
+    Results; plus ``dtype``). ``realtime`` pacing needs the NumPy backend.
+    ``progress`` (a callable ``progress(step, steps)`` or ``True``, a bar)
+    runs the compiled program in segments, reporting between them and
+    stoppable by a ``KeyboardInterrupt`` raised there, as the NumPy engine
+    (:mod:`avblocks.core.compiled.segments`); ``None`` or ``False`` runs it
+    in one call. A second call on the same
     diagram with the same settings reuses the first call's runner (see
     :func:`_last_runner`), so it costs a structure check, not a compile."""
     if realtime is not None:
         raise ParameterError("real-time pacing needs the NumPy backend", param="realtime",
                              hint="use backend='numpy' to pace a run to the clock")
+    _segments.reporter(progress)        # a wrong progress= fails before compiling
     if log is not None and not isinstance(log, (str, PortRef)):
         log = list(log)                 # read once (it may be an iterator)
     settings = _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite) \
@@ -244,7 +250,7 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
                              expected=f"<= {max_log_bytes / 1e9:.2f} GB",
                              found=f"{len(runner.specs)} signals x {p.nlog} samples",
                              hint="log fewer signals or decimate with log_every")
-    res = runner(params=params, x0=x0, seed=seed)
+    res = runner(params=params, x0=x0, seed=seed, progress=progress)
     last = _LAST.get(diagram) if isinstance(diagram, Diagram) else None
     if last is not None and last[4] is runner and last[2] != runner.struct:
         # the run grew a plan (a new structure): the next call reuses the

@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import threading
 from collections import OrderedDict
+from contextlib import contextmanager
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -251,8 +253,64 @@ class Program:
         Must be called under a JAX transformation (it traces)."""
         jax = _jax.jax()
         jnp, lax = jax.numpy, jax.lax
+        self._count_trace()
+        with self._body(theta, remat) as body:
+            carry, logs = lax.scan(body.outer, body.init(X0), jnp.arange(self.nlog))
+            carry = body.finish(carry)
+        return logs, carry[0], body.needs(carry)
+
+    def segment(self, theta, carry, i0, length):
+        """Pure: one segment of the run, ``(carry, rows)``: the outer
+        iterations (log samples) ``i0 .. i0 + length - 1`` of :meth:`run`,
+        traced from the same body, so a run made of segments computes what
+        :meth:`run` computes, value for value (tested bit for bit).
+
+        ``carry`` is ``(X, held outputs, needs)``; with ``i0 == 0`` its
+        outputs and needs are placeholders (:meth:`segment_start`) and the
+        segment first computes the initial outputs from ``X``, as
+        :meth:`run` does. ``i0`` is traced: one compiled segment serves
+        every position. Iterations past the last sample (the last segment
+        padded to ``length``) repeat the last sample's outputs without
+        advancing (their rows are dropped); the steps left over when
+        ``log_every`` does not divide the step count run at the end of the
+        segment that reaches the last sample. Must be called under a JAX
+        transformation (it traces)."""
+        jax = _jax.jax()
+        jnp, lax = jax.numpy, jax.lax
+        self._count_trace()
+        nlog = self.nlog
+        with self._body(theta, False) as body:
+            carry = lax.cond(i0 == 0, lambda c: body.init(c[0]), lambda c: c, carry)
+            idx = jnp.minimum(i0 + jnp.arange(length), nlog - 1)
+            carry, rows = lax.scan(body.outer, carry, idx)
+            carry = lax.cond(i0 + length >= nlog, body.finish, lambda c: c, carry)
+        return carry, rows
+
+    def segment_start(self, X0):
+        """The carry a first :meth:`segment` takes: the initial states and
+        zeros in place of the held outputs and needs (of the declared
+        shapes and this program's dtypes); ``segment(i0=0)`` replaces them."""
+        jax = _jax.jax()
+        canon = jax.dtypes.canonicalize_dtype
+        with _jax.x64(self.x64):
+            fdt = np.dtype(canon(np.float64))
+            held = [{o: np.zeros(p.shape, canon(p.dtype)) for o, p in b._outputs.items()}
+                    if per else {} for b, per in zip(self.cd.blocks, self.eng.periodic)]
+        needs = np.zeros((len(self.need_rows), 4), fdt) if self.need_rows else None
+        return (X0, held, needs)
+
+    def _count_trace(self):
         self.traces += 1
         _STATS["traces"] += 1
+
+    @contextmanager
+    def _body(self, theta, remat):
+        """The pieces of the traced run (inside the parameter binding and
+        memo they need): ``init(X0) -> carry``, ``outer(carry, i) -> (carry,
+        logged row)``, ``finish(carry)`` (the steps left after the last
+        sample) and ``needs(carry)``."""
+        jax = _jax.jax()
+        jnp, lax = jax.numpy, jax.lax
         per_block = {}
         for path, i, k in self.slots:
             per_block.setdefault(i, (self.cd.blocks[i], {}))[1][k] = theta[path]
@@ -262,9 +320,6 @@ class Program:
         tally = _diagnostics.tally
         with bound_parameters(list(per_block.values())), _memo.active(_memo.Memo()):
             fdt = jnp.asarray(0.0).dtype
-            with tally(rows, jnp.zeros((len(rows), 4), fdt)) as tl:
-                Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
-            N0 = tl.value if rows else None
 
             # The carry is (X_k, Y_k-1, needs): each step first computes its
             # outputs at t_k (periodic blocks hold Y_k-1 between hits), then
@@ -276,6 +331,11 @@ class Program:
             # between hits): the others are not carried.
             def held(Y):
                 return [y if p else {} for y, p in zip(Y, eng.periodic)]
+
+            def init(X0):
+                with tally(rows, jnp.zeros((len(rows), 4), fdt)) as tl:
+                    Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
+                return (X0, held(Y0), tl.value if rows else None)
 
             def step(carry, k):
                 X, Yp, N = carry
@@ -308,12 +368,15 @@ class Program:
                                  lambda c: c, carry)
                 return carry, row
 
-            carry, logs = lax.scan(outer, (X0, held(Y0), N0), jnp.arange(nlog))
             rem = self.nsteps - (nlog - 1) * le
-            if rem:
-                carry = advance(carry, (nlog - 1) * le, rem)
-        needs = carry[2] if rows else jnp.zeros((0, 4), fdt)
-        return logs, carry[0], needs
+
+            def finish(carry):
+                return advance(carry, (nlog - 1) * le, rem) if rem else carry
+
+            def needs(carry):
+                return carry[2] if rows else jnp.zeros((0, 4), fdt)
+
+            yield SimpleNamespace(init=init, outer=outer, finish=finish, needs=needs)
 
     def needs(self, value):
         """``{(block name, search number): [capacity, hits, reach, span]}``

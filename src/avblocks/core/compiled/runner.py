@@ -19,6 +19,7 @@ from . import _jax
 from . import chunking as _chunking
 from . import devices as _devices
 from . import plans as _plans
+from . import segments as _segments
 from .outcome import check_finite as _check_finite
 from .program import Program, get_program
 from .structure import diagram_key, fingerprint
@@ -158,9 +159,9 @@ class Runner:
         return X
 
     # --------------------------------------------------------------- run
-    def _results(self, logs, XF, meta, runs=None):
+    def _results(self, logs, XF, meta, runs=None, t=None):
         data = dict(zip(self.names, logs))
-        res = Results(self.t, data, dict(zip(self.names, self.specs)), meta,
+        res = Results(self.t if t is None else t, data, dict(zip(self.names, self.specs)), meta,
                       self.aliases, runs=runs)
         cd = self.compiled
         res.final_state = {f"{cd.names[i]}.{k}": v for i, x in enumerate(XF)
@@ -230,14 +231,39 @@ class Runner:
         self.struct = key[0]
         self._run_exe = None
 
-    def __call__(self, params=None, x0=None, seed=None):
+    def __call__(self, params=None, x0=None, seed=None, *, progress=None):
+        """One run (see the class docstring). ``progress``: a callable
+        ``progress(step, steps)`` or ``True`` (a bar) runs it in segments
+        that report between them and can be stopped by a
+        ``KeyboardInterrupt`` (the results so far come back, marked
+        interrupted): see :mod:`avblocks.core.compiled.segments`. ``None``
+        or ``False``: the whole run in one call."""
         jax = _jax.jax()
         seed = self.seed if seed is None else int(seed)
+        report = _segments.reporter(progress)
         # no overrides (the common repeated call): the blocks' own values,
         # read afresh each call, without the validation an override needs
         theta = self._theta_plain() if params is None else self._theta(params)[0]
         X0 = self._states(self._x0_values(x0)[0] if x0 is not None else {}, [seed])
         prog = self.program
+        if report is not None:
+            res, needs, stopped = _segments.run(self, theta, X0, seed, params, report)
+            over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows \
+                else ()
+            if over and stopped:
+                # not repeated (it was stopped), but its samples are suspect
+                import warnings
+                names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
+                res.meta["overflowed"] = [n for n, *_ in over]
+                warnings.warn(f"the stopped compiled run's neighbour search overflowed its "
+                              f"plan: {names}; its results may miss neighbours",
+                              RuntimeWarning, stacklevel=2)
+            elif over:
+                return _plans.settle(self, over, lambda: self(params, x0, seed,
+                                                              progress=progress))
+            if self.check_finite:
+                _check_finite(res)
+            return res
         known = self._run_exe
         if known is not None:
             # validated values have the declared shapes and dtypes: the

@@ -68,6 +68,7 @@ import numpy as np
 
 from ...core.errors import ParameterError
 from ...vehicles import Quadrotor, QuadrotorVelocityControl
+from .._emulator import run_emulator
 from . import _types
 from ._link import CfLink, NoReply
 
@@ -508,7 +509,6 @@ def _parse_eq(items, what):
 
 def main(args):
     """``avblocks crazyflies emulate`` (see :func:`add_parser`)."""
-    import signal
     names = _names(args.names)
     p0 = json.loads(args.position0) if args.position0 else [
         [0.0, -args.spacing * k, 0.0] for k in range(len(names))]
@@ -517,16 +517,9 @@ def main(args):
                            silent=_parse_at(args.silent, "silent"),
                            stale=_parse_at(args.stale, "stale"), log=args.log,
                            domain=args.domain)
-    signal.signal(signal.SIGTERM, lambda *a: em.stop())
-    print(f"emulating Crazyflies {','.join(em.names)} (Crazyswarm2 over rmw_zenoh) via "
-          f"{args.router}", flush=True)
-    try:
-        em.run(args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        em.close()
-    return 0
+    banner = (f"emulating Crazyflies {','.join(em.names)} (Crazyswarm2 over rmw_zenoh) "
+              f"via {args.router}")
+    return run_emulator(em, banner, args.duration)
 
 
 def add_parser(sub):

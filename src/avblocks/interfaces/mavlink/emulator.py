@@ -56,6 +56,7 @@ import time
 import numpy as np
 
 from ...core.errors import ParameterError
+from .._emulator import run_emulator
 from . import frames
 
 FLAVORS = ("px4", "ardupilot")
@@ -539,7 +540,6 @@ def _parse_faults(items):
 
 def main(args):
     """``avblocks mavlink emulate``."""
-    import signal
     pose0 = json.loads(args.pose0) if args.pose0 else None
     if pose0 is None:
         pose0 = [[args.spacing * k, 0.0, 0.0] for k in range(args.n)]
@@ -553,16 +553,9 @@ def main(args):
                   silent=_parse_faults(args.silent), stale=_parse_faults(args.stale),
                   no_pose=[int(s) for s in (args.no_pose or "").split(",") if s.strip()],
                   log=args.log, pose_message=args.pose_message)
-    signal.signal(signal.SIGTERM, lambda *a: em.stop())
-    print(f"emulating {em.n} {args.flavor} vehicle(s) on udp 127.0.0.1:"
-          f"{em.ports[0]}..{em.ports[-1]}", flush=True)
-    try:
-        em.run(args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        em.close()
-    return 0
+    banner = (f"emulating {em.n} {args.flavor} vehicle(s) on udp 127.0.0.1:"
+              f"{em.ports[0]}..{em.ports[-1]}")
+    return run_emulator(em, banner, args.duration)
 
 
 def add_parser(sub):

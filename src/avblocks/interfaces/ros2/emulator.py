@@ -42,6 +42,7 @@ import time
 import numpy as np
 
 from ...core.errors import ParameterError
+from .._emulator import run_emulator
 from . import _msgs
 from ._zenoh import Link
 
@@ -318,7 +319,6 @@ def read_log(path):
 
 def main(args):
     """``avblocks robots emulate`` (see :func:`add_parser`)."""
-    import signal
     pose0 = json.loads(args.pose0) if args.pose0 else None
     if pose0 is None and args.spacing:
         n = len(args.names.split(","))
@@ -329,16 +329,9 @@ def main(args):
                   drops=parse_drops(args.drop), time_scale=args.time_scale,
                   cmd_timeout=args.cmd_timeout, log=args.log, seed=args.seed,
                   corrupt=parse_corrupt(args.corrupt))
-    signal.signal(signal.SIGTERM, lambda *a: em.stop())
-    print(f"emulating {','.join(em.names)} ({args.model}, {args.transport}) via "
-          f"{args.router}", flush=True)
-    try:
-        em.run(args.duration)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        em.close()
-    return 0
+    banner = (f"emulating {','.join(em.names)} ({args.model}, {args.transport}) via "
+              f"{args.router}")
+    return run_emulator(em, banner, args.duration)
 
 
 def add_parser(sub):

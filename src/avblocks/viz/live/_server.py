@@ -21,14 +21,13 @@ fails loudly instead of serving without a token.
 from __future__ import annotations
 
 import contextlib
-import hmac
 import http
 import io
-import secrets
 import threading
 import types
 
 from ...core.errors import AvError
+from ...core.urltoken import make_token, under_token
 
 _LOCK = threading.Lock()
 
@@ -62,16 +61,11 @@ class _Namespace(types.SimpleNamespace):
 
 def _guard(process_request, token, Request):
     """``process_request`` that checks the token segment first."""
-    prefix = f"/{token}"
 
     def check(connection, request):
-        path = request.path
-        head, sep, rest = path.partition("?")
-        seg = head[: len(prefix)]
-        after = head[len(prefix):]
-        ok = (hmac.compare_digest(seg.encode(), prefix.encode())
-              and (after == "" or after.startswith("/")))
-        if not ok:
+        head, sep, rest = request.path.partition("?")
+        after = under_token(head, token)
+        if after is None:
             return connection.respond(http.HTTPStatus.FORBIDDEN,
                                       "avblocks live view: wrong or missing token\n")
         new = Request(path=(after or "/") + (sep + rest if sep else ""),
@@ -87,9 +81,7 @@ def open_server(host="127.0.0.1", port=0, token=None, label=None):
     """A started ``viser.ViserServer`` bound to ``host:port`` (0: a free
     port) that answers only under ``/<token>/``. Returns ``(server, token)``."""
     viser, infra, ws_server, Request = _import_viser()
-    token = token or secrets.token_urlsafe(24)
-    if not token.replace("-", "").replace("_", "").isalnum():
-        raise LiveViewError("token must be URL-safe (letters, digits, - and _)")
+    token = make_token(token, LiveViewError)
     real = getattr(infra, "websockets", None)
     if real is None or getattr(real, "asyncio", None) is None:
         raise LiveViewError("this viser version starts its server differently; "

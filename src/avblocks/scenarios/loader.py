@@ -65,7 +65,7 @@ _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation
              "movie", "params", "outcome", "figures", "report", "editor"}
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
-REPORTS = ("nest", "formation", "flocking", "swap", "honeybee")
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "drone_formation")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -180,7 +180,6 @@ def module_blocks(module) -> dict:
     it: it is named by the user on the command line, never by a file."""
     import importlib
 
-    from ..core.block import Block
     try:
         mod = importlib.import_module(str(module))
     except ImportError as e:
@@ -189,9 +188,19 @@ def module_blocks(module) -> dict:
     out = {}
     for name in getattr(mod, "__all__", [n for n in dir(mod) if not n.startswith("_")]):
         obj = getattr(mod, name, None)
-        if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+        if is_block_class(obj):
             out[f"{module}.{name}"] = obj
     return out
+
+
+def is_block_class(obj) -> bool:
+    """Whether ``obj`` is a class a file can name as a block: a
+    :class:`~avblocks.core.block.Block` subclass, or a
+    :class:`~avblocks.core.diagram.Diagram` subclass (a subsystem such as
+    ``vehicles.VelocityControlledQuadrotor``)."""
+    from ..core.block import Block
+    return (inspect.isclass(obj) and issubclass(obj, (Block, Diagram))
+            and obj not in (Block, Diagram))
 
 
 def block_registry(code_blocks=False, modules=()) -> dict:
@@ -202,8 +211,6 @@ def block_registry(code_blocks=False, modules=()) -> dict:
     :func:`module_blocks`)."""
     import importlib
 
-    from ..core.block import Block
-
     reg = {}
     for fam in ("blocks", "vehicles", "controllers", "environment", "viz"):
         try:
@@ -212,7 +219,7 @@ def block_registry(code_blocks=False, modules=()) -> dict:
             continue
         for name in getattr(mod, "__all__", dir(mod)):
             obj = getattr(mod, name, None)
-            if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+            if is_block_class(obj):
                 if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj

@@ -168,6 +168,7 @@ REPORT_SIGNALS = {
     "flocking": ("flock.position", "flock.velocity"),
     "swap": ("fleet.position", "drive.done"),
     "honeybee": ("bees.pose", "gossip.informed", "modes.mode"),
+    "drone_formation": ("fleet.position", "ref.position"),
 }
 
 

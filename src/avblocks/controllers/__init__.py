@@ -6,7 +6,8 @@ Single integrators (``position`` in, ``velocity`` out): HolonomicPointToPoint,
 Consensus, DisplacementFormation, CyclicPursuit, Coverage,
 CollisionAvoidance; 3-D virtual structure: FormationReference (planned
 positions and velocities) and ReferenceTracker (``velocity`` out).
-Double integrators (``accel`` out): Flocking.
+Double integrators (``accel`` out): Flocking. Following a measured
+target (alpha-beta filter + velocity law): TrackingController.
 Discrete-event: Supervisor, AgentModes.
 Learned: Policy (obs in, cmd out; mlp). Formation helpers: formation() etc.
 """
@@ -25,6 +26,7 @@ from .point_to_point import PointToPoint, point_to_point_law
 from .policy import Policy, mlp, mlp_init, save_policy
 from .random_walk import Distribution, RandomWalk, random_walk_cmd
 from .supervisor import AgentModes, Supervisor
+from .target_tracking import TrackingController, alpha_beta_step, follow_velocity
 from .virtual_structure import (
     FormationReference,
     ReferenceTracker,
@@ -48,4 +50,5 @@ __all__ = [
     "Policy", "mlp", "mlp_init", "save_policy",
     "FormationReference", "ReferenceTracker", "virtual_structure_reference",
     "reference_tracking_law",
+    "TrackingController", "alpha_beta_step", "follow_velocity",
 ]

@@ -16,7 +16,7 @@ import numpy as np
 from ..core.errors import ParameterError
 from ..core.params import count as _count
 from ..core.params import integer as _integer
-from . import drone_formation, formation, honeybee, nest, swap
+from . import drone_formation, formation, honeybee, nest, scenes, swap
 from .limits import budget as _budget
 
 
@@ -216,5 +216,5 @@ GENERATORS = {
     "zeros": _zeros,
     "arange": _arange,
 }
-for _case_study in (drone_formation, formation, honeybee, nest, swap):
+for _case_study in (drone_formation, formation, honeybee, nest, swap, scenes):
     GENERATORS.update(_case_study.GENERATORS)

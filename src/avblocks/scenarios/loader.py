@@ -28,7 +28,9 @@ A scenario file has five sections::
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), a one-key mapping naming one of
-the generators in :data:`GENERATORS`, or ``{function: "module:name"}``: a
+the generators in :data:`GENERATORS`, a ``{world: {...}}`` or a
+``{mujoco_scene: {...}}`` (:mod:`avblocks.scenarios.scenes`), or
+``{function: "module:name"}``: a
 function of the library (a module under ``avblocks``) or of a block module
 the user named (``--blocks``), by importable name, e.g. the ``fn`` of a
 ``blocks.Function`` (see :func:`resolve_function`). Nothing in the file is
@@ -65,7 +67,8 @@ _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation
              "movie", "params", "outcome", "figures", "report", "editor"}
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
-REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "drone_formation")
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "drone_formation",
+           "uav_tracking")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -203,12 +206,21 @@ def is_block_class(obj) -> bool:
             and obj not in (Block, Diagram))
 
 
-def block_registry(code_blocks=False, modules=()) -> dict:
+#: Interface packages whose blocks a scenario file may name
+#: (``interfaces.mujoco.PhysicsWorld``): physics and cameras, which talk to
+#: nothing outside the process. Robots and drones are reached with
+#: ``avblocks run ... --robots``, never from a file.
+FILE_INTERFACES = ("mujoco", "vision")
+
+
+def block_registry(code_blocks=False, modules=(), interfaces=False) -> dict:
     """``{"vehicles.Unicycle": class, ...}`` for every public block class
     that a scenario file can name (``code_blocks=True``: also those that
-    take Python code, such as ``blocks.Function``; ``modules``: user
-    modules whose blocks are named ``"module.Class"``, see
-    :func:`module_blocks`)."""
+    take Python code, such as ``blocks.Function``; ``interfaces=True``:
+    also the blocks of :data:`FILE_INTERFACES`, named
+    ``"interfaces.mujoco.SceneCamera"``, which need their extras and are
+    not in the editor's palette; ``modules``: user modules whose blocks
+    are named ``"module.Class"``, see :func:`module_blocks`)."""
     import importlib
 
     reg = {}
@@ -223,6 +235,12 @@ def block_registry(code_blocks=False, modules=()) -> dict:
                 if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
+    for fam in FILE_INTERFACES if interfaces else ():
+        mod = importlib.import_module(f"avblocks.interfaces.{fam}")  # extras load lazily
+        for name in mod.__all__:
+            obj = getattr(mod, name, None)
+            if is_block_class(obj):
+                reg[f"interfaces.{fam}.{name}"] = obj
     for m in modules or ():
         reg.update(module_blocks(m))
     return reg
@@ -313,6 +331,10 @@ class Scenario:
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)
+                if k == "mujoco_scene":
+                    from .scenes import mujoco_scene
+                    return mujoco_scene(self._value(args, f"{where}.mujoco_scene"),
+                                        f"{where}.mujoco_scene", self.folder, self.source)
             return {k: self._value(x, f"{where}.{k}") for k, x in v.items()}
         return v
 
@@ -489,7 +511,7 @@ class Scenario:
         self._generated_bytes = 0
         # a file may name blocks.Function: its fn can only be a function
         # resolved by name ({function: "module:name"}), never code
-        reg = block_registry(code_blocks=True, modules=self.modules)
+        reg = block_registry(code_blocks=True, modules=self.modules, interfaces=True)
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():
             where = f"blocks.{name}"
@@ -581,7 +603,7 @@ def builtin_dir() -> Path:
 
 #: modules of this package that are machinery, not scenarios
 INFRASTRUCTURE = ("loader", "report", "paths", "targets", "generators", "limits",
-                  "worlds", "files", "document")
+                  "worlds", "files", "document", "scenes")
 
 
 def builtin_scenarios() -> dict:

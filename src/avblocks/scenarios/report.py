@@ -169,6 +169,8 @@ REPORT_SIGNALS = {
     "swap": ("fleet.position", "drive.done"),
     "honeybee": ("bees.pose", "gossip.informed", "modes.mode"),
     "drone_formation": ("fleet.position", "ref.position"),
+    "uav_tracking": ("target.pose", "uav.position", "uav.attitude", "tracker.found",
+                     "tracker.bbox", "follow.estimate", "camera.image"),
 }
 
 

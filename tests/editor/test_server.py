@@ -226,8 +226,11 @@ def _summary(tmp, target, sets=()):
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["formation", "nest"])
-def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory):
+@pytest.mark.parametrize("name", ["formation", "nest", "drone_formation", "uav_tracking"])
+def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory,
+                                                    request):
+    if name == "uav_tracking":
+        request.getfixturevalue("mujoco_extra")
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]
     status, saved = editor_server.post("save", {"path": f"mine/{name}.yaml",

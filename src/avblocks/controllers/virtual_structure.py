@@ -125,7 +125,7 @@ class FormationReference(Block):
     """
 
     traceable = True
-    example = {"start": {"line_positions": {"n": "$agents", "height": 1.5}},
+    example = {"start": {"drone_start": {"n": "$agents", "height": 1.5}},
                "offsets": {"crown_offsets": {"n": "$agents"}}}
 
     def __init__(self, start, offsets, path_radius=1.5, period=24.0, gather=6.0,

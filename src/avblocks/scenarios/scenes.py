@@ -26,7 +26,10 @@ bodies that are agents named by group (:meth:`Scene.from_mjcf`)::
         mjcf: my_scene.xml
         ground_robots: {target: [target0]}
         quadrotors: {uav: [uav0]}
-        max_image: [320, 240]
+
+(its cameras: a camera ``<body>_cam`` on each body of a quadrotor group is
+that group's mount; any other named camera is a fixed one; the offscreen
+buffer is the file's ``<visual><global offwidth offheight>``).
 
 Every block that names the scene builds it from the same data (a YAML
 anchor, ``scene: &scene {...}`` then ``scene: *scene``, writes it once).
@@ -43,7 +46,7 @@ from .paths import inside
 _SCENE_KEYS = {"ground", "ground_size", "texture", "obstacle_height", "obstacle_color",
                "timestep", "max_image", "gravity", "shadows"}
 _KEYS = _SCENE_KEYS | {"world", "mjcf", "ground_robots", "quadrotors", "cameras"}
-_MJCF_KEYS = {"mjcf", "ground_robots", "quadrotors", "max_image", "shadows"}
+_MJCF_KEYS = {"mjcf", "ground_robots", "quadrotors", "shadows"}
 
 
 def _mapping(v, where, source, what):
@@ -105,7 +108,7 @@ def _from_mjcf(Scene, spec, where, folder, source):
                 raise ScenarioError("a group of an MJCF scene is a list of body names",
                                     file=source, entry=f"{where}.{kind}.{name}")
         groups[kind] = g
-    kw = {k: spec[k] for k in ("max_image", "shadows") if k in spec}
+    kw = {k: spec[k] for k in ("shadows",) if k in spec}
     try:
         return Scene.from_mjcf(str(full), ground_robots=groups["ground_robots"],
                                quadrotors=groups["quadrotors"], **kw)

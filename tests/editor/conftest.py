@@ -76,16 +76,3 @@ def editor_server(tmp_path):
     finally:
         srv.stop()
 
-
-@pytest.fixture
-def mujoco_extra():
-    """MuJoCo through avblocks (which picks a headless GL before importing
-    it) and OpenCV, or skip; in CI (``CI`` set) a missing part fails."""
-    try:
-        from avblocks.interfaces.mujoco import import_mujoco
-        import_mujoco()
-        import cv2  # noqa: F401
-    except ImportError as e:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip(f"mujoco or cv2 unavailable: {e}")

@@ -75,4 +75,3 @@ def editor_server(tmp_path):
                            token=srv.token, root=tmp_path, server=srv)
     finally:
         srv.stop()
-

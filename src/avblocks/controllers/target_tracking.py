@@ -62,7 +62,7 @@ def follow_velocity(estimate, position, k_p, k_z, altitude, v_max, xp=np):
 
 
 class TrackingController(Block):
-    """Follow a target by its measured position: an alpha-beta filter and a velocity law with feed-forward.
+    """Follow a measured target: an alpha-beta filter and a velocity law with feed-forward.
 
     A discrete block at the sensor's rate (e.g. a camera's), between a
     measurement of the target (e.g. ``interfaces.vision.GroundPointEstimator``)

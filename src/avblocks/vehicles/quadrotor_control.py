@@ -210,7 +210,7 @@ def velocity_controlled_quadrotor(quad, controller=None, name=None, **gains):
 
 
 class VelocityControlledQuadrotor(Diagram):
-    """N quadrotors flown by velocity set-points: a Quadrotor and its velocity controller as one subsystem.
+    """N quadrotors flown by velocity set-points: a Quadrotor and its controller as one subsystem.
 
     The subsystem :func:`velocity_controlled_quadrotor` builds, as a class
     a scenario file can name (``type: vehicles.VelocityControlledQuadrotor``):

@@ -28,6 +28,14 @@ filter (position and velocity of the target) and commands::
 The velocity feed-forward ``v_hat`` removes the steady lag ``V / k_p`` that
 a pure P law leaves behind a vehicle moving at speed V.
 
+The scenario file ``uav_tracking.yaml`` is this module's twin (the same
+blocks, the drone as ``interfaces.mujoco.PhysicsWorld`` plus
+``vehicles.QuadrotorVelocityControl``, the scene of :func:`build_scene`
+given by numbers in a ``{mujoco_scene: ...}`` value): it is what ``avblocks
+run uav_tracking`` runs and what the editor opens, to the same numbers.
+``physics="model"`` is this module's; in the file, give the block ``uav``
+the type ``vehicles.Quadrotor``.
+
 Outputs of ``avblocks run uav_tracking``: ``results.nc``, ``tracking.mp4``
 (the scene camera and the drone's camera side by side, the tracked blob
 boxed), ``tracking_error.png`` and an outcome line (largest and RMS

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from avblocks.core.errors import AlgebraicLoopError, ParameterError, ShapeError
+from avblocks.scenarios.loader import builtin_scenarios
 
 P2P = {"type": "controllers.PointToPoint",
        "waypoints": {"random_waypoints": {"n": "$agents", "count": 2, "area": [20, 20],
@@ -226,8 +227,11 @@ def _summary(tmp, target, sets=()):
     return json.loads((out / "summary.json").read_text())
 
 
-@pytest.mark.parametrize("name", ["formation", "nest", "pursuit", "spread", "navigation"])
-def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory):
+@pytest.mark.parametrize("name", sorted(builtin_scenarios()))
+def test_saved_case_study_runs_to_the_same_summary(editor_server, name, tmp_path_factory,
+                                                    request):
+    if name == "uav_tracking":
+        request.getfixturevalue("mujoco_extra")
     status, loaded = editor_server.post("load", {"builtin": name})
     doc = loaded["document"]
     status, saved = editor_server.post("save", {"path": f"mine/{name}.yaml",

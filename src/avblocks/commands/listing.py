@@ -50,7 +50,7 @@ def blocks():
     """``[{"type", "summary"}]`` of the block types, sorted."""
     from ..scenarios import block_registry
     return [{"type": k, "summary": _summary(cls)}
-            for k, cls in sorted(block_registry(code_blocks=True).items())]
+            for k, cls in sorted(block_registry(code_blocks=True, interfaces=True).items())]
 
 
 def cmd_list(args):

@@ -4,7 +4,10 @@ Unicycles (``pose`` in, ``cmd`` = (v, omega) out): PointToPoint,
 LeaderFollower, RandomWalk, HolonomicToUnicycle (+ OffAxisPoint).
 Single integrators (``position`` in, ``velocity`` out): HolonomicPointToPoint,
 Consensus, DisplacementFormation, CyclicPursuit, Coverage,
-CollisionAvoidance. Double integrators (``accel`` out): Flocking.
+CollisionAvoidance; 3-D virtual structure: FormationReference (planned
+positions and velocities) and ReferenceTracker (``velocity`` out).
+Double integrators (``accel`` out): Flocking. Following a measured
+target (alpha-beta filter + velocity law): TrackingController.
 Discrete-event: Supervisor, AgentModes.
 Learned: Policy (obs in, cmd out; mlp). Formation helpers: formation() etc.
 """
@@ -23,6 +26,13 @@ from .point_to_point import PointToPoint, point_to_point_law
 from .policy import Policy, mlp, mlp_init, save_policy
 from .random_walk import Distribution, RandomWalk, random_walk_cmd
 from .supervisor import AgentModes, Supervisor
+from .target_tracking import TrackingController, alpha_beta_step, follow_velocity
+from .virtual_structure import (
+    FormationReference,
+    ReferenceTracker,
+    reference_tracking_law,
+    virtual_structure_reference,
+)
 
 __all__ = [
     "PointToPoint", "point_to_point_law",
@@ -38,4 +48,7 @@ __all__ = [
     "RandomWalk", "Distribution", "random_walk_cmd",
     "Flocking", "flocking_law", "sigma_norm", "bump", "phi_alpha", "order_parameter",
     "Policy", "mlp", "mlp_init", "save_policy",
+    "FormationReference", "ReferenceTracker", "virtual_structure_reference",
+    "reference_tracking_law",
+    "TrackingController", "alpha_beta_step", "follow_velocity",
 ]

@@ -37,9 +37,11 @@ class _Writer:
         self.data = data
         self.modules = tuple(modules)
         self.generators = GENERATORS
-        self.taken = {"av", "np", "GENERATORS", "diagram", "res", "parse_world"}
+        self.taken = {"av", "np", "GENERATORS", "diagram", "res", "parse_world",
+                      "mujoco_scene"}
         self.uses_generators = False
         self.uses_world = False
+        self.uses_scene = False
         self.functions = {}                 # "module:name" -> the name in the script
         self.params = {}
         for k in (data.get("parameters") or {}):
@@ -79,6 +81,9 @@ class _Writer:
                 if k == "world":
                     self.uses_world = True
                     return f'parse_world({self.value(args)}, "world", ".")'
+                if k == "mujoco_scene":
+                    self.uses_scene = True
+                    return f'mujoco_scene({self.value(args)}, "scene", ".")'
             return "{" + ", ".join(f"{k!r}: {self.value(x, indent)}"
                                    for k, x in v.items()) + "}"
         return repr(v)
@@ -90,7 +95,7 @@ class _Writer:
         imports = {}
         handles = {}
         from ..scenarios.loader import block_registry
-        own = block_registry(code_blocks=True)
+        own = block_registry(code_blocks=True, interfaces=True)
         reg = {**block_registry(code_blocks=True, modules=self.modules), **own}
         for name, spec in blocks.items():
             typ = spec["type"]
@@ -152,6 +157,8 @@ class _Writer:
             lines.append("from avblocks.scenarios.generators import GENERATORS")
         if self.uses_world:
             lines.append("from avblocks.scenarios.worlds import _parse_world as parse_world")
+        if self.uses_scene:
+            lines.append("from avblocks.scenarios.scenes import mujoco_scene")
         lines.append("")
         if self.params:
             lines.append("# the diagram's parameters")

@@ -173,7 +173,7 @@ class _Collector:
         sc = self.sc
         sc.params = dict(self.data.get("parameters") or {})
         sc._generated_bytes = 0
-        reg = block_registry(code_blocks=True, modules=sc.modules)
+        reg = block_registry(code_blocks=True, modules=sc.modules, interfaces=True)
         d = Diagram(sc.name if str(sc.name).isidentifier() else None)
         for name, spec in (self.data.get("blocks") or {}).items():
             where = f"blocks.{name}"

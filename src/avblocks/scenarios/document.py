@@ -77,6 +77,11 @@ def _resolve(name_or_path, root):
                                      f"avblocks/scenarios/{target}.py); run it with "
                                      f"`avblocks run {target}`")
         return b[target], target
+    if p.is_file():
+        raise ScenarioError("is not a scenario file: documents are YAML or TOML "
+                            "(.yaml, .yml, .toml)", file=target,
+                            hint="a Python scenario module is run with `avblocks run "
+                                 "FILE.py`, not drawn")
     from ..core.errors import did_you_mean
     raise ScenarioError("no such scenario file or built-in case study", file=target,
                         hint=did_you_mean(target, b) + f"built-in: {sorted(b)}")

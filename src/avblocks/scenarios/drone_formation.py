@@ -4,18 +4,18 @@ simulation and, unchanged, on drones (``--robots mavlink`` or
 
 Set-up
 ------
-N velocity-controlled quadrotors (``vehicles.velocity_controlled_quadrotor``,
+N velocity-controlled quadrotors (``vehicles.VelocityControlledQuadrotor``,
 block ``fleet``) start hovering on a line along x at ``height`` (on drones
 the takeoff phase brings them there). A virtual structure
-(:class:`FormationReference`, block ``ref``) gives each vehicle its planned
+(:class:`~avblocks.controllers.FormationReference`, block ``ref``) gives each vehicle its planned
 position: a "crown", N slots on a circle of radius ``radius`` around a
 centre, alternately ``dz`` above and below it, that keeps its shape
 while its centre flies a circle of radius ``path_radius`` in ``period``
 seconds, rising and sinking by ``climb`` on the way. For the first
 ``gather`` seconds the planned positions blend from the start line into
 the crown (a smoothstep), so the plan starts where the vehicles are.
-Each vehicle tracks its planned position (:class:`Tracker`, block
-``track``)::
+Each vehicle tracks its planned position (:class:`~avblocks.controllers.ReferenceTracker`,
+block ``track``)::
 
     v_i = v_ref,i + k (p_ref,i - p_i),   |v_i| <= v_max
 
@@ -24,6 +24,11 @@ error (RMS and largest distance to the planned position after
 ``gather``), the smallest distance between two vehicles over the run.
 Figure (:func:`figures`): planned against flown paths, top view and side
 view.
+
+The scenario file ``drone_formation.yaml`` is this module's twin (the same
+blocks, the start line and the crown from its generators ``drone_start``
+and ``crown_offsets``): it is what ``avblocks run drone_formation`` runs
+and what the editor opens, to the same numbers.
 
 Run it::
 
@@ -37,9 +42,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from avblocks.core.block import Block
+from avblocks.controllers import FormationReference, ReferenceTracker
 from avblocks.core.diagram import Diagram
-from avblocks.vehicles import Quadrotor, velocity_controlled_quadrotor
+from avblocks.vehicles import VelocityControlledQuadrotor
 
 #: Parameters (``--set name=value``).
 PARAMS = {"agents": 5, "spacing": 1.0, "height": 1.5, "radius": 1.0, "dz": 0.3,
@@ -65,103 +70,27 @@ def crown_offsets(n=5, radius=1.0, dz=0.3):
     return slots[np.argsort(slots[:, 0], kind="stable")]
 
 
-class FormationReference(Block):
-    """Planned positions and velocities of a turning 3-D formation.
-
-    Ports
-    -----
-    position : out, (N, 3) [m]
-    velocity : out, (N, 3) [m/s]
-
-    Parameters
-    ----------
-    start : (N, 3)
-        Start positions (the plan begins there).
-    offsets : (N, 3)
-        Slots around the centre, in the formation's frame.
-    path_radius, period : float
-        The centre flies a circle of this radius [m] in ``period`` [s].
-    climb : float
-        ... rising and sinking by this much [m] on the way (h_z).
-    gather : float
-        Blending time from the start into the formation [s].
-
-    Equations
-    ---------
-    With ``T = max(t - gather, 0)`` (the formation forms in place, then
-    flies): ``c = c0 + (R_c sin wT, R_c (1 - cos wT), h_z sin wT)``,
-    ``w = 2 pi / period``, ``q_i = c + o_i``; planned ``p_i = (1 - s) p0_i + s q_i`` with
-    ``s = 3 tau^2 - 2 tau^3``, ``tau = min(t / gather, 1)``; the velocity is
-    the exact time derivative.
-
-    References
-    ----------
-    M. A. Lewis, K.-H. Tan, "High precision formation control of mobile
-    robots using virtual structures", Autonomous Robots 4, 1997.
-    """
-
-    def __init__(self, start, offsets, path_radius=1.5, period=24.0, gather=6.0,
-                 climb=0.3):
-        super().__init__()
-        self.p0 = np.asarray(start, float)
-        self.o = np.asarray(offsets, float)
-        self.n = n = len(self.p0)
-        self.c0 = np.array([self.p0[:, 0].mean(), self.p0[:, 1].mean(), self.p0[:, 2].mean()])
-        self.rc, self.w, self.tg = float(path_radius), 2 * np.pi / float(period), float(gather)
-        self.hz = float(climb)
-        self.declare_output("position", (n, 3), unit="m")
-        self.declare_output("velocity", (n, 3), unit="m/s")
-
-    def output(self, t, x, u, xp):
-        rc, hz = self.rc, self.hz
-        w = xp.where(t > self.tg, self.w, 0.0)
-        tt = xp.maximum(t - self.tg, 0.0)
-        ps, pc = xp.sin(self.w * tt), xp.cos(self.w * tt)
-        c = self.c0 + xp.stack([rc * ps, rc * (1.0 - pc), hz * ps])
-        cd = w * xp.stack([rc * pc, rc * ps, hz * pc])
-        q, qd = c + self.o, cd + 0.0 * self.o
-        tau = xp.minimum(t / self.tg, 1.0)
-        s = 3 * tau**2 - 2 * tau**3
-        sd = xp.where(t < self.tg, (6 * tau - 6 * tau**2) / self.tg, 0.0)
-        return {"position": (1 - s) * self.p0 + s * q,
-                "velocity": sd * (q - self.p0) + s * qd}
+#: The scenario's blocks live in :mod:`avblocks.controllers` (the names
+#: this module had before stay valid).
+Tracker = ReferenceTracker
 
 
-class Tracker(Block):
-    """Track planned positions with a velocity command.
+def _drone_start(n, height=1.5, spacing=1.0):
+    """Generator ``drone_start``: :func:`start_positions` for a scenario file."""
+    from .limits import budget
+    budget(3 * int(n), "drone_start")
+    return start_positions(int(n), float(height), float(spacing))
 
-    Ports
-    -----
-    position : in, (N, 3) [m]
-    ref_position, ref_velocity : in, (N, 3)
-    velocity : out, (N, 3) [m/s]
 
-    Parameters
-    ----------
-    n : int
-    gain : float [1/s]
-    v_max : float [m/s]
+def _crown_offsets(n, radius=1.0, dz=0.3):
+    """Generator ``crown_offsets``: :func:`crown_offsets` for a scenario file."""
+    from .limits import budget
+    budget(3 * int(n), "crown_offsets")
+    return crown_offsets(int(n), float(radius), float(dz))
 
-    Equations
-    ---------
-    ``v = v_ref + k (p_ref - p)``, scaled to ``|v| <= v_max``.
 
-    References
-    ----------
-    Proportional tracking with feed-forward (Lewis and Tan, 1997).
-    """
-
-    def __init__(self, n, gain=1.5, v_max=1.5):
-        super().__init__()
-        self.n, self.k, self.v_max = int(n), float(gain), float(v_max)
-        for p in ("position", "ref_position", "ref_velocity"):
-            self.declare_input(p, (n, 3))
-        self.declare_output("velocity", (n, 3), unit="m/s")
-
-    def output(self, t, x, u, xp):
-        v = u["ref_velocity"] + self.k * (u["ref_position"] - u["position"])
-        sp = xp.sqrt(xp.sum(v * v, axis=-1, keepdims=True))
-        return {"velocity": v * xp.minimum(1.0, self.v_max / xp.maximum(sp, 1e-12))}
+#: value generators of this case study (``{drone_start: {n: $agents, ...}}``)
+GENERATORS = {"drone_start": _drone_start, "crown_offsets": _crown_offsets}
 
 
 def make_diagram(agents=5, spacing=1.0, height=1.5, radius=1.0, dz=0.3, path_radius=1.5,
@@ -171,10 +100,10 @@ def make_diagram(agents=5, spacing=1.0, height=1.5, radius=1.0, dz=0.3, path_rad
     n = int(agents)
     p0 = start_positions(n, height, spacing)
     d = Diagram("drone_formation")
-    fleet = d.add(velocity_controlled_quadrotor(Quadrotor(p0)), name="fleet")
+    fleet = d.add(VelocityControlledQuadrotor(p0), name="fleet")
     ref = d.add(FormationReference(p0, crown_offsets(n, radius, dz), path_radius, period,
                                    gather, climb), name="ref")
-    trk = d.add(Tracker(n, gain, v_max), name="track")
+    trk = d.add(ReferenceTracker(n, gain, v_max), name="track")
     d.connect(fleet.position, trk.position)
     d.connect(ref.position, trk.ref_position)
     d.connect(ref.velocity, trk.ref_velocity)

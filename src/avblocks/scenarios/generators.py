@@ -17,7 +17,7 @@ import numpy as np
 from ..core.errors import ParameterError
 from ..core.params import count as _count
 from ..core.params import integer as _integer
-from . import formation, honeybee, navigation, nest, pursuit, spread, swap
+from . import drone_formation, formation, honeybee, navigation, nest, pursuit, scenes, spread, swap
 from .limits import budget as _budget
 
 
@@ -217,5 +217,6 @@ GENERATORS = {
     "zeros": _zeros,
     "arange": _arange,
 }
-for _case_study in (formation, honeybee, nest, swap, pursuit, spread, navigation):
+for _case_study in (drone_formation, formation, honeybee, nest, swap, pursuit, spread, navigation,
+                    scenes):
     GENERATORS.update(_case_study.GENERATORS)

@@ -28,7 +28,9 @@ A scenario file has five sections::
 
 Values may be plain numbers, lists, strings, ``$parameter`` references
 (also inside strings: ``"${agents}"``), a one-key mapping naming one of
-the generators in :data:`GENERATORS`, or ``{function: "module:name"}``: a
+the generators in :data:`GENERATORS`, a ``{world: {...}}`` or a
+``{mujoco_scene: {...}}`` (:mod:`avblocks.scenarios.scenes`), or
+``{function: "module:name"}``: a
 function of the library (a module under ``avblocks``) or of a block module
 the user named (``--blocks``), by importable name, e.g. the ``fn`` of a
 ``blocks.Function`` (see :func:`resolve_function`). Nothing in the file is
@@ -66,7 +68,7 @@ _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation
 #: Case studies whose outcome and figures a scenario file can ask for by name
 #: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
 REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "pursuit", "spread",
-           "navigation")
+           "navigation", "drone_formation", "uav_tracking")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -181,7 +183,6 @@ def module_blocks(module) -> dict:
     it: it is named by the user on the command line, never by a file."""
     import importlib
 
-    from ..core.block import Block
     try:
         mod = importlib.import_module(str(module))
     except ImportError as e:
@@ -190,20 +191,37 @@ def module_blocks(module) -> dict:
     out = {}
     for name in getattr(mod, "__all__", [n for n in dir(mod) if not n.startswith("_")]):
         obj = getattr(mod, name, None)
-        if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+        if is_block_class(obj):
             out[f"{module}.{name}"] = obj
     return out
 
 
-def block_registry(code_blocks=False, modules=()) -> dict:
+def is_block_class(obj) -> bool:
+    """Whether ``obj`` is a class a file can name as a block: a
+    :class:`~avblocks.core.block.Block` subclass, or a
+    :class:`~avblocks.core.diagram.Diagram` subclass (a subsystem such as
+    ``vehicles.VelocityControlledQuadrotor``)."""
+    from ..core.block import Block
+    return (inspect.isclass(obj) and issubclass(obj, (Block, Diagram))
+            and obj not in (Block, Diagram))
+
+
+#: Interface packages whose blocks a scenario file may name
+#: (``interfaces.mujoco.PhysicsWorld``): physics and cameras, which talk to
+#: nothing outside the process. Robots and drones are reached with
+#: ``avblocks run ... --robots``, never from a file.
+FILE_INTERFACES = ("mujoco", "vision")
+
+
+def block_registry(code_blocks=False, modules=(), interfaces=False) -> dict:
     """``{"vehicles.Unicycle": class, ...}`` for every public block class
     that a scenario file can name (``code_blocks=True``: also those that
-    take Python code, such as ``blocks.Function``; ``modules``: user
-    modules whose blocks are named ``"module.Class"``, see
-    :func:`module_blocks`)."""
+    take Python code, such as ``blocks.Function``; ``interfaces=True``:
+    also the blocks of :data:`FILE_INTERFACES`, named
+    ``"interfaces.mujoco.SceneCamera"``, which need their extras and are
+    not in the editor's palette; ``modules``: user modules whose blocks
+    are named ``"module.Class"``, see :func:`module_blocks`)."""
     import importlib
-
-    from ..core.block import Block
 
     reg = {}
     for fam in ("blocks", "vehicles", "controllers", "environment", "tasks", "viz"):
@@ -213,10 +231,16 @@ def block_registry(code_blocks=False, modules=()) -> dict:
             continue
         for name in getattr(mod, "__all__", dir(mod)):
             obj = getattr(mod, name, None)
-            if inspect.isclass(obj) and issubclass(obj, Block) and obj is not Block:
+            if is_block_class(obj):
                 if name == "Function" and not code_blocks:   # takes Python code
                     continue
                 reg[f"{fam}.{name}"] = obj
+    for fam in FILE_INTERFACES if interfaces else ():
+        mod = importlib.import_module(f"avblocks.interfaces.{fam}")  # extras load lazily
+        for name in mod.__all__:
+            obj = getattr(mod, name, None)
+            if is_block_class(obj):
+                reg[f"interfaces.{fam}.{name}"] = obj
     for m in modules or ():
         reg.update(module_blocks(m))
     return reg
@@ -307,6 +331,10 @@ class Scenario:
                 if k == "world":
                     return _parse_world(self._value(args, f"{where}.world"),
                                         where, self.folder, self.source)
+                if k == "mujoco_scene":
+                    from .scenes import mujoco_scene
+                    return mujoco_scene(self._value(args, f"{where}.mujoco_scene"),
+                                        f"{where}.mujoco_scene", self.folder, self.source)
             return {k: self._value(x, f"{where}.{k}") for k, x in v.items()}
         return v
 
@@ -483,7 +511,7 @@ class Scenario:
         self._generated_bytes = 0
         # a file may name blocks.Function: its fn can only be a function
         # resolved by name ({function: "module:name"}), never code
-        reg = block_registry(code_blocks=True, modules=self.modules)
+        reg = block_registry(code_blocks=True, modules=self.modules, interfaces=True)
         d = Diagram(self.name)
         for name, spec in self.data["blocks"].items():
             where = f"blocks.{name}"
@@ -575,7 +603,7 @@ def builtin_dir() -> Path:
 
 #: modules of this package that are machinery, not scenarios
 INFRASTRUCTURE = ("loader", "report", "paths", "targets", "generators", "limits",
-                  "worlds", "files", "document")
+                  "worlds", "files", "document", "scenes")
 
 
 def builtin_scenarios() -> dict:

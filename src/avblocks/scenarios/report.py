@@ -171,6 +171,9 @@ REPORT_SIGNALS = {
     "pursuit": ("pursuers.position", "evader.position", "task.distance"),
     "spread": ("fleet.position", "task.reward", "task.success", "landmarks.y"),
     "navigation": ("fleet.position", "goals.y", "task.success", "task.collision"),
+    "drone_formation": ("fleet.position", "ref.position"),
+    "uav_tracking": ("target.pose", "uav.position", "uav.attitude", "tracker.found",
+                     "tracker.bbox", "follow.estimate", "camera.image"),
 }
 
 

@@ -19,7 +19,7 @@ Set-up
        height, from the quadrotor's pose) -> TrackingController
     -> velocity set-point -> QuadrotorVelocityControl -> quadrotor
 
-:class:`TrackingController` filters the ground point with an alpha-beta
+:class:`~avblocks.controllers.TrackingController` filters the ground point with an alpha-beta
 filter (position and velocity of the target) and commands::
 
     v_xy = v_hat + k_p (p_hat - p_xy),  |v_xy| <= v_max
@@ -27,6 +27,14 @@ filter (position and velocity of the target) and commands::
 
 The velocity feed-forward ``v_hat`` removes the steady lag ``V / k_p`` that
 a pure P law leaves behind a vehicle moving at speed V.
+
+The scenario file ``uav_tracking.yaml`` is this module's twin (the same
+blocks, the drone as ``interfaces.mujoco.PhysicsWorld`` plus
+``vehicles.QuadrotorVelocityControl``, the scene of :func:`build_scene`
+given by numbers in a ``{mujoco_scene: ...}`` value): it is what ``avblocks
+run uav_tracking`` runs and what the editor opens, to the same numbers.
+``physics="model"`` is this module's; in the file, give the block ``uav``
+the type ``vehicles.Quadrotor``.
 
 Outputs of ``avblocks run uav_tracking``: ``results.nc``, ``tracking.mp4``
 (the scene camera and the drone's camera side by side, the tracked blob
@@ -40,8 +48,7 @@ from pathlib import Path
 
 import numpy as np
 
-from avblocks.controllers import PointToPoint
-from avblocks.core.block import Block
+from avblocks.controllers import PointToPoint, TrackingController
 from avblocks.core.diagram import Diagram
 from avblocks.environment import Circle, World, rectangle
 from avblocks.vehicles import Quadrotor, Unicycle, velocity_controlled_quadrotor
@@ -57,84 +64,6 @@ WAYPOINTS = np.array([[3.0, 0.0], [4.5, 1.5], [3.5, 3.5], [0.0, 3.5], [-2.5, 2.5
                       [-2.0, -0.5], [-0.5, -2.5], [2.0, -0.3], [0.0, 0.0], [-1.5, 1.0]])
 TARGET_RADIUS = 0.25
 TARGET_HEIGHT = 0.12
-
-
-class TrackingController(Block):
-    """Alpha-beta filter on a ground-point measurement and a velocity law.
-
-    Ports
-    -----
-    point : in, (N, 3) [m], measured target point; valid : in, (N,) bool
-    position : in, (N, 3) [m], the follower's position
-    velocity : out, (N, 3) [m/s], velocity set-point (world frame)
-    estimate : out, (N, 4), filtered target (x, y, vx, vy)
-
-    State
-    -----
-    est : discrete (N, 4), the filtered target; seen : (N,) bool
-
-    Parameters
-    ----------
-    period : float, sample period [s] (the camera's)
-    k_p : float, position gain [1/s]; k_z : altitude gain [1/s]
-    altitude : float [m]; v_max : float [m/s]
-    alpha, beta : filter gains (0 < alpha <= 1, 0 < beta <= 2)
-
-    Equations
-    ---------
-    Predict ``p- = p + v T``; innovation ``r = z - p-``; if valid
-    ``p = p- + alpha r``, ``v = v + beta r / T``; else ``p = p-``. The first
-    valid measurement initializes ``p = z, v = 0``. Then
-    ``v_xy = v + k_p (p - x_xy)`` (norm clipped to v_max),
-    ``v_z = k_z (altitude - x_z)``. (Kalata 1984, the alpha-beta tracker.)
-    """
-
-    #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
-    traceable = False
-
-    update_uses_outputs = True
-
-    def __init__(self, n, period, *, k_p=1.2, k_z=1.0, altitude=4.0, v_max=3.0,
-                 alpha=0.6, beta=0.15, start=None):
-        super().__init__()
-        self.n = n = int(n)
-        self.T = float(period)
-        self.k_p, self.k_z = float(k_p), float(k_z)
-        self.altitude, self.v_max = float(altitude), float(v_max)
-        self.alpha, self.beta = float(alpha), float(beta)
-        self.declare_periodic(self.T)
-        est0 = np.zeros((n, 4))
-        if start is not None:
-            est0[:, :2] = np.asarray(start, float)[:, :2]
-        self.declare_input("point", (n, 3), unit="m")
-        self.declare_input("valid", (n,), "bool")
-        self.declare_input("position", (n, 3), unit="m")
-        self.declare_discrete_state("est", est0)
-        self.declare_discrete_state("seen", np.zeros(n, bool))
-        self.declare_output("velocity", (n, 3), unit="m/s")
-        self.declare_output("estimate", (n, 4), labels=("x", "y", "vx", "vy"))
-
-    def output(self, t, x, u, xp):
-        est, seen = x["est"], x["seen"]
-        z = u["point"][:, :2]
-        ok = np.asarray(u["valid"], bool)
-        p_pred = est[:, :2] + self.T * est[:, 2:]
-        r = z - p_pred
-        p = np.where(ok[:, None], p_pred + self.alpha * r, p_pred)
-        v = np.where(ok[:, None], est[:, 2:] + self.beta / self.T * r, est[:, 2:])
-        first = ok & ~seen
-        p = np.where(first[:, None], z, p)
-        v = np.where(first[:, None], 0.0, v)
-        pos = u["position"]
-        vxy = v + self.k_p * (p - pos[:, :2])
-        nv = np.linalg.norm(vxy, axis=1, keepdims=True)
-        vxy = vxy * np.minimum(1.0, self.v_max / np.maximum(nv, 1e-12))
-        vz = self.k_z * (self.altitude - pos[:, 2:3])
-        return {"velocity": np.concatenate([vxy, vz], axis=1),
-                "estimate": np.concatenate([p, v], axis=1)}
-
-    def update(self, t, x, u, xp, y):
-        return {"est": y["estimate"], "seen": x["seen"] | np.asarray(u["valid"], bool)}
 
 
 def build_scene(altitude, width, height, fovy, uav0, target0, scene_view=True,

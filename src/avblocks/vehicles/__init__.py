@@ -1,21 +1,22 @@
 """Vehicle models: one block = N vehicles. Each family is a pure dynamics
 function plus a block that wraps it.
 
-=========================  ======================  ==================================
-block                      input                   outputs
-=========================  ======================  ==================================
-Unicycle                   cmd (v, omega)          pose
-Unicycle2                  wrench (f, tau)         pose, twist
-DiffDrive                  wheels (left, right)    pose
-Ackermann                  cmd (v, delta)          pose [, steer]
-SingleIntegrator           velocity                position
-DoubleIntegrator           accel | force           position, velocity
-Quadrotor                  wrench | rotors         position, velocity, attitude,
-                                                   rates, pose
-QuadrotorVelocityControl   velocity + feedback     wrench | rotors
-Blimp                      thrust (f_x, f_z, tau)  position, velocity, pose,
-                                                   body_velocity
-=========================  ======================  ==================================
+===========================  ======================  ==================================
+block                        input                   outputs
+===========================  ======================  ==================================
+Unicycle                     cmd (v, omega)          pose
+Unicycle2                    wrench (f, tau)         pose, twist
+DiffDrive                    wheels (left, right)    pose
+Ackermann                    cmd (v, delta)          pose [, steer]
+SingleIntegrator             velocity                position
+DoubleIntegrator             accel | force           position, velocity
+Quadrotor                    wrench | rotors         position, velocity, attitude,
+                                                     rates, pose
+QuadrotorVelocityControl     velocity + feedback     wrench | rotors
+VelocityControlledQuadrotor  velocity                position, pose, attitude
+Blimp                        thrust (f_x, f_z, tau)  position, velocity, pose,
+                                                     body_velocity
+===========================  ======================  ==================================
 """
 
 from ._rotations import (
@@ -38,7 +39,11 @@ from .quadrotor import (
     rotors_to_wrench,
     wrench_to_rotors,
 )
-from .quadrotor_control import QuadrotorVelocityControl, velocity_controlled_quadrotor
+from .quadrotor_control import (
+    QuadrotorVelocityControl,
+    VelocityControlledQuadrotor,
+    velocity_controlled_quadrotor,
+)
 from .unicycle import Unicycle, unicycle_rhs
 from .unicycle2 import Unicycle2, unicycle2_rhs
 
@@ -47,6 +52,7 @@ __all__ = [
     "DiffDrive", "diffdrive_rhs", "wheels_to_twist", "twist_to_wheels",
     "Ackermann", "ackermann_rhs", "SingleIntegrator", "DoubleIntegrator",
     "Quadrotor", "QuadrotorVelocityControl", "velocity_controlled_quadrotor",
+    "VelocityControlledQuadrotor",
     "quadrotor_rhs", "mixer_matrix", "rotors_to_wrench", "wrench_to_rotors",
     "Blimp", "blimp_rhs",
     "quat_mul", "quat_normalize", "quat_rotate", "quat_to_rotmat", "quat_yaw",

@@ -2,7 +2,8 @@
 controller (:class:`QuadrotorVelocityControl`) and
 :func:`velocity_controlled_quadrotor`, the subsystem that makes a
 :class:`~avblocks.vehicles.Quadrotor` a holonomic agent taking velocity
-commands."""
+commands, and :class:`VelocityControlledQuadrotor`, the same subsystem as a
+class that a scenario file names (``type: vehicles.VelocityControlledQuadrotor``)."""
 
 from __future__ import annotations
 
@@ -206,3 +207,122 @@ def velocity_controlled_quadrotor(quad, controller=None, name=None, **gains):
     d.export_output("pose", qh.pose)
     d.export_output("attitude", qh.attitude)
     return d
+
+
+class VelocityControlledQuadrotor(Diagram):
+    """N quadrotors flown by velocity set-points: a Quadrotor and its controller as one subsystem.
+
+    The subsystem :func:`velocity_controlled_quadrotor` builds, as a class
+    a scenario file can name (``type: vehicles.VelocityControlledQuadrotor``):
+    a :class:`Quadrotor` (block ``quad``) flown by a
+    :class:`QuadrotorVelocityControl` (block ``ctrl``) that has the
+    vehicle's own mass, inertia, drag and airframe. It has the ports of a
+    3-D :class:`SingleIntegrator` plus the planar pose and the attitude,
+    so a controller written for holonomic agents flies quadrotors
+    unchanged, and ``--robots mavlink`` / ``crazyflies`` replace it whole.
+
+    Ports
+    -----
+    velocity : in, (N, 3) [m/s]
+        Velocity set-point (world frame).
+    position : out, (N, 3) [m]
+        Centre of mass, world frame.
+    pose : out, (N, 3)
+        x, y [m] and yaw [rad].
+    attitude : out, (N, 4)
+        Unit quaternion w, x, y, z.
+
+    Parameters
+    ----------
+    position0 : array_like, (N, 3)
+        Start positions [m] (hovering, level).
+    mass : float or (N,)
+        [kg], default 1.
+    inertia : array_like, (3,) or (N, 3)
+        Diagonal inertia [kg m^2], default (0.01, 0.01, 0.02).
+    drag : float, (3,) or (N, 3)
+        Linear drag c [N s/m] along the world axes (default 0).
+    arm_length : float or (N,)
+        Rotor distance from the centre l [m], default 0.2.
+    kv : float
+        Velocity gain [1/s] (default 2.5).
+    k_att : float
+        Attitude gain [1/s] (default 8).
+    k_rate : float
+        Rate-loop gain [1/s] (default 25).
+    tilt_max : float
+        Largest commanded tilt [rad] (default 0.5).
+    yaw : float or (N,)
+        Yaw set-point [rad] (default 0).
+
+    Numeric parameters
+    ------------------
+
+    Those of the two blocks inside, addressed through the subsystem:
+    ``"fleet.quad.mass"``, ``"fleet.ctrl.kv"``... (``fleet`` the name it
+    is added under).
+
+    Equations
+    ---------
+    The vehicle: :class:`Quadrotor` (Newton-Euler rigid body, wrench
+    input). The controller: :class:`QuadrotorVelocityControl` (velocity
+    loop ``a = kv (v_ref - v) + c v / m``, geometric attitude loop of Lee
+    et al., rate loop). A velocity step settles as a first-order lag of
+    time constant ``1 / kv``.
+
+    References
+    ----------
+    Lee, Leok & McClamroch (2010); Mahony, Kumar & Corke (2012), Section V.
+
+    Examples
+    --------
+    >>> import numpy as np, avblocks as av
+    >>> q = av.vehicles.VelocityControlledQuadrotor(np.zeros((2, 3)))
+    >>> sorted(q.input_ports), sorted(q.output_ports)
+    (['velocity'], ['attitude', 'pose', 'position'])
+    """
+
+    example = {"position0": {"random_positions": {"n": "$agents", "area": [50, 50],
+                                                  "dim": 3, "seed": "$seed"}}}
+
+    def __init__(self, position0, *, mass=1.0, inertia=(0.01, 0.01, 0.02), drag=0.0,
+                 arm_length=0.2, kv=2.5, k_att=8.0, k_rate=25.0, tilt_max=0.5, yaw=0.0):
+        super().__init__(None)
+        from .quadrotor import Quadrotor
+        quad = Quadrotor(position0, mass=mass, inertia=inertia, drag=drag,
+                         arm_length=arm_length)
+        ctrl = QuadrotorVelocityControl.for_quadrotor(quad, kv=kv, k_att=k_att,
+                                                      k_rate=k_rate, tilt_max=tilt_max,
+                                                      yaw=yaw)
+        self.n = quad.n
+        qh = self.add(quad, name="quad")
+        ch = self.add(ctrl, name="ctrl")
+        self.connect(qh.velocity, ch.measured_velocity)
+        self.connect(qh.attitude, ch.attitude)
+        self.connect(qh.rates, ch.rates)
+        self.connect(ch.wrench, qh.wrench)
+        self.export_input("velocity", ch.velocity)
+        self.export_output("position", qh.position)
+        self.export_output("pose", qh.pose)
+        self.export_output("attitude", qh.attitude)
+
+    # the declarations a palette reads from a block, answered by the subsystem
+    @property
+    def _inputs(self):
+        return self.input_ports
+
+    @property
+    def _outputs(self):
+        return self.output_ports
+
+    @property
+    def parameters(self) -> dict:
+        """The numeric parameters of the vehicle and its controller by
+        constructor name (the vehicle's where both have one)."""
+        return {**self["ctrl"].block.parameters, **self["quad"].block.parameters}
+
+    def port_table(self, n=None) -> dict:
+        """The subsystem's ports with the agent axis as ``N``
+        (:func:`avblocks.core.declarations.port_table`)."""
+        from ..core.declarations import port_table
+        return port_table(self, n)

@@ -116,7 +116,9 @@ class MJCFWriter:
                 out.append(f'<body name="{b}" mocap="true" pos="{_f(x, y, z)}" '
                            f'quat="{_f(*p["attitude0"][i])}">{"".join(geoms)}{cam}</body>')
             else:
-                out.append(f'<body name="{b}"><freejoint name="{b}_free"/>'
+                # the body at its start (qpos0), so the exported MJCF starts there too
+                out.append(f'<body name="{b}" pos="{_f(x, y, z)}" '
+                           f'quat="{_f(*p["attitude0"][i])}"><freejoint name="{b}_free"/>'
                            f'<inertial pos="0 0 0" mass="{_f(p["mass"][i])}" '
                            f'diaginertia="{_f(*p["inertia"][i])}"/>{"".join(geoms)}{cam}</body>')
         return out

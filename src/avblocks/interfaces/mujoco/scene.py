@@ -104,6 +104,17 @@ class CameraMount:
         return np.column_stack([x, y, np.cross(x, y)])
 
 
+def _mount_of(mj, m, cam):
+    """The :class:`CameraMount` of camera ``cam`` of model ``m`` (its pose
+    in its body's frame and its field of view)."""
+    R = np.zeros(9)
+    mj.mju_quat2Mat(R, m.cam_quat[cam])
+    R = R.reshape(3, 3)
+    return CameraMount(pos=tuple(float(v) for v in m.cam_pos[cam]),
+                       xyaxes=tuple(float(v) for v in (*R[:, 0], *R[:, 1])),
+                       fovy=float(m.cam_fovy[cam]))
+
+
 @dataclass
 class Group:
     """One agent group of a scene (see :class:`Scene`)."""
@@ -277,7 +288,13 @@ class Scene(MJCFWriter):
         ``ground_robots`` / ``quadrotors``: ``{group: [body names]}``. A
         ground robot body needs three joints in order: slide x, slide y,
         hinge z (world axes); a quadrotor body a free joint; a mocap body
-        makes the group kinematic. Masses and inertias are the model's.
+        makes the group kinematic (a kinematic ground robot is drawn at
+        its body's height in the file). Masses and inertias are the
+        model's. A camera named ``<body>_cam`` on each body of a quadrotor
+        group is the group's camera mount (``SceneCamera(scene, group)``;
+        the first body's pose and field of view stand for all); every
+        other named camera is a fixed camera. The offscreen buffer
+        (``max_image``) is the file's ``<visual><global offwidth offheight>``.
         """
         s = cls(ground=False, **kw)
         text = Path(mjcf).read_text() if Path(str(mjcf)).suffix == ".xml" and \
@@ -289,6 +306,7 @@ class Scene(MJCFWriter):
         except Exception as e:  # noqa: BLE001 - MuJoCo's own parse error
             raise ParameterError(f"MuJoCo cannot load the MJCF: {e}", block=_NAME,
                                  param="mjcf") from None
+        owned = set()       # cameras that are a group's mount
         for kind, spec in (("ground", ground_robots or {}), ("quad", quadrotors or {})):
             for gname, bodies in spec.items():
                 ids = []
@@ -302,13 +320,27 @@ class Scene(MJCFWriter):
                 kin = bool(np.all(m.body_mocapid[ids] >= 0))
                 prm = {"mass": m.body_mass[ids].copy(),
                        "inertia": m.body_inertia[ids].copy()}
+                mount = None
                 if kind == "quad":
                     prm.update(arm_length=np.full(n, 0.2), yaw_coeff=np.full(n, 0.016),
                                drag=np.zeros((n, 3)), frame="x", input="wrench",
                                rotor_max=np.full(n, np.inf), thrust_max=np.full(n, np.inf))
+                    cams = [mj.mj_name2id(m, mj.mjtObj.mjOBJ_CAMERA, f"{b}_cam")
+                            for b in bodies]
+                    if all(c >= 0 and m.cam_bodyid[c] == i for c, i in zip(cams, ids)):
+                        mount = _mount_of(mj, m, cams[0])
+                        owned.update(cams)
                 else:
                     prm.update(kind="unicycle", wheel_radius=0.05, track_width=0.3)
-                s.groups[gname] = Group(gname, kind, n, list(bodies), kin, prm)
+                    if kin:         # drawn at the file's height (set_poses: z = height / 2)
+                        prm["height"] = 2.0 * float(m.body_pos[ids[0], 2])
+                s.groups[gname] = Group(gname, kind, n, list(bodies), kin, prm, mount)
+        for c in range(m.ncam):
+            name = mj.mj_id2name(m, mj.mjtObj.mjOBJ_CAMERA, c)
+            if name and c not in owned:
+                s.fixed_cameras[name] = {"pos": m.cam_pos[c].copy(),
+                                         "fovy": float(m.cam_fovy[c])}
+        s.max_image = (int(m.vis.global_.offwidth), int(m.vis.global_.offheight))
         s._model = m
         s._map()
         return s

@@ -437,3 +437,102 @@ def test_help_overlay_and_python_export(page, editor_server):
     status, r = editor_server.post("export", {"document": doc, "format": "python"})
     assert status == 200
     assert shown.strip() == r["text"].strip()
+
+
+TEAM_YAML = """\
+# a team of {n}: a Unicycle fleet driven to random waypoints
+name: team
+parameters:
+  agents: {n}
+blocks:
+  fleet:
+    type: vehicles.Unicycle
+    pose0: {{random_poses: {{n: $agents, area: [20, 20], seed: 3}}}}
+  drive:
+    type: controllers.PointToPoint
+    n: $agents
+    waypoints: {{random_waypoints: {{n: $agents, count: 2, area: [20, 20], seed: 4}}}}
+wires:
+  - [fleet.pose, drive.pose]
+  - [drive.cmd, fleet.cmd]
+simulation: {{t_final: 60, dt: 0.05}}
+"""
+
+
+def open_file(pg, editor_server, name, text):
+    """Write a scenario file into the server's folder and open it in the page."""
+    (editor_server.root / name).write_text(text)
+    pg.get_by_role("button", name="Open").click()
+    pg.locator(f'[data-file="{name}"]').click()
+    pg.wait_for_function(f"document.querySelector('[data-testid=file-title]')"
+                         f".textContent.startsWith('{name}')")
+    wait_checked(pg)
+    assert pg.get_by_test_id("check").inner_text().startswith("✓")
+
+
+def _export_download(pg, fmt):
+    with pg.expect_download() as dl:
+        pg.get_by_label("Export").select_option(fmt)
+    d = dl.value
+    return d.suggested_filename, Path(d.path()).read_bytes()
+
+
+def test_export_svg_and_png_from_the_page(page, editor_server):
+    import base64
+    import io
+    import xml.etree.ElementTree as ET
+
+    import numpy as np
+    from PIL import Image
+    pg = page
+    open_file(pg, editor_server, "team.yaml", TEAM_YAML.format(n=7))
+
+    # SVG: a well-formed SVG document naming every block of the diagram
+    name, raw = _export_download(pg, "svg")
+    assert name == "team.svg"
+    root = ET.fromstring(raw)
+    assert root.tag == "{http://www.w3.org/2000/svg}svg"
+    texts = " ".join("".join(t.itertext()) for t in root.iter("{http://www.w3.org/2000/svg}text"))
+    for block in ("fleet", "drive"):
+        assert block in texts, (block, texts[:400])
+
+    # PNG: decodes (Pillow) to the size of the server's own export of the same file, not blank
+    name, raw = _export_download(pg, "png")
+    assert name == "team.png"
+    img = Image.open(io.BytesIO(raw))
+    img.load()
+    status, loaded = editor_server.post("load", {"path": "team.yaml"})
+    status, ref = editor_server.post("export", {"document": loaded["document"], "format": "png"})
+    assert status == 200, ref
+    ref_img = Image.open(io.BytesIO(base64.b64decode(ref["data_url"].split(",", 1)[1])))
+    assert img.size == ref_img.size and img.size[0] > 100 and img.size[1] > 100
+    px = np.asarray(img.convert("RGB"), dtype=float)
+    ink = (px.min(axis=2) < 200).mean()           # pixels that are not (near) white
+    assert 0.005 < ink < 0.6, ink
+    assert len(np.unique(px.reshape(-1, 3), axis=0)) > 8   # lines, text and fills, not one colour
+
+
+def test_live_button_opens_the_drawn_diagram_in_the_live_view(page, editor_server):
+    import re
+    pg = page
+    open_file(pg, editor_server, "team.yaml", TEAM_YAML.format(n=7))
+    with pg.context.expect_page(timeout=60_000) as popup:
+        pg.get_by_role("button", name="Live").click()
+    live = popup.value
+    try:
+        port = int(re.match(r"http://127\.0\.0\.1:(\d+)/", live.url).group(1))
+        assert port != editor_server.server.port       # the live view's own server
+        # its status line: the diagram's agent count, and simulated time going on
+        live.wait_for_function("/\\bt = [0-9.]+ s/.test(document.body.innerText)",
+                               timeout=90_000)
+        text = live.locator("body").inner_text()
+        assert re.search(r"\b7 agents\b", text), text
+
+        def t_page():
+            m = re.search(r"\bt = ([0-9.]+) s", live.locator("body").inner_text())
+            return float(m.group(1)) if m else None
+
+        t0 = t_page()
+        assert until(lambda: (t_page() or 0) > t0 + 0.2, timeout=30), (t0, t_page())
+    finally:
+        live.close()

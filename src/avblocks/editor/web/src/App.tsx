@@ -5,7 +5,7 @@ import { Background, Controls, MiniMap, ReactFlow, ReactFlowProvider, useReactFl
 import type { Connection, EdgeChange, NodeChange, Edge, Node } from '@xyflow/react';
 import type { Doc, FileList, Json, Palette, RunStatus, SignalData, Validation, ValidationError, XY } from './types';
 import * as M from './model';
-import { handleRef, IN_NODE, OUT_NODE, toFlow, wireId } from './flow';
+import { handleRef, IN_NODE, OUT_NODE, stableFlow, toFlow, wireId } from './flow';
 import type { FlowEdge, FlowNode } from './flow';
 import { layoutAll, layoutLevel, needsLayout } from './layout';
 import { Api, ApiError } from './transport';
@@ -52,6 +52,13 @@ function isTyping(e: KeyboardEvent): boolean {
   return t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.tagName === 'SELECT' || t.isContentEditable;
 }
 
+/** A node's colour in the minimap (one function for every render: the minimap's nodes stay memoised). */
+function miniColor(n: Node): string {
+  const f = n as unknown as FlowNode;
+  if (f.type === 'subsystem') return '#c7d2fe';
+  return (f.data as { errors?: string[] } | undefined)?.errors?.length ? '#fca5a5' : '#cbd5e1';
+}
+
 function download(name: string, href: string) {
   const a = document.createElement('a');
   a.href = href;
@@ -65,7 +72,8 @@ function Editor({ transport }: { transport: Transport }) {
   const api = useMemo(() => new Api(transport), [transport]);
   const rf = useReactFlow();
   // level of detail: zoomed far out, draw blocks without their text (faster, and unreadable anyway)
-  const far = useStore((s) => s.transform[2] < 0.45);
+  // (one number per zoom band, so panning and zooming within a band render nothing here)
+  const detail = useStore((s) => (s.transform[2] < 0.3 ? 2 : s.transform[2] < 0.45 ? 1 : 0));
   const [palette, setPalette] = useState<Palette | null>(null);
   const [hist, setHist] = useState<M.History>(() => M.history(M.emptyDocument()));
   const doc = hist.present;
@@ -206,7 +214,14 @@ function Editor({ transport }: { transport: Transport }) {
 
   // ------------------------------------------------------------ the flow view
 
-  const flow = useMemo(() => toFlow(doc, palette, { level, validation, selected, selectedEdges }), [doc, palette, level, validation, selected, selectedEdges]);
+  // the nodes and edges that did not change keep their objects, so React Flow re-renders
+  // only those that did (a block dragged, the one a check answered about), not all 500
+  const lastFlow = useRef<{ nodes: FlowNode[]; edges: FlowEdge[] }>({ nodes: [], edges: [] });
+  const flow = useMemo(() => {
+    const next = stableFlow(lastFlow.current, toFlow(doc, palette, { level, validation, selected, selectedEdges }));
+    lastFlow.current = next;
+    return next;
+  }, [doc, palette, level, validation, selected, selectedEdges]);
 
   const onNodesChange = useCallback(
     (changes: NodeChange[]) => {
@@ -791,7 +806,7 @@ function Editor({ transport }: { transport: Transport }) {
       </header>
       <div className="main">
         <PalettePanel palette={palette} onAdd={(t) => addAt(t)} searchRef={searchRef} />
-        <div className={`canvas ${far ? 'far' : ''}`} onDragOver={(e) => {
+        <div className={`canvas ${detail >= 1 ? 'far' : ''} ${detail >= 2 ? 'tiny' : ''}`} onDragOver={(e) => {
           e.preventDefault();
           e.dataTransfer.dropEffect = 'copy';
         }} onDrop={onDrop}>
@@ -838,7 +853,7 @@ function Editor({ transport }: { transport: Transport }) {
             connectionRadius={24}
           >
             <Background gap={20} size={1} color="#d4d8de" />
-            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={(n) => ((n as FlowNode).type === 'subsystem' ? '#c7d2fe' : (n as FlowNode).data && ((n as FlowNode).data as { errors?: string[] }).errors?.length ? '#fca5a5' : '#cbd5e1')} />
+            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={miniColor} />
             <Controls showInteractive={false} />
           </ReactFlow>
           {!Object.keys(doc.blocks).length ? (

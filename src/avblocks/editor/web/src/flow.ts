@@ -306,3 +306,51 @@ export function handleRef(doc: Doc, node: string, handle: string): string {
   if (node in doc.blocks) return `${node}.${handle}`;
   return handle; // groups and boundary nodes carry full refs
 }
+
+function sameJson(a: unknown, b: unknown): boolean {
+  return a === b || JSON.stringify(a) === JSON.stringify(b);
+}
+
+function sameNode(a: FlowNode, b: FlowNode): boolean {
+  return (
+    a.type === b.type &&
+    a.position.x === b.position.x &&
+    a.position.y === b.position.y &&
+    !!a.selected === !!b.selected &&
+    a.width === b.width &&
+    a.height === b.height &&
+    a.className === b.className &&
+    a.deletable === b.deletable &&
+    sameJson(a.data, b.data)
+  );
+}
+
+function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
+  return (
+    a.source === b.source &&
+    a.target === b.target &&
+    a.sourceHandle === b.sourceHandle &&
+    a.targetHandle === b.targetHandle &&
+    !!a.selected === !!b.selected &&
+    a.className === b.className &&
+    sameJson(a.data, b.data)
+  );
+}
+
+/** `next` with each node and edge equal to one of `prev` replaced by that object (the same
+ * identity: React Flow's memoised node and edge components then skip it). The arrays are
+ * `prev`'s own when nothing changed at all. */
+export function stableFlow(prev: { nodes: FlowNode[]; edges: FlowEdge[] }, next: { nodes: FlowNode[]; edges: FlowEdge[] }): { nodes: FlowNode[]; edges: FlowEdge[] } {
+  const oldNodes = new Map(prev.nodes.map((n) => [n.id, n]));
+  const oldEdges = new Map(prev.edges.map((e) => [e.id, e]));
+  const nodes = next.nodes.map((n) => {
+    const o = oldNodes.get(n.id);
+    return o && sameNode(o, n) ? o : n;
+  });
+  const edges = next.edges.map((e) => {
+    const o = oldEdges.get(e.id);
+    return o && sameEdge(o, e) ? o : e;
+  });
+  const same = <T,>(a: T[], b: T[]) => a.length === b.length && a.every((x, i) => x === b[i]);
+  return { nodes: same(nodes, prev.nodes) ? prev.nodes : nodes, edges: same(edges, prev.edges) ? prev.edges : edges };
+}

@@ -8,8 +8,8 @@ import * as M from './model';
 import { handleRef, IN_NODE, OUT_NODE, stableFlow, toFlow, wireId } from './flow';
 import type { FlowEdge, FlowNode } from './flow';
 import { layoutAll, layoutLevel, needsLayout } from './layout';
-import { Api, ApiError } from './transport';
-import type { Transport } from './transport';
+import { Api, ApiError, saveRequest } from './transport';
+import type { FileRef, Transport } from './transport';
 import { nodeTypes, edgeTypes, WIRE_CLICK } from './nodes';
 import {
   BlockPanel,
@@ -25,12 +25,6 @@ import {
   SignalPlot,
   WirePanel,
 } from './panels';
-
-interface FileRef {
-  path: string | null;
-  builtin: string | null;
-  revision: string | null;
-}
 
 interface Toast {
   id: number;
@@ -425,14 +419,7 @@ function Editor({ transport }: { transport: Transport }) {
       const draft = opts.draft ?? !valid;
       try {
         // a document opened from a built-in or another file keeps that file's comments and forms
-        const origin = file.builtin ?? (file.path && file.path !== p ? file.path : null);
-        const r = await api.save({
-          path: p,
-          document: doc,
-          revision: opts.force ? null : file.path === p ? file.revision : null,
-          draft,
-          ...(origin ? { origin } : {}),
-        });
+        const r = await api.save(saveRequest(file, p, doc, { force: opts.force, draft }));
         setFile({ path: r.path, builtin: null, revision: r.revision });
         setSavedDoc(doc);
         setDialog(null);

@@ -136,15 +136,42 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
   const nodes: FlowNode[] = [];
   const driven = new Set(doc.wires.map(([, b]) => b));
 
+  // the signals the last check named, by block (once, not once per block: 500 blocks x 1000 signals)
+  const signalPorts = new Map<string, string[]>();
+  for (const ref of Object.keys(val?.signals ?? {})) {
+    const [sb, sp] = splitRef(ref);
+    if (!sp) continue;
+    const l = signalPorts.get(sb);
+    if (l) l.push(sp);
+    else signalPorts.set(sb, [sp]);
+  }
+
+  // each block's wires and errors, found once
+  const wiresOf = new Map<string, Wire[]>();
+  for (const w of doc.wires) {
+    for (const blk of new Set([splitRef(w[0])[0], splitRef(w[1])[0]])) {
+      const l = wiresOf.get(blk);
+      if (l) l.push(w);
+      else wiresOf.set(blk, [w]);
+    }
+  }
+  const errorsOf = new Map<string, ValidationError[]>();
+  for (const e of errors) {
+    if (!e.block) continue;
+    const l = errorsOf.get(e.block);
+    if (l) l.push(e);
+    else errorsOf.set(e.block, [e]);
+  }
+
   for (const name of blocks) {
     const b = doc.blocks[name];
     if (!b) continue;
     const decl = declOf(palette, b.type);
-    const ports = portsOf(doc, name, palette, val?.ports);
+    const ports = portsOf({ ...doc, wires: wiresOf.get(name) ?? [] }, name, palette, val?.ports);
+    const errors = errorsOf.get(name) ?? [];
     // ports the last check named (outputs with a signal, inputs an error is about)
-    for (const ref of Object.keys(val?.signals ?? {})) {
-      const [sb, sp] = splitRef(ref);
-      if (sb === name && sp && !ports.outputs.includes(sp) && !ports.inputs.includes(sp)) ports.outputs.push(sp);
+    for (const sp of signalPorts.get(name) ?? []) {
+      if (!ports.outputs.includes(sp) && !ports.inputs.includes(sp)) ports.outputs.push(sp);
     }
     for (const e of errors) {
       if (e.block === name && e.port && !ports.inputs.includes(e.port) && !ports.outputs.includes(e.port)) ports.inputs.push(e.port);

@@ -10,6 +10,8 @@ Debian's Chromium (headless, no GPU: software rendering). The script measures
 - pan: frames/s (``requestAnimationFrame`` callbacks counted in the page)
   while the mouse drags the canvas continuously;
 - zoom: frames/s while the wheel zooms in and out continuously;
+- drag: frames/s while one block is dragged to and fro (every move is an
+  edit of the document: the page recomputes the canvas's nodes and wires);
 - idle: frames/s with nothing happening (the browser's ceiling here);
 
 each at the whole diagram in view (zoomed out: every node drawn) and at zoom 1
@@ -115,7 +117,22 @@ def measure(browser, url, seconds, n_blocks, cpu=False):
             pg.mouse.wheel(0, 60 if (k // 10) % 2 == 0 else -60)
 
         f_zoom, c_zoom = traced(browser, pg, cpu, seconds, zoom)
-        rows.append((view, drawn, f_pan, f_zoom, idle, c_pan, c_zoom))
+        # the drawn block nearest the middle of the pane, by its header
+        box = pg.evaluate("""([cx, cy]) => { let best = null, d = 1e18;
+          for (const n of document.querySelectorAll('.react-flow__node-block')) {
+            const r = n.getBoundingClientRect(); const x = r.x + r.width / 2, y = r.y + 4;
+            const e = (x - cx) ** 2 + (y - cy) ** 2; if (e < d) { d = e; best = [x, y]; } }
+          return best; }""", [cx, cy])
+        pg.mouse.move(*box)
+        pg.mouse.down()
+
+        def drag(k, box=box):
+            dx = 80 if (k // 20) % 2 == 0 else -80
+            pg.mouse.move(box[0] + dx * ((k % 20) / 20), box[1] + 0.5 * dx * ((k % 20) / 20))
+
+        f_drag = fps_during(pg, seconds, drag)
+        pg.mouse.up()
+        rows.append((view, drawn, f_pan, f_zoom, f_drag, idle, c_pan, c_zoom))
     pg.close()
     return t_open, rows
 
@@ -138,8 +155,8 @@ def main():
           "Chromium headless, software rendering\n")
     extra = " pan [CPU ms/frame] | zoom [CPU ms/frame] |" if args.cpu else ""
     print("| blocks | open [s] | view | nodes drawn | pan [frames/s] | zoom [frames/s] "
-          "| idle [frames/s] |" + extra)
-    print("|---:|---:|---|---:|---:|---:|---:|" + ("---:|---:|" if args.cpu else ""))
+          "| drag [frames/s] | idle [frames/s] |" + extra)
+    print("|---:|---:|---|---:|---:|---:|---:|---:|" + ("---:|---:|" if args.cpu else ""))
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path="/usr/bin/chromium", args=ARGS)
         for n in args.blocks:
@@ -154,10 +171,10 @@ def main():
                                            cpu=args.cpu)
                 finally:
                     srv.stop()
-            for view, drawn, f_pan, f_zoom, idle, c_pan, c_zoom in rows:
+            for view, drawn, f_pan, f_zoom, f_drag, idle, c_pan, c_zoom in rows:
                 cpu = f" {c_pan:.1f} | {c_zoom:.1f} |" if args.cpu else ""
                 print(f"| {n} | {t_open:.1f} | {view} | {drawn} | {f_pan:.0f} "
-                      f"| {f_zoom:.0f} | {idle:.0f} |{cpu}")
+                      f"| {f_zoom:.0f} | {f_drag:.0f} | {idle:.0f} |{cpu}")
         browser.close()
 
 

@@ -412,7 +412,8 @@ function Editor({ transport }: { transport: Transport }) {
   // ------------------------------------------------------------ files
 
   const valid = validation?.ok ?? false;
-  const dirty = savedDoc !== doc && JSON.stringify(savedDoc) !== JSON.stringify(doc);
+  // (two serialisations of the whole document: once per edit, not once per render)
+  const dirty = useMemo(() => savedDoc !== doc && JSON.stringify(savedDoc) !== JSON.stringify(doc), [savedDoc, doc]);
 
   const doSave = useCallback(
     async (p: string, opts: { force?: boolean; draft?: boolean } = {}) => {

@@ -536,3 +536,51 @@ def test_live_button_opens_the_drawn_diagram_in_the_live_view(page, editor_serve
         assert until(lambda: (t_page() or 0) > t0 + 0.2, timeout=30), (t0, t_page())
     finally:
         live.close()
+
+
+def _red_pixels(png, box, pad=4):
+    import io
+
+    import numpy as np
+    from PIL import Image
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    x0, y0 = int(box["x"]) - pad, int(box["y"]) - pad
+    x1, y1 = int(box["x"] + box["width"]) + pad, int(box["y"] + box["height"]) + pad
+    sub = img[max(0, y0):y1, max(0, x0):x1]
+    r, g, b = sub[..., 0], sub[..., 1], sub[..., 2]
+    return int(((r > 180) & (r - g > 90) & (r - b > 90)).sum())
+
+
+def test_a_block_with_an_error_stays_marked_zoomed_far_out(page, editor_server):
+    """Zoomed out until ports are no longer drawn (a few hundred blocks in
+    view), the block the check names is still red on the canvas and in the
+    minimap; the block without an error is not."""
+    pg = page
+    text = TEAM_YAML.format(n=4).replace("  - [drive.cmd, fleet.cmd]\n", "")
+    (editor_server.root / "half.yaml").write_text(text)
+    pg.get_by_role("button", name="Open").click()
+    pg.locator('[data-file="half.yaml"]').click()
+    pg.wait_for_selector('.react-flow__node[data-id="fleet"]')
+    wait_checked(pg)
+    # the library's own verdict: fleet.cmd is not driven (and nothing about drive)
+    status, loaded = editor_server.post("load", {"path": "half.yaml"})
+    status, v = editor_server.post("validate", {"document": loaded["document"]})
+    assert {e.get("block") for e in v["errors"]} == {"fleet"}, v["errors"]
+    pane = pg.locator(".react-flow__pane").bounding_box()
+    pg.mouse.move(pane["x"] + pane["width"] / 3, pane["y"] + pane["height"] / 3)
+    for _ in range(40):
+        if "tiny" in pg.locator(".canvas").get_attribute("class"):
+            break
+        pg.mouse.wheel(0, 240)
+        pg.wait_for_timeout(60)
+    assert "tiny" in pg.locator(".canvas").get_attribute("class")
+    assert pg.locator(".react-flow__handle").first.is_hidden()      # ports not drawn
+    pg.wait_for_timeout(300)
+    png = pg.screenshot()
+    fleet = pg.locator('.react-flow__node[data-id="fleet"]').bounding_box()
+    drive = pg.locator('.react-flow__node[data-id="drive"]').bounding_box()
+    assert fleet["width"] < 70                                        # really zoomed out
+    assert _red_pixels(png, fleet) > 4 * fleet["width"], fleet
+    assert _red_pixels(png, drive) == 0
+    mini = pg.locator(".react-flow__minimap").bounding_box()
+    assert _red_pixels(png, mini, pad=0) > 0

@@ -50,7 +50,10 @@ function isTyping(e: KeyboardEvent): boolean {
 function miniColor(n: Node): string {
   const f = n as unknown as FlowNode;
   if (f.type === 'subsystem') return '#c7d2fe';
-  return (f.data as { errors?: string[] } | undefined)?.errors?.length ? '#fca5a5' : '#cbd5e1';
+  // red when the block, or one of its ports, has an error (as the block's own mark on the canvas)
+  const d = f.data as { errors?: string[]; inputs?: { errors: string[] }[]; outputs?: { errors: string[] }[] } | undefined;
+  const bad = !!d && (!!d.errors?.length || [...(d.inputs ?? []), ...(d.outputs ?? [])].some((p) => p.errors.length > 0));
+  return bad ? '#f87171' : '#cbd5e1';
 }
 
 function download(name: string, href: string) {

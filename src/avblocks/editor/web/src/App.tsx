@@ -46,6 +46,11 @@ function isTyping(e: KeyboardEvent): boolean {
   return t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.tagName === 'SELECT' || t.isContentEditable;
 }
 
+/** Fitting the view leaves room for what floats over the canvas: the breadcrumb (top left),
+ * the zoom buttons (bottom left) and the minimap (bottom right, 200 x 150), so no block
+ * is hidden under them. */
+const FIT = { padding: { top: '52px', left: '64px', right: '40px', bottom: '180px' }, maxZoom: 1.2 } as const;
+
 /** A node's colour in the minimap (one function for every render: the minimap's nodes stay memoised). */
 function miniColor(n: Node): string {
   const f = n as unknown as FlowNode;
@@ -133,7 +138,7 @@ function Editor({ transport }: { transport: Transport }) {
       setRunStatus(null);
       setRunId(null);
       setPlot(null);
-      if (Object.keys(d.blocks).length) setTimeout(() => rf.fitView({ padding: 0.15, duration: 0, maxZoom: 1.2 }), 30);
+      if (Object.keys(d.blocks).length) setTimeout(() => rf.fitView({ ...FIT, duration: 0 }), 30);
       else setTimeout(() => rf.setViewport({ x: 0, y: 0, zoom: 1 }), 30);
     },
     [rf],
@@ -390,7 +395,7 @@ function Editor({ transport }: { transport: Transport }) {
   const autoLayout = useCallback(async () => {
     const pos = await layoutLevel(doc, palette, level);
     setHist((h) => M.commit(h, M.moveItems(h.present, pos)));
-    setTimeout(() => rf.fitView({ padding: 0.15, duration: 200, maxZoom: 1.2 }), 30);
+    setTimeout(() => rf.fitView({ ...FIT, duration: 200 }), 30);
   }, [doc, palette, level, rf]);
 
   const openGroup = useCallback(
@@ -398,7 +403,7 @@ function Editor({ transport }: { transport: Transport }) {
       setPath((p) => [...p, g]);
       setSelected(new Set());
       setSelectedEdges(new Set());
-      setTimeout(() => rf.fitView({ padding: 0.2, duration: 150, maxZoom: 1.2 }), 30);
+      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
     },
     [rf],
   );
@@ -407,7 +412,7 @@ function Editor({ transport }: { transport: Transport }) {
     (depth: number) => {
       setPath((p) => p.slice(0, depth));
       setSelected(new Set());
-      setTimeout(() => rf.fitView({ padding: 0.15, duration: 150, maxZoom: 1.2 }), 30);
+      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
     },
     [rf],
   );
@@ -643,7 +648,7 @@ function Editor({ transport }: { transport: Transport }) {
       } else if (!mod && k === 'l') {
         autoLayout();
       } else if (!mod && k === 'f') {
-        rf.fitView({ padding: 0.15, duration: 200, maxZoom: 1.2 });
+        rf.fitView({ ...FIT, duration: 200 });
       }
     };
     window.addEventListener('keydown', onKey);

@@ -123,15 +123,17 @@ def measure(browser, url, seconds, n_blocks, cpu=False):
             const r = n.getBoundingClientRect(); const x = r.x + r.width / 2, y = r.y + 4;
             const e = (x - cx) ** 2 + (y - cy) ** 2; if (e < d) { d = e; best = [x, y]; } }
           return best; }""", [cx, cy])
-        pg.mouse.move(*box)
-        pg.mouse.down()
+        f_drag = float("nan")             # no block drawn in view: nothing to drag
+        if box is not None:
+            pg.mouse.move(*box)
+            pg.mouse.down()
 
-        def drag(k, box=box):
-            dx = 80 if (k // 20) % 2 == 0 else -80
-            pg.mouse.move(box[0] + dx * ((k % 20) / 20), box[1] + 0.5 * dx * ((k % 20) / 20))
+            def drag(k, box=box):
+                dx = 80 if (k // 20) % 2 == 0 else -80
+                pg.mouse.move(box[0] + dx * ((k % 20) / 20), box[1] + 0.5 * dx * ((k % 20) / 20))
 
-        f_drag = fps_during(pg, seconds, drag)
-        pg.mouse.up()
+            f_drag = fps_during(pg, seconds, drag)
+            pg.mouse.up()
         rows.append((view, drawn, f_pan, f_zoom, f_drag, idle, c_pan, c_zoom))
     pg.close()
     return t_open, rows

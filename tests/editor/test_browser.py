@@ -437,3 +437,150 @@ def test_help_overlay_and_python_export(page, editor_server):
     status, r = editor_server.post("export", {"document": doc, "format": "python"})
     assert status == 200
     assert shown.strip() == r["text"].strip()
+
+
+TEAM_YAML = """\
+# a team of {n}: a Unicycle fleet driven to random waypoints
+name: team
+parameters:
+  agents: {n}
+blocks:
+  fleet:
+    type: vehicles.Unicycle
+    pose0: {{random_poses: {{n: $agents, area: [20, 20], seed: 3}}}}
+  drive:
+    type: controllers.PointToPoint
+    n: $agents
+    waypoints: {{random_waypoints: {{n: $agents, count: 2, area: [20, 20], seed: 4}}}}
+wires:
+  - [fleet.pose, drive.pose]
+  - [drive.cmd, fleet.cmd]
+simulation: {{t_final: 60, dt: 0.05}}
+"""
+
+
+def open_file(pg, editor_server, name, text):
+    """Write a scenario file into the server's folder and open it in the page."""
+    (editor_server.root / name).write_text(text)
+    pg.get_by_role("button", name="Open").click()
+    pg.locator(f'[data-file="{name}"]').click()
+    pg.wait_for_function(f"document.querySelector('[data-testid=file-title]')"
+                         f".textContent.startsWith('{name}')")
+    wait_checked(pg)
+    assert pg.get_by_test_id("check").inner_text().startswith("✓")
+
+
+def _export_download(pg, fmt):
+    with pg.expect_download() as dl:
+        pg.get_by_label("Export").select_option(fmt)
+    d = dl.value
+    return d.suggested_filename, Path(d.path()).read_bytes()
+
+
+def test_export_svg_and_png_from_the_page(page, editor_server):
+    import base64
+    import io
+    import xml.etree.ElementTree as ET
+
+    import numpy as np
+    from PIL import Image
+    pg = page
+    open_file(pg, editor_server, "team.yaml", TEAM_YAML.format(n=7))
+
+    # SVG: a well-formed SVG document naming every block of the diagram
+    name, raw = _export_download(pg, "svg")
+    assert name == "team.svg"
+    root = ET.fromstring(raw)
+    assert root.tag == "{http://www.w3.org/2000/svg}svg"
+    texts = " ".join("".join(t.itertext()) for t in root.iter("{http://www.w3.org/2000/svg}text"))
+    for block in ("fleet", "drive"):
+        assert block in texts, (block, texts[:400])
+
+    # PNG: decodes (Pillow) to the size of the server's own export of the same file, not blank
+    name, raw = _export_download(pg, "png")
+    assert name == "team.png"
+    img = Image.open(io.BytesIO(raw))
+    img.load()
+    status, loaded = editor_server.post("load", {"path": "team.yaml"})
+    status, ref = editor_server.post("export", {"document": loaded["document"], "format": "png"})
+    assert status == 200, ref
+    ref_img = Image.open(io.BytesIO(base64.b64decode(ref["data_url"].split(",", 1)[1])))
+    assert img.size == ref_img.size and img.size[0] > 100 and img.size[1] > 100
+    px = np.asarray(img.convert("RGB"), dtype=float)
+    ink = (px.min(axis=2) < 200).mean()           # pixels that are not (near) white
+    assert 0.005 < ink < 0.6, ink
+    assert len(np.unique(px.reshape(-1, 3), axis=0)) > 8   # lines, text and fills, not one colour
+
+
+def test_live_button_opens_the_drawn_diagram_in_the_live_view(page, editor_server):
+    import re
+    pg = page
+    open_file(pg, editor_server, "team.yaml", TEAM_YAML.format(n=7))
+    with pg.context.expect_page(timeout=60_000) as popup:
+        pg.get_by_role("button", name="Live").click()
+    live = popup.value
+    try:
+        port = int(re.match(r"http://127\.0\.0\.1:(\d+)/", live.url).group(1))
+        assert port != editor_server.server.port       # the live view's own server
+        # its status line: the diagram's agent count, and simulated time going on
+        live.wait_for_function("/\\bt = [0-9.]+ s/.test(document.body.innerText)",
+                               timeout=90_000)
+        text = live.locator("body").inner_text()
+        assert re.search(r"\b7 agents\b", text), text
+
+        def t_page():
+            m = re.search(r"\bt = ([0-9.]+) s", live.locator("body").inner_text())
+            return float(m.group(1)) if m else None
+
+        t0 = t_page()
+        assert until(lambda: (t_page() or 0) > t0 + 0.2, timeout=30), (t0, t_page())
+    finally:
+        live.close()
+
+
+def _red_pixels(png, box, pad=4):
+    import io
+
+    import numpy as np
+    from PIL import Image
+    img = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+    x0, y0 = int(box["x"]) - pad, int(box["y"]) - pad
+    x1, y1 = int(box["x"] + box["width"]) + pad, int(box["y"] + box["height"]) + pad
+    sub = img[max(0, y0):y1, max(0, x0):x1]
+    r, g, b = sub[..., 0], sub[..., 1], sub[..., 2]
+    return int(((r > 180) & (r - g > 90) & (r - b > 90)).sum())
+
+
+def test_a_block_with_an_error_stays_marked_zoomed_far_out(page, editor_server):
+    """Zoomed out until ports are no longer drawn (a few hundred blocks in
+    view), the block the check names is still red on the canvas and in the
+    minimap; the block without an error is not."""
+    pg = page
+    text = TEAM_YAML.format(n=4).replace("  - [drive.cmd, fleet.cmd]\n", "")
+    (editor_server.root / "half.yaml").write_text(text)
+    pg.get_by_role("button", name="Open").click()
+    pg.locator('[data-file="half.yaml"]').click()
+    pg.wait_for_selector('.react-flow__node[data-id="fleet"]')
+    wait_checked(pg)
+    # the library's own verdict: fleet.cmd is not driven (and nothing about drive)
+    status, loaded = editor_server.post("load", {"path": "half.yaml"})
+    status, v = editor_server.post("validate", {"document": loaded["document"]})
+    assert {e.get("block") for e in v["errors"]} == {"fleet"}, v["errors"]
+    pane = pg.locator(".react-flow__pane").bounding_box()
+    pg.mouse.move(pane["x"] + pane["width"] / 3, pane["y"] + pane["height"] / 3)
+    for _ in range(40):
+        if "tiny" in pg.locator(".canvas").get_attribute("class"):
+            break
+        pg.mouse.wheel(0, 240)
+        pg.wait_for_timeout(60)
+    assert "tiny" in pg.locator(".canvas").get_attribute("class")
+    assert pg.locator(".react-flow__handle").first.is_hidden()      # ports not drawn
+    pg.wait_for_timeout(300)
+    png = pg.screenshot()
+    fleet = pg.locator('.react-flow__node[data-id="fleet"]').bounding_box()
+    drive = pg.locator('.react-flow__node[data-id="drive"]').bounding_box()
+    assert fleet["width"] < 70                                        # really zoomed out
+    assert _red_pixels(png, fleet) > 4 * fleet["width"], fleet
+    assert _red_pixels(png, drive) == 0
+    mini = pg.locator(".react-flow__minimap").bounding_box()
+    assert _red_pixels(png, mini, pad=0) > 0

@@ -217,6 +217,64 @@ def test_invalid_document_saved_only_as_a_draft_and_409_on_change(editor_server)
     assert {"path": "d.yaml", "name": "d"} in files["files"]
 
 
+
+TEAM_FILE = """\
+# a team: one fleet, one law
+name: team
+parameters:
+  agents: 5   # how many
+  seed: 1
+blocks:
+  fleet:
+    type: vehicles.Unicycle
+    pose0: {random_poses: {n: $agents, area: [20, 20], seed: 3}}
+  drive:
+    type: controllers.PointToPoint
+    n: $agents
+    waypoints: {random_waypoints: {n: $agents, count: 2, area: [20, 20], seed: 4}}
+wires:
+  - [fleet.pose, drive.pose]   # the law sees the pose
+  - [drive.cmd, fleet.cmd]
+simulation: {t_final: 5, dt: 0.05}
+"""
+
+
+def test_save_as_from_a_file_keeps_its_text_and_a_stale_revision_is_409(editor_server):
+    """What the page's Save as sends (``origin``: the file it was loaded from)
+    and what its Save sends (that file's revision): the new file is the old
+    one's text with only the edit changed; saving over a file changed on
+    disk since it was loaded is refused, origin or not, and writes nothing."""
+    a = editor_server.root / "a.yaml"
+    a.write_text(TEAM_FILE)
+    status, loaded = editor_server.post("load", {"path": "a.yaml"})
+    assert status == 200, loaded
+    doc = copy.deepcopy(loaded["document"])
+    doc["parameters"]["agents"] = 9
+    status, saved = editor_server.post("save", {"path": "sub/b.yaml", "document": doc,
+                                                "revision": None, "draft": False,
+                                                "origin": "a.yaml"})
+    assert status == 200, saved
+    b = (editor_server.root / "sub" / "b.yaml").read_text()
+    lines = TEAM_FILE.splitlines()
+    assert b.splitlines()[:len(lines)] != lines
+    changed = [(x, y) for x, y in zip(lines, b.splitlines()) if x != y]
+    assert len(changed) == 1, changed                    # comments, forms kept
+    assert changed[0][1].split() == ["agents:", "9", "#", "how", "many"]
+    assert a.read_text() == TEAM_FILE                     # the origin is only read
+    # Save over a.yaml with the revision it was loaded with, after a change on disk: 409
+    a.write_text(TEAM_FILE.replace("seed: 1", "seed: 2"))
+    for extra in ({}, {"origin": "a.yaml"}):
+        status, body = editor_server.post("save", {"path": "a.yaml", "document": doc,
+                                                   "revision": loaded["revision"],
+                                                   "draft": False, **extra})
+        assert status == 409 and body["error"]["kind"] == "Conflict", body
+        assert a.read_text() == TEAM_FILE.replace("seed: 1", "seed: 2")
+    # with the revision on disk now, the save goes through and keeps that file's change
+    status, now = editor_server.post("load", {"path": "a.yaml"})
+    status, body = editor_server.post("save", {"path": "a.yaml", "document": now["document"],
+                                               "revision": now["revision"], "draft": False})
+    assert status == 200 and a.read_text() == TEAM_FILE.replace("seed: 1", "seed: 2")
+
 def _summary(tmp, target, sets=()):
     from avblocks.cli import main
     out = tmp / f"out-{Path(str(target)).stem}-{len(list(tmp.iterdir()))}"

@@ -10,7 +10,7 @@ export default defineConfig({
     emptyOutDir: true,
     sourcemap: false,
     chunkSizeWarningLimit: 4000,
-    rollupOptions: { output: { entryFileNames: 'assets/editor-[hash].js', assetFileNames: 'assets/editor-[hash][extname]' } },
+    rollupOptions: { output: { entryFileNames: 'assets/editor-[hash].js', chunkFileNames: 'assets/[name]-[hash].js', assetFileNames: 'assets/editor-[hash][extname]' } },
   },
   test: { include: ['test/**/*.test.ts'] },
 });

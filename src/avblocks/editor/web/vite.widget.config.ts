@@ -11,7 +11,9 @@ export default defineConfig({
     sourcemap: false,
     chunkSizeWarningLimit: 4000,
     lib: { entry: 'src/widget.tsx', formats: ['es'], fileName: () => 'widget.js' },
+    // a library build in 'es' format keeps its whitespace unless the output asks: the widget is
+    // loaded as it is (never bundled again), so it is minified like the page
     minify: true,
-    rollupOptions: { output: { codeSplitting: false } },
+    rollupOptions: { output: { codeSplitting: false, minify: true } },
   },
 });

@@ -5,11 +5,11 @@ import { Background, Controls, MiniMap, ReactFlow, ReactFlowProvider, useReactFl
 import type { Connection, EdgeChange, NodeChange, Edge, Node } from '@xyflow/react';
 import type { Doc, FileList, Json, Palette, RunStatus, SignalData, Validation, ValidationError, XY } from './types';
 import * as M from './model';
-import { handleRef, IN_NODE, OUT_NODE, toFlow, wireId } from './flow';
+import { handleRef, IN_NODE, OUT_NODE, stableFlow, toFlow, wireId } from './flow';
 import type { FlowEdge, FlowNode } from './flow';
 import { layoutAll, layoutLevel, needsLayout } from './layout';
-import { Api, ApiError } from './transport';
-import type { Transport } from './transport';
+import { Api, ApiError, saveRequest } from './transport';
+import type { FileRef, Transport } from './transport';
 import { nodeTypes, edgeTypes, WIRE_CLICK } from './nodes';
 import {
   BlockPanel,
@@ -25,12 +25,6 @@ import {
   SignalPlot,
   WirePanel,
 } from './panels';
-
-interface FileRef {
-  path: string | null;
-  builtin: string | null;
-  revision: string | null;
-}
 
 interface Toast {
   id: number;
@@ -52,6 +46,21 @@ function isTyping(e: KeyboardEvent): boolean {
   return t.tagName === 'INPUT' || t.tagName === 'TEXTAREA' || t.tagName === 'SELECT' || t.isContentEditable;
 }
 
+/** Fitting the view leaves room for what floats over the canvas: the breadcrumb (top left),
+ * the zoom buttons (bottom left) and the minimap (bottom right, 200 x 150), so no block
+ * is hidden under them. */
+const FIT = { padding: { top: '52px', left: '64px', right: '40px', bottom: '180px' }, maxZoom: 1.2 } as const;
+
+/** A node's colour in the minimap (one function for every render: the minimap's nodes stay memoised). */
+function miniColor(n: Node): string {
+  const f = n as unknown as FlowNode;
+  if (f.type === 'subsystem') return '#c7d2fe';
+  // red when the block, or one of its ports, has an error (as the block's own mark on the canvas)
+  const d = f.data as { errors?: string[]; inputs?: { errors: string[] }[]; outputs?: { errors: string[] }[] } | undefined;
+  const bad = !!d && (!!d.errors?.length || [...(d.inputs ?? []), ...(d.outputs ?? [])].some((p) => p.errors.length > 0));
+  return bad ? '#f87171' : '#cbd5e1';
+}
+
 function download(name: string, href: string) {
   const a = document.createElement('a');
   a.href = href;
@@ -65,7 +74,8 @@ function Editor({ transport }: { transport: Transport }) {
   const api = useMemo(() => new Api(transport), [transport]);
   const rf = useReactFlow();
   // level of detail: zoomed far out, draw blocks without their text (faster, and unreadable anyway)
-  const far = useStore((s) => s.transform[2] < 0.45);
+  // (one number per zoom band, so panning and zooming within a band render nothing here)
+  const detail = useStore((s) => (s.transform[2] < 0.3 ? 2 : s.transform[2] < 0.45 ? 1 : 0));
   const [palette, setPalette] = useState<Palette | null>(null);
   const [hist, setHist] = useState<M.History>(() => M.history(M.emptyDocument()));
   const doc = hist.present;
@@ -128,7 +138,7 @@ function Editor({ transport }: { transport: Transport }) {
       setRunStatus(null);
       setRunId(null);
       setPlot(null);
-      if (Object.keys(d.blocks).length) setTimeout(() => rf.fitView({ padding: 0.15, duration: 0, maxZoom: 1.2 }), 30);
+      if (Object.keys(d.blocks).length) setTimeout(() => rf.fitView({ ...FIT, duration: 0 }), 30);
       else setTimeout(() => rf.setViewport({ x: 0, y: 0, zoom: 1 }), 30);
     },
     [rf],
@@ -206,7 +216,14 @@ function Editor({ transport }: { transport: Transport }) {
 
   // ------------------------------------------------------------ the flow view
 
-  const flow = useMemo(() => toFlow(doc, palette, { level, validation, selected, selectedEdges }), [doc, palette, level, validation, selected, selectedEdges]);
+  // the nodes and edges that did not change keep their objects, so React Flow re-renders
+  // only those that did (a block dragged, the one a check answered about), not all 500
+  const lastFlow = useRef<{ nodes: FlowNode[]; edges: FlowEdge[] }>({ nodes: [], edges: [] });
+  const flow = useMemo(() => {
+    const next = stableFlow(lastFlow.current, toFlow(doc, palette, { level, validation, selected, selectedEdges }));
+    lastFlow.current = next;
+    return next;
+  }, [doc, palette, level, validation, selected, selectedEdges]);
 
   const onNodesChange = useCallback(
     (changes: NodeChange[]) => {
@@ -378,7 +395,7 @@ function Editor({ transport }: { transport: Transport }) {
   const autoLayout = useCallback(async () => {
     const pos = await layoutLevel(doc, palette, level);
     setHist((h) => M.commit(h, M.moveItems(h.present, pos)));
-    setTimeout(() => rf.fitView({ padding: 0.15, duration: 200, maxZoom: 1.2 }), 30);
+    setTimeout(() => rf.fitView({ ...FIT, duration: 200 }), 30);
   }, [doc, palette, level, rf]);
 
   const openGroup = useCallback(
@@ -386,7 +403,7 @@ function Editor({ transport }: { transport: Transport }) {
       setPath((p) => [...p, g]);
       setSelected(new Set());
       setSelectedEdges(new Set());
-      setTimeout(() => rf.fitView({ padding: 0.2, duration: 150, maxZoom: 1.2 }), 30);
+      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
     },
     [rf],
   );
@@ -395,7 +412,7 @@ function Editor({ transport }: { transport: Transport }) {
     (depth: number) => {
       setPath((p) => p.slice(0, depth));
       setSelected(new Set());
-      setTimeout(() => rf.fitView({ padding: 0.15, duration: 150, maxZoom: 1.2 }), 30);
+      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
     },
     [rf],
   );
@@ -403,21 +420,15 @@ function Editor({ transport }: { transport: Transport }) {
   // ------------------------------------------------------------ files
 
   const valid = validation?.ok ?? false;
-  const dirty = savedDoc !== doc && JSON.stringify(savedDoc) !== JSON.stringify(doc);
+  // (two serialisations of the whole document: once per edit, not once per render)
+  const dirty = useMemo(() => savedDoc !== doc && JSON.stringify(savedDoc) !== JSON.stringify(doc), [savedDoc, doc]);
 
   const doSave = useCallback(
     async (p: string, opts: { force?: boolean; draft?: boolean } = {}) => {
       const draft = opts.draft ?? !valid;
       try {
         // a document opened from a built-in or another file keeps that file's comments and forms
-        const origin = file.builtin ?? (file.path && file.path !== p ? file.path : null);
-        const r = await api.save({
-          path: p,
-          document: doc,
-          revision: opts.force ? null : file.path === p ? file.revision : null,
-          draft,
-          ...(origin ? { origin } : {}),
-        });
+        const r = await api.save(saveRequest(file, p, doc, { force: opts.force, draft }));
         setFile({ path: r.path, builtin: null, revision: r.revision });
         setSavedDoc(doc);
         setDialog(null);
@@ -637,7 +648,7 @@ function Editor({ transport }: { transport: Transport }) {
       } else if (!mod && k === 'l') {
         autoLayout();
       } else if (!mod && k === 'f') {
-        rf.fitView({ padding: 0.15, duration: 200, maxZoom: 1.2 });
+        rf.fitView({ ...FIT, duration: 200 });
       }
     };
     window.addEventListener('keydown', onKey);
@@ -791,7 +802,7 @@ function Editor({ transport }: { transport: Transport }) {
       </header>
       <div className="main">
         <PalettePanel palette={palette} onAdd={(t) => addAt(t)} searchRef={searchRef} />
-        <div className={`canvas ${far ? 'far' : ''}`} onDragOver={(e) => {
+        <div className={`canvas ${detail >= 1 ? 'far' : ''} ${detail >= 2 ? 'tiny' : ''}`} onDragOver={(e) => {
           e.preventDefault();
           e.dataTransfer.dropEffect = 'copy';
         }} onDrop={onDrop}>
@@ -838,7 +849,7 @@ function Editor({ transport }: { transport: Transport }) {
             connectionRadius={24}
           >
             <Background gap={20} size={1} color="#d4d8de" />
-            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={(n) => ((n as FlowNode).type === 'subsystem' ? '#c7d2fe' : (n as FlowNode).data && ((n as FlowNode).data as { errors?: string[] }).errors?.length ? '#fca5a5' : '#cbd5e1')} />
+            <MiniMap pannable zoomable nodeStrokeWidth={2} nodeColor={miniColor} />
             <Controls showInteractive={false} />
           </ReactFlow>
           {!Object.keys(doc.blocks).length ? (

@@ -136,15 +136,42 @@ export function toFlow(doc: Doc, palette: Palette | null, opts: ToFlowOptions = 
   const nodes: FlowNode[] = [];
   const driven = new Set(doc.wires.map(([, b]) => b));
 
+  // the signals the last check named, by block (once, not once per block: 500 blocks x 1000 signals)
+  const signalPorts = new Map<string, string[]>();
+  for (const ref of Object.keys(val?.signals ?? {})) {
+    const [sb, sp] = splitRef(ref);
+    if (!sp) continue;
+    const l = signalPorts.get(sb);
+    if (l) l.push(sp);
+    else signalPorts.set(sb, [sp]);
+  }
+
+  // each block's wires and errors, found once
+  const wiresOf = new Map<string, Wire[]>();
+  for (const w of doc.wires) {
+    for (const blk of new Set([splitRef(w[0])[0], splitRef(w[1])[0]])) {
+      const l = wiresOf.get(blk);
+      if (l) l.push(w);
+      else wiresOf.set(blk, [w]);
+    }
+  }
+  const errorsOf = new Map<string, ValidationError[]>();
+  for (const e of errors) {
+    if (!e.block) continue;
+    const l = errorsOf.get(e.block);
+    if (l) l.push(e);
+    else errorsOf.set(e.block, [e]);
+  }
+
   for (const name of blocks) {
     const b = doc.blocks[name];
     if (!b) continue;
     const decl = declOf(palette, b.type);
-    const ports = portsOf(doc, name, palette, val?.ports);
+    const ports = portsOf({ ...doc, wires: wiresOf.get(name) ?? [] }, name, palette, val?.ports);
+    const errors = errorsOf.get(name) ?? [];
     // ports the last check named (outputs with a signal, inputs an error is about)
-    for (const ref of Object.keys(val?.signals ?? {})) {
-      const [sb, sp] = splitRef(ref);
-      if (sb === name && sp && !ports.outputs.includes(sp) && !ports.inputs.includes(sp)) ports.outputs.push(sp);
+    for (const sp of signalPorts.get(name) ?? []) {
+      if (!ports.outputs.includes(sp) && !ports.inputs.includes(sp)) ports.outputs.push(sp);
     }
     for (const e of errors) {
       if (e.block === name && e.port && !ports.inputs.includes(e.port) && !ports.outputs.includes(e.port)) ports.inputs.push(e.port);
@@ -305,4 +332,52 @@ function countBlocks(doc: Doc, g: string): number {
 export function handleRef(doc: Doc, node: string, handle: string): string {
   if (node in doc.blocks) return `${node}.${handle}`;
   return handle; // groups and boundary nodes carry full refs
+}
+
+function sameJson(a: unknown, b: unknown): boolean {
+  return a === b || JSON.stringify(a) === JSON.stringify(b);
+}
+
+function sameNode(a: FlowNode, b: FlowNode): boolean {
+  return (
+    a.type === b.type &&
+    a.position.x === b.position.x &&
+    a.position.y === b.position.y &&
+    !!a.selected === !!b.selected &&
+    a.width === b.width &&
+    a.height === b.height &&
+    a.className === b.className &&
+    a.deletable === b.deletable &&
+    sameJson(a.data, b.data)
+  );
+}
+
+function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
+  return (
+    a.source === b.source &&
+    a.target === b.target &&
+    a.sourceHandle === b.sourceHandle &&
+    a.targetHandle === b.targetHandle &&
+    !!a.selected === !!b.selected &&
+    a.className === b.className &&
+    sameJson(a.data, b.data)
+  );
+}
+
+/** `next` with each node and edge equal to one of `prev` replaced by that object (the same
+ * identity: React Flow's memoised node and edge components then skip it). The arrays are
+ * `prev`'s own when nothing changed at all. */
+export function stableFlow(prev: { nodes: FlowNode[]; edges: FlowEdge[] }, next: { nodes: FlowNode[]; edges: FlowEdge[] }): { nodes: FlowNode[]; edges: FlowEdge[] } {
+  const oldNodes = new Map(prev.nodes.map((n) => [n.id, n]));
+  const oldEdges = new Map(prev.edges.map((e) => [e.id, e]));
+  const nodes = next.nodes.map((n) => {
+    const o = oldNodes.get(n.id);
+    return o && sameNode(o, n) ? o : n;
+  });
+  const edges = next.edges.map((e) => {
+    const o = oldEdges.get(e.id);
+    return o && sameEdge(o, e) ? o : e;
+  });
+  const same = <T,>(a: T[], b: T[]) => a.length === b.length && a.every((x, i) => x === b[i]);
+  return { nodes: same(nodes, prev.nodes) ? prev.nodes : nodes, edges: same(edges, prev.edges) ? prev.edges : edges };
 }

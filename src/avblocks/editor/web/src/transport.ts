@@ -106,6 +106,39 @@ export class WidgetTransport implements Transport {
   }
 }
 
+/** Where the document in the page came from: a file under the server's folder (with the
+ * revision it had when loaded or last saved), a built-in case study, or neither. */
+export interface FileRef {
+  path: string | null;
+  builtin: string | null;
+  revision: string | null;
+}
+
+export interface SaveArgs {
+  path: string;
+  document: Doc;
+  revision: string | null;
+  draft: boolean;
+  origin?: string;
+}
+
+/** The `save` request for writing the page's document to `path` (API.md). Saving over the
+ * file it was loaded from sends that file's revision (a change on disk since then is a 409);
+ * saving elsewhere ("save as", or a built-in's first save) sends `origin`, the built-in or
+ * the file it came from, so the new file keeps that one's comments and forms. `force`
+ * (overwrite after a 409) sends no revision. */
+export function saveRequest(file: FileRef, path: string, document: Doc, opts: { force?: boolean; draft: boolean }): SaveArgs {
+  const same = file.path !== null && file.path === path && file.builtin === null;
+  const origin = file.builtin ?? (file.path !== null && !same ? file.path : null);
+  return {
+    path,
+    document,
+    revision: same && !opts.force ? file.revision : null,
+    draft: opts.draft,
+    ...(origin !== null ? { origin } : {}),
+  };
+}
+
 /** The operations of API.md, typed. */
 export class Api {
   t: Transport;
@@ -124,8 +157,8 @@ export class Api {
   validate(document: Doc) {
     return this.t.call<Validation>('validate', { document }, 'POST');
   }
-  save(args: { path: string; document: Doc; revision?: string | null; draft?: boolean; origin?: string }) {
-    return this.t.call<{ path: string; revision: string; draft: boolean }>('save', args, 'POST');
+  save(args: SaveArgs) {
+    return this.t.call<{ path: string; revision: string; draft: boolean }>('save', { ...args }, 'POST');
   }
   run(args: { document: Doc; backend: string; t_final?: number; dt?: number }) {
     return this.t.call<{ run: string }>('run', args, 'POST');

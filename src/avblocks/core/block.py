@@ -90,11 +90,12 @@ class Block:
         from .declarations import constructor_parameters
         return constructor_parameters(cls)
 
-    def port_table(self, n=None) -> dict:
+    def port_table(self, n=None, *, symbolic=True) -> dict:
         """This instance's ports with the agent axis as ``N`` (the block's
-        ``n``, else ``n``): :func:`avblocks.core.declarations.port_table`."""
+        ``n``, else ``n``; ``symbolic=False``: every size as a number):
+        :func:`avblocks.core.declarations.port_table`."""
         from .declarations import port_table
-        return port_table(self, n)
+        return port_table(self, n, symbolic=symbolic)
 
     def __init_subclass__(cls, **kw):
         super().__init_subclass__(**kw)

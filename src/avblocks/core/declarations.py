@@ -214,12 +214,14 @@ def shape_text(shape, agents=False, n=None) -> str:
     return "(" + ", ".join(dims) + ("," if len(dims) == 1 else "") + ")"
 
 
-def port_table(block, n=None) -> dict:
+def port_table(block, n=None, *, symbolic=True) -> dict:
     """``{"inputs": [...], "outputs": [...]}`` of a block instance: each
     port's name, shape text with the agent axis as ``N`` (the block's
-    ``n``, else the ``n`` given), dtype, unit and description (the
-    port's own, else the docstring's ``Ports`` section)."""
-    n = getattr(block, "n", n)
+    ``n``, else the ``n`` given; ``symbolic=False``: numbers only, for a
+    block whose size is fixed rather than the diagram's agent count),
+    dtype, unit and description (the port's own, else the docstring's
+    ``Ports`` section)."""
+    n = getattr(block, "n", n) if symbolic else None
     try:
         n = int(n) if n is not None else None
     except (TypeError, ValueError):

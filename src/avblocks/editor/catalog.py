@@ -116,10 +116,15 @@ def describe(cls, typ) -> dict:
     else:
         try:
             block = build_template(cls, typ, template)
+        except ImportError as e:                # an extra is missing here
+            entry["error"] = f"needs an optional extra that is not installed: {e}"
         except (AvError, TypeError, ValueError) as e:
             entry["error"] = f"the template does not build: {e}"
     if block is not None:
-        entry.update(block.port_table(TEMPLATE_AGENTS))
+        # "N" only where the template follows $agents (an interface block's
+        # vehicles are those of its scene: a number)
+        entry.update(block.port_table(TEMPLATE_AGENTS,
+                                      symbolic="$agents" in json.dumps(template)))
         n = getattr(block, "n", None)
         for d in params:
             spec = block.parameters.get(d.name)
@@ -166,7 +171,9 @@ def palette(extra_modules=()) -> dict:
     form a family each (``--blocks mypackage.blocks``)."""
     from .. import __version__
     from ..scenarios.loader import block_registry, module_blocks
-    reg = block_registry()
+    # interfaces: the physics and camera blocks a file may name (their
+    # entries say what extra they need where it is missing)
+    reg = block_registry(interfaces=True)
     families = []
     for fam in FAMILIES:
         blocks = [describe(cls, typ) for typ, cls in reg.items()

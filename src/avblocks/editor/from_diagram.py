@@ -50,7 +50,7 @@ def document_of(diagram, modules=()) -> dict:
     from ..core.guarded import constructor_arguments
     from ..scenarios.loader import block_registry
     from .service import EMPTY_DOCUMENT
-    types = {cls: typ for typ, cls in block_registry(modules=modules).items()}
+    types = {cls: typ for typ, cls in block_registry(modules=modules, interfaces=True).items()}
     blocks = {}
     for name, h in diagram.blocks.items():
         b = h.block

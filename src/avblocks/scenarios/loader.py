@@ -218,8 +218,8 @@ def block_registry(code_blocks=False, modules=(), interfaces=False) -> dict:
     that a scenario file can name (``code_blocks=True``: also those that
     take Python code, such as ``blocks.Function``; ``interfaces=True``:
     also the blocks of :data:`FILE_INTERFACES`, named
-    ``"interfaces.mujoco.SceneCamera"``, which need their extras and are
-    not in the editor's palette; ``modules``: user modules whose blocks
+    ``"interfaces.mujoco.SceneCamera"``, which need their extras;
+    ``modules``: user modules whose blocks
     are named ``"module.Class"``, see :func:`module_blocks`)."""
     import importlib
 

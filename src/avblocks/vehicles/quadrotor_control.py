@@ -321,8 +321,8 @@ class VelocityControlledQuadrotor(Diagram):
         constructor name (the vehicle's where both have one)."""
         return {**self["ctrl"].block.parameters, **self["quad"].block.parameters}
 
-    def port_table(self, n=None) -> dict:
+    def port_table(self, n=None, *, symbolic=True) -> dict:
         """The subsystem's ports with the agent axis as ``N``
         (:func:`avblocks.core.declarations.port_table`)."""
         from ..core.declarations import port_table
-        return port_table(self, n)
+        return port_table(self, n, symbolic=symbolic)

@@ -123,6 +123,16 @@ class PhysicsWorld(Block):
     #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
     traceable = False
 
+    #: what the editor's palette starts a new block with: a scene in numbers
+    #: (a ground robot and a quadrotor), as a scenario file gives it
+    example = {"scene": {"mujoco_scene": {
+        "world": {"bounds": [-5.0, -5.0, 5.0, 5.0]},
+        "ground_robots": {"rover": {"pose0": [[0.0, 0.0, 0.0]], "radius": 0.25,
+                                    "height": 0.12, "color": [0.85, 0.05, 0.05],
+                                    "kinematic": True}},
+        "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
+                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}}, "period": 0.01}
+
     def __init__(self, scene, period=0.01, *, tau_v=0.02, tau_w=0.02, prefix=None,
                  state_outputs=False):
         super().__init__()

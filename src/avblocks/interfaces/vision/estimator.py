@@ -64,6 +64,11 @@ class GroundPointEstimator(Block):
 
     update_uses_outputs = True
 
+    #: what the editor's palette starts a new block with: a downward camera
+    #: of 160 x 120 pixels and 60 degrees under the body
+    example = {"n": 1, "K": {"camera_matrix": {"fovy": 60.0, "width": 160, "height": 120}},
+               "mount_pos": [0.0, 0.0, -0.06], "mount_rot": {"camera_axes": {}}}
+
     def __init__(self, n, K, mount_pos, mount_rot, *, z0=0.0, point0=(0.0, 0.0, 0.0)):
         super().__init__()
         self.n = n = int(n)

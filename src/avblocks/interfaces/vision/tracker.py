@@ -155,6 +155,9 @@ class ColorBlobTracker(Block):
     #: NumPy/MuJoCo/OpenCV code: the compiled (JAX) backend refuses it by name.
     traceable = False
 
+    #: what the editor's palette starts a new block with
+    example = {"n": 1, "height": 120, "width": 160}
+
     def __init__(self, n, height, width, *, lower=(170, 120, 70),
                  upper=(10, 255, 255), min_area=4, open_px=0):
         super().__init__()

@@ -99,3 +99,160 @@ def test_width_classes():
     assert width_classes(40) == (16, 24, 40)
     assert width_classes(24) == (16, 24)           # a quarter would be below 16
     assert width_classes(16) == (16,)
+
+
+# ------------------------------------------------- within and candidates
+
+def brute_within(p, r, box=None):
+    """Independent truth: every other point within r (inclusive), all pairs."""
+    d = p[None, :, :] - p[:, None, :]
+    if box is not None:
+        d = d - np.asarray(box) * np.round(d / np.asarray(box))
+    dist = np.sqrt((d ** 2).sum(-1))
+    ok = (dist <= r) & ~np.eye(len(p), dtype=bool)
+    return [set(np.nonzero(ok[a])[0].tolist()) for a in range(len(p))], dist
+
+
+def rows_as_sets(idx):
+    return [set(int(j) for j in row if j >= 0) for row in np.asarray(idx)]
+
+
+def kdtree_sets(p, r):
+    """SciPy's k-d tree: the others within r (inclusive)."""
+    tree = cKDTree(p)
+    return [set(s) - {a} for a, s in enumerate(tree.query_ball_point(p, r))]
+
+
+# smaller crowds than above: XLA's CPU compile of the radius search grows
+# fast with the candidate width (a 450-wide plan took about a minute)
+
+def one_cell_small(rng):
+    return rng.uniform(0, 0.2, (90, 2))                 # every point in one cell
+
+
+def two_clusters_small(rng):
+    return np.concatenate([rng.normal(0, 0.15, (60, 2)), rng.normal(1000, 0.15, (60, 2)),
+                           rng.uniform(-100, 100, (300, 2))])
+
+
+def lattice_and_blob_small(rng):
+    g = np.stack(np.meshgrid(np.arange(20.0), np.arange(20.0)), -1).reshape(-1, 2)
+    return np.concatenate([g, 10.0 + np.round(rng.uniform(0, 0.5, (50, 2)) * 4) / 4])
+
+
+SMALL = [one_cell_small, two_clusters_small, lattice_and_blob_small]
+
+
+def cells_around(p, plan):
+    """Independent truth for candidates: the points in the 5 x 5 cells around
+    each point's own (edge reach / split), counted in Python integers."""
+    e = plan.reach / plan.split
+    c = np.floor(p / e).astype(np.int64)
+    near = np.all(np.abs(c[None, :, :] - c[:, None, :]) <= plan.split, axis=-1)
+    return [set(np.nonzero(near[a])[0].tolist()) for a in range(len(p))]
+
+
+@pytest.mark.parametrize("cloud", SMALL)
+def test_within_on_crowded_clouds_equals_brute_force_and_the_kd_tree(cloud):
+    p = cloud(np.random.default_rng(6))
+    r = 1.0
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, r)
+        i, d, need = jax.jit(lambda q: sp.within(plan, q, r, xp=jnp))(jnp.asarray(p))
+    i, d = np.asarray(i), np.asarray(d)
+    assert plan.exceeded(need) is None                  # the plan held every row
+    assert len(width_classes(plan.capacity)) > 1        # narrow widths were on offer
+    want, dist = brute_within(p, r)
+    assert rows_as_sets(i) == want == kdtree_sets(p, r)
+    ok = i >= 0
+    rows = np.broadcast_to(np.arange(len(p))[:, None], i.shape)
+    np.testing.assert_allclose(d[ok], dist[rows[ok], i[ok]], rtol=1e-12)
+    assert np.all(np.isinf(d[~ok]))
+    assert int(need.hits) == max(len(s) for s in want)
+    if cloud is one_cell_small:         # the same under vmap (one width: the plan's)
+        with jax.enable_x64(True):
+            iv = jax.jit(jax.vmap(lambda q: sp.within(plan, q, r, xp=jnp)[0]))(
+                jnp.asarray(np.stack([p, p[::-1]])))
+        assert rows_as_sets(iv[0]) == want
+        assert rows_as_sets(iv[1]) == brute_within(p[::-1], r)[0]
+
+
+@pytest.mark.parametrize("cloud", SMALL)
+def test_candidates_on_crowded_clouds_are_the_cells_around(cloud):
+    p = cloud(np.random.default_rng(7))
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, 1.0)
+        c, need = jax.jit(lambda q: sp.candidates(plan, q, xp=jnp))(jnp.asarray(p))
+    c = np.asarray(c)
+    assert c.shape == (len(p), plan.capacity)
+    want = cells_around(p, plan)
+    assert rows_as_sets(c) == want
+    assert int(need.capacity) == max(len(s) for s in want) <= plan.capacity
+    # each row: its candidates first, then -1 only
+    filled = c >= 0
+    assert np.all(filled.sum(1) == [len(s) for s in want])
+    assert np.all(np.diff(filled.astype(int), axis=1) <= 0)
+
+
+def test_within_and_candidates_over_many_chunks_take_their_own_widths():
+    rng = np.random.default_rng(9)
+    p = np.concatenate([rng.uniform(0, 400, (2 * TRACED_CHUNK, 2)),
+                        rng.normal(200, 0.3, (60, 2))])
+    r = 2.0
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, r)
+        i, _, need = jax.jit(lambda q: sp.within(plan, q, r, xp=jnp))(jnp.asarray(p))
+        c, _ = jax.jit(lambda q: sp.candidates(plan, q, xp=jnp))(jnp.asarray(p))
+    assert plan.exceeded(need) is None
+    assert rows_as_sets(i) == brute_within(p, r)[0] == kdtree_sets(p, r)
+    assert rows_as_sets(c) == cells_around(p, plan)
+
+
+def test_within_in_a_periodic_box_with_a_crowd():
+    rng = np.random.default_rng(3)
+    box = (20.0, 20.0)
+    p = np.concatenate([rng.uniform(0, 20, (300, 2)),
+                        np.mod(rng.normal(0, 0.2, (50, 2)), 20.0)])  # across the corner
+    r = 1.5
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, r, box=box)
+        i, _, need = jax.jit(lambda q: sp.within(plan, q, r, xp=jnp))(jnp.asarray(p))
+    assert plan.exceeded(need) is None and len(width_classes(plan.capacity)) > 1
+    assert rows_as_sets(i) == brute_within(p, r, box)[0]
+
+
+def test_an_undersized_within_plan_is_reported_not_silent():
+    p = one_cell_small(np.random.default_rng(2))
+    small = sp.CellList(1.0, capacity=32, hits=16)
+    with jax.enable_x64(True):
+        _, _, need = jax.jit(lambda q: sp.within(small, q, 1.0, xp=jnp))(jnp.asarray(p))
+        _, cneed = jax.jit(lambda q: sp.candidates(small, q, xp=jnp))(jnp.asarray(p))
+    msg = small.exceeded(need)
+    assert msg and "capacity" in msg and "hits" in msg
+    assert int(need.capacity) == int(cneed.capacity) == len(p)
+
+
+def test_grad_through_within_on_a_crowd_equals_finite_differences():
+    rng = np.random.default_rng(11)
+    p = np.concatenate([rng.uniform(0, 30, (200, 2)), rng.normal(15, 0.4, (40, 2))])
+    r = 1.0
+    with jax.enable_x64(True):
+        plan = sp.plan_cells(p, r)
+        assert len(width_classes(plan.capacity)) > 1
+
+        def cost(q):
+            i, d, _ = sp.within(plan, q, r, xp=jnp)
+            return jnp.sum(jnp.where(i >= 0, (r - d) ** 3, 0.0))
+
+        g = np.asarray(jax.jit(jax.grad(cost))(jnp.asarray(p)))
+
+    def c_np(q):                # all pairs, NumPy: an independent evaluation
+        d = np.sqrt(((q[None] - q[:, None]) ** 2).sum(-1))
+        ok = (d <= r) & ~np.eye(len(q), dtype=bool)
+        return np.sum(np.where(ok, (r - d) ** 3, 0.0))
+    h = 1e-6
+    for a in [(0, 0), (7, 1), (205, 0), (230, 1)]:
+        e = np.zeros_like(p)
+        e[a] = h
+        fd = (c_np(p + e) - c_np(p - e)) / (2 * h)
+        assert g[a] == pytest.approx(fd, rel=1e-5, abs=1e-8)

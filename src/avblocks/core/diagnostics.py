@@ -23,8 +23,11 @@ A block that calls a search inside its own ``lax.cond``/``while_loop``
 body carries the tally through it as well: :func:`held` before, the body
 traced under :func:`resumed`, :func:`absorb` of what comes out (the
 Verlet list rebuild of :mod:`avblocks.utility.spatial.verlet` does).
-Code that traces blocks without a tally (the reinforcement-learning
-environments step the engine themselves) gets no reports and no cost; a
+The reinforcement-learning environments, which step the engine
+themselves, keep a tally the same way: it rides in their state from step
+to step and is checked on the host after resets, steps and rollouts
+(:meth:`avblocks.rl.FunctionalEnv.check`). Code that traces blocks without
+any tally (a block's function jitted alone) gets no reports and no cost; a
 search that would cut its selection short to a plan is exact there
 (:func:`kept`), so no caller needs a special case.
 """

@@ -8,6 +8,8 @@ engines move, only this module changes.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..core import rng
 from ..core.engine import Engine
 from ..core.params import bound_parameters
@@ -17,15 +19,42 @@ from ..core.solvers import make_solver
 def traced_engine(compiled, dt, jnp, canon):
     """The compiled backend's engine (errors name the block, fixed dtypes).
 
-    A compiled *run* keeps a tally of what its neighbour searches needed
-    (:mod:`avblocks.core.diagnostics`) and checks it after the run. An
-    environment steps the engine itself and keeps no tally, so its blocks'
-    reports do nothing and cost nothing (no host callback, under ``vmap``
-    too): its searches must be exact (the default for N <= 64 agents: all
-    pairs) or planned with enough headroom, and an edge grid's ``reach``
-    must cover the ranges asked."""
+    Like a compiled run, an environment keeps a tally of what its neighbour
+    searches needed (:mod:`avblocks.core.diagnostics`; :func:`need_rows`,
+    :func:`tally`), carried in its state, and checks it on the host
+    (:func:`overflows`), never by a callback per step."""
     from ..core.compiled.engine import TracedEngine
     return TracedEngine(compiled, dt, jnp, canon)
+
+
+def plan_searches(compiled, dt):
+    """Plan the neighbour searches of ``compiled`` as the compiled engine
+    does (from the plan book, or the block inputs at ``t0``)."""
+    from ..core.compiled.plans import plan_searches as plan
+    return plan(compiled, dt=dt)
+
+
+def need_rows(compiled):
+    """``{(block name, search number): row}`` of the needs tally."""
+    from ..core import diagnostics
+    return diagnostics.rows_of(compiled.blocks, compiled.names)
+
+
+def tally(rows, value):
+    """Reports of the searches traced inside go to a tally starting from
+    ``value`` (see :func:`avblocks.core.diagnostics.tally`)."""
+    from ..core import diagnostics
+    return diagnostics.tally(rows, value)
+
+
+def overflows(compiled, rows, value):
+    """``[(block name, search, need, message)]`` of the searches whose need
+    in ``value`` (a tally, or tallies stacked on leading axes: the largest
+    counts) exceeds their plan."""
+    from ..core.compiled.plans import overflows as over
+    v = np.asarray(value)
+    v = v.reshape((-1,) + v.shape[-2:]).max(axis=0)
+    return over(compiled, {k: v[r] for k, r in rows.items()})
 
 
 def jax():
@@ -73,4 +102,4 @@ def advance(eng, solver, after_action, X, Y, k, dt, substeps):
 
 
 __all__ = ["advance", "outputs_of", "Engine", "bound_parameters", "make_solver", "rng",
-           "traced_engine", "jax"]
+           "traced_engine", "jax", "plan_searches", "need_rows", "tally", "overflows"]

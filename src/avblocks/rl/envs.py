@@ -78,6 +78,7 @@ class _Stepper:
 
     def reset(self, params=None):
         self.state, obs = self._reset(self.next_key(), params)
+        self.fenv.check(self.state)         # a search cut short is never silent
         self.last_obs = np.asarray(obs)
         return self.last_obs
 
@@ -85,6 +86,7 @@ class _Stepper:
         a = np.asarray(action, dtype=np.float32).reshape(self.fenv.n, self.fenv.act_dim)
         a = np.clip(a, self.fenv.action_low, self.fenv.action_high)
         self.state, obs, r, d, info = self._step(self.state, a, params)
+        self.fenv.check(self.state)
         info = {k: np.asarray(v) for k, v in info.items()}
         self.last_obs = np.asarray(obs)
         return self.last_obs, np.asarray(r), bool(info["terminated"]), \
@@ -302,6 +304,7 @@ def _make_vector_class():
             params = (options or {}).get("params", self.params)
             keys = self._keys(self.num_envs)
             self.state, obs = self._reset(keys, params)
+            self.fenv.check(self.state)     # a search cut short is never silent
             return self._shape_obs(obs), {}
 
         def step(self, actions):
@@ -311,6 +314,7 @@ def _make_vector_class():
             a = np.clip(a, fe.action_low, fe.action_high)
             keys = self._keys(self.num_envs)
             self.state, obs, r, d, info = self._step(keys, self.state, a, self.params)
+            self.fenv.check(self.state)
             info = {k: np.asarray(v) for k, v in info.items()}
             r = np.asarray(r)
             term = np.asarray(info["terminated"], dtype=bool)

@@ -22,6 +22,16 @@ the episode (``theta``: domain randomization is a different ``params`` at
 each reset) and the step counters. Nothing is global and nothing is
 mutated, so ``jax.vmap`` over keys gives independent copies.
 
+Neighbour searches (JAX): the env plans them as a compiled run does, from
+the diagram's inputs at ``t0`` (or the plan a compiled run of the same
+structure grew), and the state carries what they needed (``needs``, a
+running maximum over steps and episodes; no host call per step). A plan
+too small for what an episode met is never silent: the Gymnasium,
+PettingZoo and vector wrappers and :meth:`FunctionalEnv.rollout` check it
+after each reset and step (rollout) and raise
+:class:`~avblocks.core.errors.SimulationError`; code that jits its own
+loop calls :meth:`FunctionalEnv.check` on a state it gets back.
+
 Observations are the named output ports, each reshaped to ``(N, -1)`` and
 concatenated along the last axis (or a function of the step's signals).
 Rewards are ``(N,)`` per agent; an episode ends when ``done`` holds for
@@ -51,6 +61,9 @@ class EnvState(NamedTuple):
     k: Any             # major step index (int)
     steps: Any         # control steps taken in this episode (int)
     key: Any           # the episode's key (for the next automatic reset)
+    #: JAX: the most each neighbour search needed since the env's first reset
+    #: (a tally, see :meth:`FunctionalEnv.check`); None without searches / NumPy
+    needs: Any = None
 
 
 class Signals(dict):
@@ -202,10 +215,13 @@ class FunctionalEnv:
         if backend == "jax":
             jax = _engine.jax()
             self.xp = jax.numpy
+            _engine.plan_searches(cd, task.dt)
+            self._rows = _engine.need_rows(cd)
             self._eng = _engine.traced_engine(cd, task.dt, jax.numpy,
                                               jax.dtypes.canonicalize_dtype)
         else:
             self.xp = np
+            self._rows = {}
             self._eng = _engine.Engine(cd, task.dt, np)
         for p in ([] if callable(task.observe) else task.observe) + \
                 [v for v in (task.reward, task.done, *task.info.values())
@@ -309,12 +325,50 @@ class FunctionalEnv:
                 X[i] = {**X[i], r: _fold(kk, salt, xp)}
         X = [{k: self._cast(v, cd.blocks[i]._init[k].dtype) for k, v in x.items()}
              for i, x in enumerate(X)]
-        with self._bind(theta):
+        with self._bind(theta), self._tally(None) as tl:
             Y = self._eng.all_outputs(0.0, X, [dict() for _ in cd.blocks])
         sig = self._signals(Y)
         obs = self._observe(sig)
         zero = xp.asarray(0, dtype=xp.int32)
-        return EnvState(X, Y, theta, zero, zero, k_ep), obs
+        return EnvState(X, Y, theta, zero, zero, k_ep, self._needs(tl)), obs
+
+    def _tally(self, needs):
+        """The tally the searches report to while a reset or step traces
+        (``needs``: carried in, None: from zero); a no-op without searches."""
+        if not self._rows:
+            return _engine.tally({}, None)
+        if needs is None:
+            needs = self.xp.zeros((len(self._rows), 4), self.xp.asarray(0.0).dtype)
+        return _engine.tally(self._rows, needs)
+
+    def _needs(self, tl):
+        return None if tl is None else tl.value
+
+    def overflows(self, state):
+        """``[(block name, search, need, message)]`` of the neighbour
+        searches whose plan was too small for what ``state`` (or states
+        stacked on leading axes) met since the first reset: their results
+        were cut short. Empty when all held (and under NumPy, which sizes
+        each search itself). Host side: reads ``state.needs``."""
+        if not self._rows or state.needs is None:
+            return []
+        return _engine.overflows(self.cd, self._rows, state.needs)
+
+    def check(self, state):
+        """Raise :class:`~avblocks.core.errors.SimulationError` naming the
+        block and the sizes when :meth:`overflows` finds any (call it on a
+        state a jitted loop returns); returns ``state``."""
+        over = self.overflows(state)
+        if over:
+            from ..core.errors import SimulationError
+            names = ", ".join(f"'{n}' ({m})" for n, _, _, m in over)
+            raise SimulationError(
+                "a neighbour search of the environment overflowed its static plan, so "
+                f"its results were cut short: {names}", block=over[0][0],
+                hint="give the block's search a larger capacity= (and hits=), or plan "
+                     "it from a crowded state: a compiled run of the diagram that "
+                     "re-plans keeps its grown plan for environments made after it")
+        return state
 
     def _cast(self, v, dtype):
         xp = self.xp
@@ -336,7 +390,7 @@ class FunctionalEnv:
         a = xp.reshape(xp.asarray(action), (self.n, self.act_dim))
         X[ai] = {**X[ai], "value": xp.asarray(a, dtype=X[ai]["value"].dtype)}
         Y, k, dt = state.Y, state.k, self.dt
-        with self._bind(theta):
+        with self._bind(theta), self._tally(state.needs) as tl:
             X, Y, k = _engine.advance(eng, solver, self._after_action, X, Y, k, dt,
                                       self.task.substeps)
             sig = self._signals(Y)
@@ -357,7 +411,7 @@ class FunctionalEnv:
         info["terminated"] = terminated
         info["truncated"] = truncated & ~terminated
         done = xp.broadcast_to(terminated | truncated, (self.n,))
-        new = EnvState(X, Y, theta, k, steps, state.key)
+        new = EnvState(X, Y, theta, k, steps, state.key, self._needs(tl))
         return new, obs, reward, done, info
 
     def step(self, key, state, action, params=None):
@@ -379,6 +433,8 @@ class FunctionalEnv:
         jax = _engine.jax()
         pick = lambda a, b: xp.where(ended, a, b)  # noqa: E731
         out = jax.tree_util.tree_map(pick, rstate, new)
+        if new.needs is not None:        # the tally spans episodes
+            out = out._replace(needs=xp.maximum(new.needs, rstate.needs))
         return out, pick(robs, obs), reward, done, info
 
     # ----------------------------------------------------------- rollouts
@@ -386,7 +442,8 @@ class FunctionalEnv:
         """``steps`` control steps from a fresh episode under
         ``policy(policy_params, obs, key) -> action`` as one ``lax.scan``
         (JAX backend): returns ``(obs, actions, rewards, dones)`` stacked
-        over time."""
+        over time. Called outside a JAX transformation, it checks the
+        neighbour searches' needs afterwards (:meth:`check`)."""
         jax = _engine.jax()
         jnp = jax.numpy
         k0, k1 = jax.random.split(jnp.asarray(key, dtype=jnp.uint32))
@@ -399,7 +456,9 @@ class FunctionalEnv:
             state, obs2, r, d, _ = self.step(ks, state, a, params)
             return (state, obs2), (obs, a, r, d)
 
-        _, out = jax.lax.scan(body, (state, obs), jax.random.split(k1, steps))
+        (last, _), out = jax.lax.scan(body, (state, obs), jax.random.split(k1, steps))
+        if last.needs is not None and not isinstance(last.needs, jax.core.Tracer):
+            self.check(last)
         return out
 
 

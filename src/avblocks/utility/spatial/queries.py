@@ -375,8 +375,9 @@ MIN_WIDTH = 16
 
 
 def width_classes(cap):
-    """Candidate widths a traced :func:`nearest` chooses from per chunk of
-    rows (per step when the rows fit one chunk): ``cap``, ``cap / 2`` and
+    """Candidate widths a traced :func:`nearest`, :func:`within` or
+    :func:`candidates` chooses from per chunk of rows (per step when the
+    rows fit one chunk): ``cap``, ``cap / 2`` and
     ``cap / 4`` rounded up to multiples of 8, none below :data:`MIN_WIDTH`
     (ascending). A chunk takes the smallest that holds its most crowded
     row, so its work follows its own crowding, not the plan's worst point."""
@@ -415,22 +416,52 @@ def _pad_cols(a, k, fill, xp):
     return xp.concatenate([a, pad], axis=1)
 
 
+def _by_width(make_row, cells, cap, query, args, xp):
+    """:func:`_rowmap` of ``make_row(width)`` (a row function that reads
+    ``width`` candidate slots per row): traced, each chunk of rows (the
+    whole step up to :data:`TRACED_CHUNK` rows) takes the smallest of the
+    :func:`width_classes` of ``cap`` that holds its most crowded row
+    (``lax.switch``), so crowding in one place or at one time does not
+    widen every row of every step; NumPy, under ``vmap`` and in an
+    all-pairs search the one width ``cap`` serves. Every row function must
+    return the same shapes whatever its width."""
+    widths = () if (xp is np or cells.brute) else width_classes(cap)
+    if len(widths) <= 1 or _batched(args):
+        return _rowmap(make_row(cap), args, xp)
+    import jax
+    rows = [make_row(w) for w in widths]
+    nq = len(query.q)
+
+    def pick(*a):
+        nr = (len(a) - 2 - nq) // 2
+        lo, hi = a[2 + nq:2 + nq + nr], a[2 + nq + nr:]
+        most = xp.max(sum(h - l for l, h in zip(lo, hi)))
+        c = sum((most > w).astype(np.int32) for w in widths[:-1])
+        return jax.lax.switch(c, rows, *a)
+    return _rowmap(pick, args, xp)
+
+
 def candidates(cells, points, queries=None, xp=np):
     """Candidate neighbours of each query point: ``(cand, need)``.
 
     ``cand`` is (Q, M) int point indices, ``-1`` where empty, ``M =
     capacity``; every point within ``cells.reach`` of a query point is in
     its row when ``need.capacity <= capacity``. ``queries`` defaults to
-    ``points``.
+    ``points``. Traced, each chunk of rows gathers only the smallest width
+    class (:func:`width_classes`) that holds its most crowded row and pads
+    the rest of its rows with ``-1``.
     """
     ps, order, query, cap = _prepare(cells, points, queries, xp)
-    f = _chunk_fn(cells, ps, order, cap, None, xp)
 
-    def row(*args):
-        idx, ok, _, _, cnt = f(*args)
-        return xp.where(ok, idx, -1), cnt
+    def make_row(w):
+        f = _chunk_fn(cells, ps, order, w, None, xp)
 
-    cand, cnt = _rowmap(row, _args(query, None, xp), xp)
+        def row(*args):
+            idx, ok, _, _, cnt = f(*args)
+            return _pad_cols(xp.where(ok, idx, -1), cap, -1, xp), cnt
+        return row
+
+    cand, cnt = _by_width(make_row, cells, cap, query, _args(query, None, xp), xp)
     (cand,) = _unsort(query.rows, [cand], xp)
     return cand, Need(xp.max(cnt), xp.asarray(0.0), 0, query.span)
 
@@ -452,18 +483,40 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
     no particular order) and their distances (``inf`` where none); ``H =
     cells.hits`` (NumPy without a plan: the largest count found). With
     ``queries`` None the query points are the points and ``exclude_self``
-    drops each point from its own row.
+    drops each point from its own row. Traced, each chunk of rows scans
+    only the smallest width class (:func:`width_classes`) of candidates
+    that holds its most crowded row and compacts its hits to ``H``
+    columns there.
     """
     ps, order, query, cap = _prepare(cells, points, queries, xp,
                                      exclude_self=exclude_self)
-    f = _chunk_fn(cells, ps, order, cap, radius, xp)
+    args = _args(query, None, xp)
+    if xp is np or cells.brute or len(width_classes(cap)) <= 1 or _batched(args):
+        # one width: the candidates of all rows, then one compaction
+        f = _chunk_fn(cells, ps, order, cap, radius, xp)
 
-    def row(*args):
-        idx, _, val, d2, cnt = f(*args)
-        return idx, val, d2, cnt, xp.sum(val, axis=1)
+        def row(*args):
+            idx, _, val, d2, cnt = f(*args)
+            return idx, val, d2, cnt, xp.sum(val, axis=1)
 
-    idx, val, d2, cnt, nh = _rowmap(row, _args(query, None, xp), xp)
-    (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
+        idx, val, d2, cnt, nh = _rowmap(row, args, xp)
+        (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
+    else:
+        # a width per chunk: each chunk compacts its own rows
+        if cells.hits is None:
+            raise ParameterError("a traced search needs a static hits width",
+                                 param="hits", hint="plan it with plan_cells()")
+
+        def make_row(w):
+            f = _chunk_fn(cells, ps, order, w, radius, xp)
+
+            def row(*args):
+                idx, _, val, d2, cnt = f(*args)
+                (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
+                return ci, cd, cnt, xp.sum(val, axis=1)
+            return row
+
+        ci, cd, cnt, nh = _by_width(make_row, cells, cap, query, args, xp)
     dist = xp.sqrt(cd)
     ci, dist = _unsort(query.rows, [ci, dist], xp)
     return ci, dist, Need(xp.max(cnt), xp.asarray(radius, dtype=dist.dtype), xp.max(nh),
@@ -527,26 +580,10 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
         od = xp.where(fin, xp.sqrt(xp.where(fin, od, 1.0)), xp.inf)
         return _pad_cols(oi, k, -1, xp), _pad_cols(od, k, np.inf, xp), cnt
 
-    args = _args(query, heading, xp)
-    widths = () if (xp is np or cells.brute) else width_classes(cap)
-    if len(widths) > 1 and not _batched(args):
-        # the smallest width class that holds the chunk's (or, at most
-        # TRACED_CHUNK agents, the step's) most crowded row: crowding in
-        # one place or at one time does not widen every row of every step
-        import jax
-        rows = [make_row(_chunk_fn(cells, ps, order, w, radius, xp, fov=fov))
-                for w in widths]
-        nq = len(query.q)
-
-        def pick(*a):
-            nr = (len(a) - 2 - nq) // 2
-            lo, hi = a[2 + nq:2 + nq + nr], a[2 + nq + nr:]
-            most = xp.max(sum(h - l for l, h in zip(lo, hi)))
-            c = sum((most > w).astype(np.int32) for w in widths[:-1])
-            return jax.lax.switch(c, rows, *a)
-        oi, od, cnt = _rowmap(pick, args, xp)
-    else:
-        oi, od, cnt = _rowmap(make_row(f), args, xp)
+    oi, od, cnt = _by_width(
+        lambda w: make_row(f if w == cap else
+                           _chunk_fn(cells, ps, order, w, radius, xp, fov=fov)),
+        cells, cap, query, _args(query, heading, xp), xp)
     oi, od = _unsort(query.rows, [oi, od], xp)
     # nearest keeps no row of hits, so hits are no limit of it (need 0)
     return oi, od, Need(xp.max(cnt), xp.asarray(radius, dtype=od.dtype), 0, query.span)

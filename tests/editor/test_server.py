@@ -275,6 +275,31 @@ def test_save_as_from_a_file_keeps_its_text_and_a_stale_revision_is_409(editor_s
                                                "revision": now["revision"], "draft": False})
     assert status == 200 and a.read_text() == TEAM_FILE.replace("seed: 1", "seed: 2")
 
+
+def test_save_as_onto_another_existing_file_asks_first(editor_server):
+    """Save as sends ``create``: an existing file at that path is a 409
+    ``Exists`` and stays as it was; without ``create`` (the page's
+    "Overwrite") it is replaced; a new path is written."""
+    (editor_server.root / "keep.yaml").write_text(TEAM_FILE)
+    status, loaded = editor_server.post("load", {"builtin": "waypoints"})
+    doc = loaded["document"]
+    status, body = editor_server.post("save", {"path": "keep.yaml", "document": doc,
+                                               "origin": "waypoints", "create": True})
+    assert status == 409 and body["error"]["kind"] == "Exists", body
+    assert (editor_server.root / "keep.yaml").read_text() == TEAM_FILE
+    status, body = editor_server.post("save", {"path": "fresh.yaml", "document": doc,
+                                               "origin": "waypoints", "create": True})
+    assert status == 200, body
+    shipped = builtin_scenarios()["waypoints"].read_text()
+    assert (editor_server.root / "fresh.yaml").read_text() == shipped
+    status, body = editor_server.post("save", {"path": "keep.yaml", "document": doc,
+                                               "origin": "waypoints"})
+    assert status == 200, body
+    status, again = editor_server.post("load", {"path": "keep.yaml"})
+    assert again["document"]["blocks"] == doc["blocks"]
+    assert again["document"]["parameters"] == doc["parameters"]
+
+
 def _summary(tmp, target, sets=()):
     from avblocks.cli import main
     out = tmp / f"out-{Path(str(target)).stem}-{len(list(tmp.iterdir()))}"

@@ -399,13 +399,19 @@ class EditorService:
         except ScenarioError as e:
             raise EditorError(str(e), kind="ScenarioError") from None
 
-    def save(self, path, document, revision=None, draft=False, origin=None) -> dict:
+    def save(self, path, document, revision=None, draft=False, origin=None,
+             create=False) -> dict:
         """Write the document as a scenario file under the root, atomically,
         keeping the comments and forms of the file it was loaded from
         (``origin``: a built-in name or a path under the root, when it is
         not ``path`` itself). An invalid document is refused unless
-        ``draft``; a file changed on disk since ``revision`` is refused (409)."""
+        ``draft``; a file changed on disk since ``revision`` is refused (409),
+        and so is an existing file when ``create`` (a "save as" that would
+        replace another file: 409 ``Exists``)."""
         full = self._path(path, save=True)
+        if create and full.exists():
+            raise EditorError(f"'{path}' exists already; save again to replace it",
+                              status=409, kind="Exists")
         scenario_data(document)
         if origin is not None and not isinstance(origin, str):
             raise EditorError("origin is a built-in name or a path", kind="BadRequest")

@@ -36,7 +36,7 @@ type Dialog =
   | null
   | { kind: 'open' }
   | { kind: 'saveas'; draft: boolean }
-  | { kind: 'conflict'; path: string; draft: boolean }
+  | { kind: 'conflict'; path: string; draft: boolean; exists?: boolean }
   | { kind: 'help' }
   | { kind: 'export'; text: string; filename: string };
 
@@ -434,7 +434,7 @@ function Editor({ transport }: { transport: Transport }) {
         setDialog(null);
         toast(draft ? `saved ${r.path} as a draft (it has problems; avblocks run will report them)` : `saved ${r.path}`, draft ? 'warn' : 'info');
       } catch (e) {
-        if (e instanceof ApiError && e.status === 409) setDialog({ kind: 'conflict', path: p, draft });
+        if (e instanceof ApiError && e.status === 409) setDialog({ kind: 'conflict', path: p, draft, exists: e.kind === 'Exists' });
         else toast((e as Error).message, 'error');
       }
     },
@@ -886,9 +886,10 @@ function Editor({ transport }: { transport: Transport }) {
       {dialog?.kind === 'help' ? <HelpOverlay onClose={() => setDialog(null)} /> : null}
       {dialog?.kind === 'saveas' ? <SaveAs initial={file.path ?? `${(doc.name || 'diagram').replace(/[^\w.-]/g, '_')}.yaml`} draft={dialog.draft} onSave={(p) => doSave(p)} onClose={() => setDialog(null)} /> : null}
       {dialog?.kind === 'conflict' ? (
-        <Modal title="The file changed on disk" onClose={() => setDialog(null)}>
+        <Modal title={dialog.exists ? 'The file exists' : 'The file changed on disk'} onClose={() => setDialog(null)}>
           <p>
-            <span className="mono">{dialog.path}</span> was changed by something else since it was opened.
+            <span className="mono">{dialog.path}</span>{' '}
+            {dialog.exists ? 'is another file that exists already.' : 'was changed by something else since it was opened.'}
           </p>
           <div className="row">
             <button className="danger" onClick={() => doSave(dialog.path, { force: true, draft: dialog.draft })} data-testid="overwrite">

@@ -120,6 +120,7 @@ export interface SaveArgs {
   revision: string | null;
   draft: boolean;
   origin?: string;
+  create?: boolean;
 }
 
 /** The `save` request for writing the page's document to `path` (API.md). Saving over the
@@ -136,6 +137,8 @@ export function saveRequest(file: FileRef, path: string, document: Doc, opts: { 
     revision: same && !opts.force ? file.revision : null,
     draft: opts.draft,
     ...(origin !== null ? { origin } : {}),
+    // saving to another path never replaces a file there unless told to (force)
+    ...(!same && !opts.force ? { create: true } : {}),
   };
 }
 

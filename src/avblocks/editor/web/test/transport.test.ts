@@ -14,7 +14,13 @@ describe('saveRequest (what Save and Save as send)', () => {
 
   it('save as another file sends the loaded file as origin and no revision', () => {
     const r = saveRequest(loaded, 'b/copy.yaml', doc, { draft: true });
-    expect(r).toEqual({ path: 'b/copy.yaml', document: doc, revision: null, draft: true, origin: 'a/team.yaml' });
+    expect(r).toEqual({ path: 'b/copy.yaml', document: doc, revision: null, draft: true, origin: 'a/team.yaml', create: true });
+  });
+
+  it('save as another path never replaces a file there unless forced (create)', () => {
+    expect(saveRequest(loaded, 'b/copy.yaml', doc, { draft: false }).create).toBe(true);
+    expect('create' in saveRequest(loaded, 'b/copy.yaml', doc, { draft: false, force: true })).toBe(false);
+    expect('create' in saveRequest(loaded, 'a/team.yaml', doc, { draft: false })).toBe(false);
   });
 
   it('a built-in case study is the origin of its first save, under any name', () => {
@@ -31,7 +37,7 @@ describe('saveRequest (what Save and Save as send)', () => {
 
   it('a new diagram has no origin and no revision', () => {
     const r = saveRequest({ path: null, builtin: null, revision: null }, 'new.yaml', doc, { draft: false });
-    expect(r).toEqual({ path: 'new.yaml', document: doc, revision: null, draft: false });
+    expect(r).toEqual({ path: 'new.yaml', document: doc, revision: null, draft: false, create: true });
   });
 });
 
@@ -50,7 +56,7 @@ describe('HttpTransport', () => {
     expect(sent).toHaveLength(1);
     expect(sent[0].url).toBe('/tok123/api/save');
     expect(sent[0].init.method).toBe('POST');
-    expect(JSON.parse(sent[0].init.body as string)).toEqual({ path: 'b/copy.yaml', document: doc, revision: null, draft: false, origin: 'a/team.yaml' });
+    expect(JSON.parse(sent[0].init.body as string)).toEqual({ path: 'b/copy.yaml', document: doc, revision: null, draft: false, origin: 'a/team.yaml', create: true });
   });
 
   it('a 409 answer is an ApiError with status 409 and the server message', async () => {

@@ -15,7 +15,6 @@ from avblocks.core.declarations import doc_sections
 from avblocks.editor.catalog import FAMILIES, build_template, palette
 from avblocks.scenarios import GENERATORS, Scenario, block_registry
 
-
 REGISTRY = block_registry(interfaces=True)
 
 

@@ -22,7 +22,6 @@ import math
 
 import numpy as np
 
-from ..blocks import Constant
 from ..controllers import HolonomicPointToPoint, flocking_law, safety_filter
 from ..core.diagram import Diagram
 from ..core.frontend import simulate

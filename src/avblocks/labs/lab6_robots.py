@@ -96,8 +96,9 @@ def _emulator(endpoint, log, tmp):
 
 def check_on_robots(mod):
     try:
-        from ..interfaces.ros2 import Robots, open_router
         import zenoh  # noqa: F401
+
+        from ..interfaces.ros2 import Robots, open_router
     except ImportError as e:
         raise Failed(f"this check drives the robot emulator over Zenoh and needs the ros2 "
                      f"extra: pip install 'avblocks[ros2]' ({e})") from None

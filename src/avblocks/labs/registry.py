@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 from ..core.errors import ParameterError
-from . import (lab1_kinematics, lab2_go_to_goal, lab3_formation, lab4_consensus, lab5_safety,
-               lab6_robots)
+from . import (
+    lab1_kinematics,
+    lab2_go_to_goal,
+    lab3_formation,
+    lab4_consensus,
+    lab5_safety,
+    lab6_robots,
+)
 from .grading import Lab
 
 #: the labs, in order

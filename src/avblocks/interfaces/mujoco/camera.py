@@ -92,8 +92,8 @@ class SceneCamera(Block):
                                     "height": 0.12, "color": [0.85, 0.05, 0.05],
                                     "kinematic": True}},
         "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
-                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}}, "cameras": "uav", "width": 160, "height": 120,
-               "period": 0.1}
+                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}},
+               "cameras": "uav", "width": 160, "height": 120, "period": 0.1}
 
     def __init__(self, scene, cameras, *, width=320, height=240, period=0.1,
                  offset=0.0, shadows=False, reflections=False):

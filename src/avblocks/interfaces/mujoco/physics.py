@@ -131,7 +131,8 @@ class PhysicsWorld(Block):
                                     "height": 0.12, "color": [0.85, 0.05, 0.05],
                                     "kinematic": True}},
         "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
-                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}}, "period": 0.01}
+                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}},
+               "period": 0.01}
 
     def __init__(self, scene, period=0.01, *, tau_v=0.02, tau_w=0.02, prefix=None,
                  state_outputs=False):

@@ -29,7 +29,7 @@ import numpy as np
 from ...core.block import Block
 from ...core.errors import ParameterError
 from ._gl import import_mujoco
-from .scene import Scene
+from .scene import EXAMPLE_SCENE, Scene
 
 _NAME = "SceneCamera"
 
@@ -86,13 +86,7 @@ class SceneCamera(Block):
 
     #: what the editor's palette starts a new block with: the quadrotor's
     #: downward camera of a scene in numbers
-    example = {"scene": {"mujoco_scene": {
-        "world": {"bounds": [-5.0, -5.0, 5.0, 5.0]},
-        "ground_robots": {"rover": {"pose0": [[0.0, 0.0, 0.0]], "radius": 0.25,
-                                    "height": 0.12, "color": [0.85, 0.05, 0.05],
-                                    "kinematic": True}},
-        "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
-                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}},
+    example = {"scene": EXAMPLE_SCENE,
                "cameras": "uav", "width": 160, "height": 120, "period": 0.1}
 
     def __init__(self, scene, cameras, *, width=320, height=240, period=0.1,

@@ -56,7 +56,7 @@ from ...vehicles import quat_to_rotmat, quat_yaw
 from ...vehicles.diffdrive import wheels_to_twist
 from ...vehicles.quadrotor import rotors_to_wrench
 from ._gl import import_mujoco
-from .scene import Scene
+from .scene import EXAMPLE_SCENE, Scene
 
 _NAME = "PhysicsWorld"
 
@@ -125,14 +125,7 @@ class PhysicsWorld(Block):
 
     #: what the editor's palette starts a new block with: a scene in numbers
     #: (a ground robot and a quadrotor), as a scenario file gives it
-    example = {"scene": {"mujoco_scene": {
-        "world": {"bounds": [-5.0, -5.0, 5.0, 5.0]},
-        "ground_robots": {"rover": {"pose0": [[0.0, 0.0, 0.0]], "radius": 0.25,
-                                    "height": 0.12, "color": [0.85, 0.05, 0.05],
-                                    "kinematic": True}},
-        "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
-                               "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}},
-               "period": 0.01}
+    example = {"scene": EXAMPLE_SCENE, "period": 0.01}
 
     def __init__(self, scene, period=0.01, *, tau_v=0.02, tau_w=0.02, prefix=None,
                  state_outputs=False):

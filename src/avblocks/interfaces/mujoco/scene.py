@@ -132,6 +132,18 @@ class Group:
         return [f"{b}_cam" for b in self.bodies] if self.camera is not None else []
 
 
+#: A small scene in a scenario file's numbers (a kinematic ground robot and
+#: a quadrotor with a downward camera): what the editor's palette starts the
+#: physics and camera blocks with.
+EXAMPLE_SCENE = {"mujoco_scene": {
+    "world": {"bounds": [-5.0, -5.0, 5.0, 5.0]},
+    "ground_robots": {"rover": {"pose0": [[0.0, 0.0, 0.0]], "radius": 0.25,
+                            "height": 0.12, "color": [0.85, 0.05, 0.05],
+                            "kinematic": True}},
+    "quadrotors": {"uav": {"position0": [[0.0, 0.0, 4.0]], "arm_length": 0.25,
+                           "camera": {"pos": [0.0, 0.0, -0.06], "fovy": 60.0}}}}}
+
+
 class Scene(MJCFWriter):
     """Agents, obstacles, ground and cameras of a MuJoCo world.
 

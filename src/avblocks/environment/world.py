@@ -129,6 +129,9 @@ def _as_polygons(item, where):
             raise ParameterError("polygon obstacle must be a list of >= 3 (x, y) "
                                  "vertices", param=where, expected="(V >= 3, 2)",
                                  found=v.shape)
+        if not np.all(np.isfinite(v)):       # GEOS fails on NaN/inf, deep inside
+            raise ParameterError("polygon obstacle vertices must be finite numbers",
+                                 param=where, found=v.tolist())
         parts = [Polygon(v)]
     out = []
     for p in parts:

@@ -51,6 +51,7 @@ import numpy as np
 from avblocks.controllers import PointToPoint, TrackingController
 from avblocks.core.diagram import Diagram
 from avblocks.environment import Circle, World, rectangle
+from avblocks.scenarios.report import save_figure
 from avblocks.vehicles import Quadrotor, Unicycle, velocity_controlled_quadrotor
 
 #: Obstacles: boxes, a concave L-wall, cylinders (all extruded to 1 m).
@@ -245,8 +246,10 @@ def figures(res, out, params=None):
     fig.suptitle("UAV tracking a ground vehicle by colour (case study IV.C)")
     fig.tight_layout()
     png = out / "tracking_error.png"
-    fig.savefig(png, dpi=110)
-    plt.close(fig)
+    try:
+        save_figure(fig, png)                   # folder made, written atomically
+    finally:
+        plt.close(fig)
     files = [png]
     try:
         from avblocks.viz.movie import write_movie

@@ -23,11 +23,22 @@ import numpy as np
 
 from ..core.block import Block
 from ..core.errors import ParameterError
-from ..core.params import count
+from ..core.params import count, positive_scalar
+from ..environment import World
 from ..environment.boxes import boundary_distance, split_boxes
 from ..utility.arrays import fold, norm2
 from .common import drop_diagonal, pairwise, sort_rows
 
+
+def _world(world, block):
+    """``world`` if it is an :class:`avblocks.environment.World`, else a
+    :class:`ParameterError` naming the block (a file gives one as
+    ``{world: {...}}``)."""
+    if not isinstance(world, World):
+        raise ParameterError("world must be an avblocks.environment.World", block=block,
+                             param="world", expected="World",
+                             found=type(world).__name__)
+    return world
 
 class NavigationTask(Block):
     """Observation, reward and success of the navigation task.
@@ -108,6 +119,7 @@ class NavigationTask(Block):
                  observe_velocity=False, prev0=None):
         super().__init__()
         self.n = n = count(n, "NavigationTask", "n", lo=1)
+        world = _world(world, "NavigationTask")
         self.rays = int(rays)
         self.sort_others = bool(sort_others)
         self.observe_velocity = bool(observe_velocity)
@@ -307,8 +319,9 @@ class NavigationLaw(Block):
     def __init__(self, n, world, *, half=1.5):
         super().__init__()
         self.n = n = count(n, "NavigationLaw", "n", lo=1)
-        self.half = float(half)
-        self.law = scripted_law(obstacle_edges(world), self.half, 1.0, 0.1)
+        self.half = float(positive_scalar(half, "NavigationLaw", "half"))
+        self.law = scripted_law(obstacle_edges(_world(world, "NavigationLaw")),
+                                self.half, 1.0, 0.1)
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_output("cmd", (n, 2))

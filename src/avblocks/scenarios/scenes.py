@@ -117,6 +117,17 @@ def _from_mjcf(Scene, spec, where, folder, source):
                             entry=f"{where}.mjcf") from None
 
 
+def _groups(spec, key, required, what, where, source):
+    """``(name, mapping copy, entry)`` of each group under ``spec[key]``,
+    each checked to give ``required``."""
+    for name, g in _mapping(spec.get(key), f"{where}.{key}", source, key).items():
+        at = f"{where}.{key}.{name}"
+        g = dict(_mapping(g, at, source, key))
+        if required not in g:
+            raise ScenarioError(f"{what} needs '{required}'", file=source, entry=at)
+        yield name, g, at
+
+
 def _from_numbers(Scene, CameraMount, spec, where, folder, source):
     from ..environment import World
     from .worlds import _parse_world
@@ -132,20 +143,11 @@ def _from_numbers(Scene, CameraMount, spec, where, folder, source):
         kw["texture"] = str(inside(tex, folder, what=f"{where}.texture", source=source,
                                    must_exist=True))
     scene = Scene(world, **kw)
-    for name, g in _mapping(spec.get("ground_robots"), f"{where}.ground_robots", source,
-                            "ground_robots").items():
-        at = f"{where}.ground_robots.{name}"
-        g = dict(_mapping(g, at, source, "ground_robots"))
-        if "pose0" not in g:
-            raise ScenarioError("a ground robot group needs 'pose0'", file=source, entry=at)
+    for name, g, at in _groups(spec, "ground_robots", "pose0", "a ground robot group",
+                               where, source):
         _add(scene.add_ground_robots, name, g.pop("pose0"), g, at, source)
-    for name, g in _mapping(spec.get("quadrotors"), f"{where}.quadrotors", source,
-                            "quadrotors").items():
-        at = f"{where}.quadrotors.{name}"
-        g = dict(_mapping(g, at, source, "quadrotors"))
-        if "position0" not in g:
-            raise ScenarioError("a quadrotor group needs 'position0'", file=source,
-                                entry=at)
+    for name, g, at in _groups(spec, "quadrotors", "position0", "a quadrotor group",
+                               where, source):
         cam = g.get("camera")
         if isinstance(cam, dict):
             bad = set(map(str, cam)) - {"pos", "xyaxes", "fovy"}

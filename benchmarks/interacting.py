@@ -537,7 +537,8 @@ def gpu(out_dir, limit):
     with open(os.path.join(out_dir, "gpu_issue32.json"), "w") as f:
         json.dump(rows, f, indent=1)
     lines = ["| N | dtype | ms per step | real-time factor | plan s | "
-             "first call (compile, re-plans, run) s | peak device MiB | plan |", "|---:|---|---:|---:|---:|---:|---:|---|"]
+             "first call (compile, re-plans, run) s | peak device MiB | plan |",
+             "|---:|---|---:|---:|---:|---:|---:|---|"]
     for r in rows:
         if "error" in r:
             lines.append(f"| {r['n']} | {r['dtype']} | failed: {r['error'][-80:]} |||||")

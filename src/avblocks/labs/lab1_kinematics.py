@@ -53,8 +53,9 @@ def check_derivative(mod):
     cmd = np.column_stack([rng.uniform(-2, 2, 6), rng.uniform(-1, 1, 6)])
     dx = b.derivative(0.0, {"pose": pose.copy()}, {"cmd": cmd.copy()}, np)
     if not isinstance(dx, dict) or "pose" not in dx:
+        keys = f" with keys {list(dx)}" if isinstance(dx, dict) else ""
         raise Failed(f"derivative must return {{'pose': (N, 3) rates}}, returned "
-                     f"{type(dx).__name__}{' with keys ' + str(list(dx)) if isinstance(dx, dict) else ''}")
+                     f"{type(dx).__name__}{keys}")
     want = np.column_stack([cmd[:, 0] * np.cos(pose[:, 2]), cmd[:, 0] * np.sin(pose[:, 2]),
                             cmd[:, 1]])
     compare("pose (its rate, derivative)", want, dx["pose"], atol=1e-12,

@@ -21,17 +21,26 @@ runs are concatenated into one row of ``capacity`` candidate slots
 among them when the runs hold at most ``capacity`` points.
 
 :func:`nearest` filters the candidates by radius (inclusive), self and
-field of view, and takes the ``k`` smallest ``(distance, index)`` pairs by
-``k`` passes of a minimum (traced: over one 64-bit key per candidate, the
-candidates along the leading axis, with an exact fallback for near-ties;
-NumPy: ``argpartition``): exact, ties broken by the smaller index, the
-order of a brute-force ``lexsort((index, distance))``. Query rows are
-handled in chunks of :data:`CHUNK` (NumPy) or ``TRACED_CHUNK`` (1024,
-``lax.map``), rows in cell order for locality, so the temporaries stay
-``O(chunk * capacity)``. Cost
-per call: a sort of N keys, ``2 * 5^(D-1)`` binary searches per query,
-``O(capacity * (D + k))`` per query. No (N, N) array is ever formed
-(except with ``reach = inf``: every pair).
+field of view, and takes the ``k`` smallest ``(distance, index)`` pairs,
+exact, ties broken by the smaller index: the order of a brute-force
+``lexsort((index, distance))``. Traced, each candidate gets one 64-bit key
+(the bits of its squared distance, the low bits replaced by its slot in
+the sorted points) and a tournament takes the ``k + 1`` smallest keys: the
+row is cut into groups of 16, each group keeps its minimum, and each pick
+reads the group minima and then one group, ``O(W + k (W / 16 + 16))`` for
+``W`` candidates instead of ``O(k W)`` for ``k`` passes over the row
+(measured at N = 10^4 in a contracted flock, 405 candidates per row: 160
+ms per search with passes, 50 ms with the tournament). Only the selected
+slots become point indices. Where two of a row's ``k + 1`` smallest
+distances agree in all but the slot bits (equal distances), the chunk
+takes exact passes over ``(distance, index)`` instead. NumPy:
+``argpartition`` of such keys (the point index in the low bits). Query rows are handled in chunks of
+:data:`CHUNK` (NumPy) or ``TRACED_CHUNK`` (1024, ``lax.map``), rows in
+cell order for locality, so the temporaries stay ``O(chunk *
+capacity)``. Cost per call: a sort of N keys, ``2 * 5^(D-1)`` binary
+searches per query, ``O(capacity)`` per query for the distances and keys
+and ``O(k (capacity / 16 + 16))`` for the selection. No (N, N) array is
+ever formed (except with ``reach = inf``: every pair).
 
 Under NumPy, :class:`NeighborSearch` answers radius queries with SciPy's
 k-d tree (:func:`kd_nearest`: faster at every N measured here, see

@@ -63,3 +63,29 @@ def test_queries_named_by_index_leave_themselves_out(xp):
         assert int(need.capacity) <= plan.capacity
     np.testing.assert_array_equal(np.asarray(i), bi)
     np.testing.assert_allclose(np.asarray(d), bd, rtol=1e-12)
+
+
+def test_an_accelerator_takes_big_chunks_with_the_same_results(monkeypatch):
+    """On a GPU or TPU a chunk is a set of kernel launches, so the traced
+    search sizes its chunks by a byte budget instead of the CPU's 1024 rows
+    (``traced_rows``); the rows it returns do not depend on the chunking.
+    The accelerator is stood in for by JAX's default-backend query: the
+    arithmetic still runs on this CPU."""
+    from avblocks.utility.spatial import queries as q
+    assert q.traced_rows(80) == q.TRACED_CHUNK                  # a CPU here
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert q.traced_rows(80) == 1 << 17                          # 2 GiB / (128 B x 80)
+    assert q.traced_rows(10 ** 6) == q.TRACED_CHUNK              # never below the CPU's
+    monkeypatch.setattr(q, "ACCEL_CHUNK_BYTES", 128 * 40 * 2048)  # 2048 rows at width 40
+    rng = np.random.default_rng(4)
+    p = rng.uniform(0, 60, (5000, 2))
+    r, k = 1.0, 7
+    plan = sp.plan_cells(p, r)
+    assert q.TRACED_CHUNK < q.traced_rows(plan.capacity) < len(p)   # several big chunks
+    with jax.enable_x64(True):
+        i, d, _ = jax.jit(lambda a: sp.nearest(plan, a, r, k, xp=jnp))(jnp.asarray(p))
+    from scipy.spatial import cKDTree
+    dd, ii = cKDTree(p).query(p, k=k + 1, distance_upper_bound=np.nextafter(r, np.inf))
+    dd, ii = dd[:, 1:], np.where(np.isfinite(dd[:, 1:]), ii[:, 1:], -1)
+    np.testing.assert_allclose(np.asarray(d), dd, rtol=1e-12)
+    np.testing.assert_array_equal(np.asarray(i), ii)       # no ties in a random cloud

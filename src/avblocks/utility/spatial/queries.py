@@ -50,6 +50,27 @@ CHUNK = 4096
 #: (measured at N = 1e4, k = 12: 4096 rows 9.9 ms, 1024 rows 6.5-7.1 ms).
 TRACED_CHUNK = 1024
 
+#: Bytes of (rows, candidates) temporaries a traced search's chunk may take
+#: on an accelerator (GPU, TPU). There a chunk is one set of kernels run
+#: one chunk after another (``lax.map``), so CPU-sized chunks of 1024 rows
+#: would leave a GPU idle between ~1,000 small launches per step at N =
+#: 10^6; the chunk grows instead until its temporaries (about 16 arrays of
+#: 8 bytes per candidate slot) reach this budget.
+ACCEL_CHUNK_BYTES = 2 ** 31
+
+
+def traced_rows(width):
+    """Query rows per chunk of a traced search whose rows read ``width``
+    candidate slots: :data:`TRACED_CHUNK` on a CPU (cache-sized), on an
+    accelerator the largest power of two whose temporaries fit
+    :data:`ACCEL_CHUNK_BYTES` (at least :data:`TRACED_CHUNK`). The platform
+    is JAX's default backend, where the engine runs a program."""
+    import jax
+    if jax.default_backend() == "cpu":
+        return TRACED_CHUNK
+    rows = ACCEL_CHUNK_BYTES // (16 * 8 * max(1, int(width)))
+    return max(TRACED_CHUNK, 1 << (max(1, int(rows)).bit_length() - 1))
+
 
 class _Query(NamedTuple):
     """Per-query data of a search, rows in processing order."""
@@ -462,16 +483,17 @@ def _pad_cols(a, k, fill, xp):
 
 def _by_width(make_row, cells, cap, query, args, xp):
     """:func:`_rowmap` of ``make_row(width)`` (a row function that reads
-    ``width`` candidate slots per row): traced, each chunk of rows (the
-    whole step up to :data:`TRACED_CHUNK` rows) takes the smallest of the
+    ``width`` candidate slots per row): traced, each chunk of rows
+    (:func:`traced_rows`; the whole step when it has fewer rows) takes the smallest of the
     :func:`width_classes` of ``cap`` that holds its most crowded row
     (``lax.switch``), so crowding in one place or at one time does not
     widen every row of every step; NumPy, under ``vmap`` and in an
     all-pairs search the one width ``cap`` serves. Every row function must
     return the same shapes whatever its width."""
     widths = () if (xp is np or cells.brute) else width_classes(cap)
+    size = None if xp is np else traced_rows(cap)
     if len(widths) <= 1 or _batched(args):
-        return _rowmap(make_row(cap), args, xp)
+        return _rowmap(make_row(cap), args, xp, size)
     import jax
     rows = [make_row(w) for w in widths]
     nq = len(query.q)
@@ -482,7 +504,7 @@ def _by_width(make_row, cells, cap, query, args, xp):
         most = xp.max(sum(h - l for l, h in zip(lo, hi)))
         c = sum((most > w).astype(np.int32) for w in widths[:-1])
         return jax.lax.switch(c, rows, *a)
-    return _rowmap(pick, args, xp)
+    return _rowmap(pick, args, xp, size)
 
 
 def candidates(cells, points, queries=None, xp=np):
@@ -543,7 +565,8 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
             pos, _, val, d2, cnt = f(*args)
             return order[pos], val, d2, cnt, xp.sum(val, axis=1)
 
-        idx, val, d2, cnt, nh = _rowmap(row, args, xp)
+        idx, val, d2, cnt, nh = _rowmap(row, args, xp,
+                                        None if xp is np else traced_rows(cap))
         (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     else:
         # a width per chunk: each chunk compacts its own rows

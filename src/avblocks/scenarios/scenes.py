@@ -111,7 +111,7 @@ def _from_mjcf(Scene, spec, where, folder, source):
     kw = {k: spec[k] for k in ("shadows",) if k in spec}
     try:
         return Scene.from_mjcf(str(full), ground_robots=groups["ground_robots"],
-                               quadrotors=groups["quadrotors"], **kw)
+                               quadrotors=groups["quadrotors"], folder=folder, **kw)
     except AvError as e:
         raise ScenarioError(f"in the MJCF file '{path}': {e}", file=source,
                             entry=f"{where}.mjcf") from None

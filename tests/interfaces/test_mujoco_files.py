@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 import avblocks as av
-
 from avblocks.scenarios import Scenario
 
 from ._mj import need

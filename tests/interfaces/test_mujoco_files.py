@@ -180,7 +180,9 @@ def test_every_file_attribute_is_checked(mj, tmp_path, element):
     _write(case / "scene.xml", f'<mujoco>{element}'
            '<asset><mesh name="tetra" file="meshes/tetra.obj"/></asset>'
            f'{DRONE[8:]}')
-    _refused(case, "scene.xml")
+    inner = element[element.index("<", 1) + 1:].split()[0]      # the element's tag
+    bad = next(w for w in element.split() if "other" in w).split("/>")[0]
+    _refused(case, "scene.xml", f"<{inner} {bad}>")
 
 
 def test_a_sub_models_own_files_are_checked_from_its_folder(mj, tmp_path):

@@ -78,6 +78,12 @@ _SIM_SHORTCUTS = {"t_final", "dt", "log_every", "solver"}
 WRITE_KEYS = {"path", "movie", "file", "filename", "output", "save", "save_path"}
 #: ... and files it reads: they must lie under the scenario file's folder.
 READ_KEYS = {"background", "image", "map", "geojson"}
+#: ... and a trained policy's file (``tasks.TaskCommand``'s ``policy``):
+#: under the folder too, unless the person running named it on the
+#: command line (``--set controller=policy.npz``: theirs, like ``--out``);
+#: ``NO_POLICY`` values name no file.
+POLICY_KEYS = {"policy"}
+NO_POLICY = {"", "scripted"}      # tasks.TaskCommand.SCRIPTED
 
 
 def _is_number(v) -> bool:
@@ -255,6 +261,10 @@ class Scenario:
     params: dict = field(default_factory=dict)
     #: user block modules whose blocks the file may name (``module.Class``)
     modules: tuple = ()
+    #: text values the person running gave on the command line
+    #: (``with_overrides(..., user=True)``): a policy path among them is
+    #: theirs to name, anywhere; a policy path the file names is confined
+    user_values: frozenset = frozenset()
 
     @property
     def name(self) -> str:
@@ -356,11 +366,17 @@ class Scenario:
         """Whether ``key`` is one of this scenario's parameters."""
         return key in (self.data.get("parameters") or {})
 
-    def with_overrides(self, overrides: dict) -> Scenario:
+    def with_overrides(self, overrides: dict, *, user=False) -> Scenario:
         """A copy with ``--set`` values applied: parameter names,
         ``simulation.<key>``, the shortcuts ``t_final``/``dt``/``log_every``/
         ``solver``, or ``block.param`` (checked against the built diagram by
-        :meth:`build`). The copy is validated when it is built."""
+        :meth:`build`). The copy is validated when it is built.
+
+        ``user``: the values come from the person running (``avblocks run
+        --set``), not from a file: a policy path among them
+        (``--set controller=policy.npz``) is read where they say, as
+        ``--out`` is; one from a file (a sweep's values included) must lie
+        under the scenario file's folder."""
         import copy
         if not isinstance(self.data, dict) or not isinstance(
                 self.data.get("parameters") or {}, dict):
@@ -391,7 +407,10 @@ class Scenario:
                                       "(or t_final, dt, log_every, simulation.<setting>, "
                                       "block.param)")
         data["parameters"] = params
-        return Scenario(data, self.source, modules=self.modules)
+        mine = frozenset(str(v) for v in plain.values() if isinstance(v, str)) if user \
+            else frozenset()
+        return Scenario(data, self.source, modules=self.modules,
+                        user_values=self.user_values | mine)
 
     def hooks(self, diagram, sim):
         """The ``outcome``/``figures`` of this scenario built as ``diagram``
@@ -484,6 +503,10 @@ class Scenario:
             elif k in READ_KEYS:
                 kwargs[k] = inside(v, self.folder, what=f"{where}.{k}", source=self.source,
                                    must_exist=True)
+            elif k in POLICY_KEYS and str(v) not in NO_POLICY \
+                    and str(v) not in self.user_values:
+                kwargs[k] = str(inside(v, self.folder, what=f"{where}.{k}",
+                                       source=self.source, must_exist=True))
         return kwargs
 
     def movie_options(self) -> dict:

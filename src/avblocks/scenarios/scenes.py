@@ -35,7 +35,11 @@ Every block that names the scene builds it from the same data (a YAML
 anchor, ``scene: &scene {...}`` then ``scene: *scene``, writes it once).
 Every failure is a :class:`~avblocks.core.errors.ScenarioError` naming
 the file and the entry: an unknown key, a missing or unreadable MJCF file,
-XML that MuJoCo refuses, a body that is not in it.
+XML that MuJoCo refuses, a body that is not in it, or a file the MJCF
+includes or loads (``<include>``, meshes, textures, height fields, skins,
+sub-models, ``<compiler meshdir texturedir assetdir>``) outside the
+scenario file's folder, checked before MuJoCo reads anything
+(:meth:`Scene.from_mjcf` with ``folder``).
 """
 
 from __future__ import annotations
@@ -111,7 +115,7 @@ def _from_mjcf(Scene, spec, where, folder, source):
     kw = {k: spec[k] for k in ("shadows",) if k in spec}
     try:
         return Scene.from_mjcf(str(full), ground_robots=groups["ground_robots"],
-                               quadrotors=groups["quadrotors"], **kw)
+                               quadrotors=groups["quadrotors"], folder=folder, **kw)
     except AvError as e:
         raise ScenarioError(f"in the MJCF file '{path}': {e}", file=source,
                             entry=f"{where}.mjcf") from None

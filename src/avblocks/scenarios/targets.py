@@ -66,9 +66,11 @@ class PythonScenario:
         return key in sig.parameters or any(p.kind == p.VAR_KEYWORD
                                             for p in sig.parameters.values())
 
-    def with_overrides(self, overrides) -> PythonScenario:
+    def with_overrides(self, overrides, *, user=False) -> PythonScenario:
         """A copy with ``--set`` values: ``make_diagram`` arguments,
-        ``simulation.<key>`` settings and ``block.param`` numeric values."""
+        ``simulation.<key>`` settings and ``block.param`` numeric values
+        (``user``: as :meth:`Scenario.with_overrides`'s; Python code
+        names the files it reads itself)."""
         plain, _numeric = split_overrides(overrides)
         params = [k for k in plain if not k.startswith("simulation.")]
         fn = self.ns.get("make_diagram")
@@ -200,4 +202,4 @@ def load_any(target, overrides, out=None):
     scenario file's blocks may write to), as a :class:`Loaded` whose
     ``.hooks`` holds the scenario's ``outcome`` and ``figures`` (see
     :mod:`avblocks.scenarios.report`)."""
-    return _loaded(open_scenario(target).with_overrides(overrides), out)
+    return _loaded(open_scenario(target).with_overrides(overrides, user=True), out)

@@ -294,8 +294,16 @@ class Scene(MJCFWriter):
                                     "fovy": positive_scalar(fovy, _NAME, "fovy")}
 
     @classmethod
-    def from_mjcf(cls, mjcf, *, ground_robots=None, quadrotors=None, **kw):
+    def from_mjcf(cls, mjcf, *, ground_robots=None, quadrotors=None, folder=None, **kw):
         """A scene from a user's MJCF (file path or XML text).
+
+        A file is loaded from its path, so its ``<include>`` files and its
+        assets (meshes, textures, ...) are found relative to it. With
+        ``folder`` (a path) every file the MJCF names, through includes
+        too, must lie under ``folder``, checked before MuJoCo reads
+        anything (a :class:`~avblocks.core.errors.ParameterError` naming
+        the file, the element and the path otherwise); a scenario file's
+        ``mujoco_scene: {mjcf: ...}`` passes its own folder.
 
         ``ground_robots`` / ``quadrotors``: ``{group: [body names]}``. A
         ground robot body needs three joints in order: slide x, slide y,
@@ -309,12 +317,19 @@ class Scene(MJCFWriter):
         (``max_image``) is the file's ``<visual><global offwidth offheight>``.
         """
         s = cls(ground=False, **kw)
-        text = Path(mjcf).read_text() if Path(str(mjcf)).suffix == ".xml" and \
-            Path(str(mjcf)).is_file() else str(mjcf)
+        is_file = Path(str(mjcf)).suffix == ".xml" and Path(str(mjcf)).is_file()
+        if folder is not None:
+            if not is_file:
+                raise ParameterError("with 'folder' the MJCF is an .xml file's path",
+                                     block=_NAME, param="mjcf", found=f"{str(mjcf):.60}")
+            from ._files import check_mjcf_files
+            check_mjcf_files(mjcf, folder)
+        text = Path(mjcf).read_text() if is_file else str(mjcf)
         s._mjcf = text
         mj = import_mujoco()
         try:
-            m = mj.MjModel.from_xml_string(text)
+            m = (mj.MjModel.from_xml_path(str(Path(mjcf).resolve())) if is_file
+                 else mj.MjModel.from_xml_string(text))
         except Exception as e:  # noqa: BLE001 - MuJoCo's own parse error
             raise ParameterError(f"MuJoCo cannot load the MJCF: {e}", block=_NAME,
                                  param="mjcf") from None

@@ -148,6 +148,16 @@ def _inverse(perm, xp):
     return xp.zeros(n, dtype=perm.dtype).at[perm].set(xp.arange(n, dtype=perm.dtype))
 
 
+def _chunk_rows(width, xp, batched):
+    """Rows per chunk: NumPy's default (None), :data:`TRACED_CHUNK` under
+    ``vmap`` (an ensemble's runs multiply every temporary, and the engine
+    sizes its chunks of runs without counting the search's), else
+    :func:`traced_rows`."""
+    if xp is np:
+        return None
+    return TRACED_CHUNK if batched else traced_rows(width)
+
+
 def _rowmap(fn, arrays, xp, size=None):
     """``fn`` over row chunks of ``arrays`` (all with Q leading rows),
     outputs concatenated: a Python loop of a few chunks under NumPy,
@@ -491,8 +501,9 @@ def _by_width(make_row, cells, cap, query, args, xp):
     all-pairs search the one width ``cap`` serves. Every row function must
     return the same shapes whatever its width."""
     widths = () if (xp is np or cells.brute) else width_classes(cap)
-    size = None if xp is np else traced_rows(cap)
-    if len(widths) <= 1 or _batched(args):
+    batched = xp is not np and _batched(args)
+    size = _chunk_rows(cap, xp, batched)
+    if len(widths) <= 1 or batched:
         return _rowmap(make_row(cap), args, xp, size)
     import jax
     rows = [make_row(w) for w in widths]
@@ -565,8 +576,8 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
             pos, _, val, d2, cnt = f(*args)
             return order[pos], val, d2, cnt, xp.sum(val, axis=1)
 
-        idx, val, d2, cnt, nh = _rowmap(row, args, xp,
-                                        None if xp is np else traced_rows(cap))
+        idx, val, d2, cnt, nh = _rowmap(row, args, xp, _chunk_rows(
+            cap, xp, xp is not np and _batched(args)))
         (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     else:
         # a width per chunk: each chunk compacts its own rows

@@ -206,7 +206,6 @@ INPUTS = {
 }
 
 
-
 class _Steps(tuple):
     """An input that changes during the harness's run: its value at major
     steps 0, 1, 2... (the last one held), for a parameter that acts only
@@ -228,17 +227,17 @@ class _Schedule(av.Block):
 
 
 DT = 0.01                                   # the harness's step (Euler)
+STEPS = 6                                   # ... and its number of steps
 # navigation: agent 0 at 0.2 m of its goal (at it only with a larger
 # goal_radius), agent 2 at its goal, agent 1 beside the obstacle (the
 # closeness term) sliding along it (progress every step) and touching it
 # from step 4 on (a first contact after the change at step 3)
-NAV_STEPS = 6
 INPUTS.update({
     "tasks.NavigationTask": {
         "position": _Steps(np.array([[0.0, 0.0], [0.35, 0.05 * k], [-0.6, 0.5]])
-                           for k in range(NAV_STEPS + 1)),
+                           for k in range(STEPS + 1)),
         "goals": np.array([[0.2, 0.0], [-1.0, 1.0], [-0.6, 0.6]]),
-        "contact": _Steps(np.array([False, k >= 4, False]) for k in range(NAV_STEPS + 1))},
+        "contact": _Steps(np.array([False, k >= 4, False]) for k in range(STEPS + 1))},
     # agent 0 within the walls' 0.35 m reach (1.5 - 1.3), not with half 1.925
     "tasks.NavigationLaw": {"position": np.array([[1.3, 0.0], [-0.2, -1.3], [0.0, 0.3]])},
     # the evader 0.2 m from a wall: inside the margin 0.3 half = 0.45 m
@@ -253,7 +252,7 @@ INPUTS.update({
     # followers (the speed limit 0.5 m/s acts)
     "controllers.TrackingController": {
         "point": _Steps(np.array([[0.1 * k, 0.05 * k, 0.0]] * N) + _p()
-                        for k in range(NAV_STEPS + 1)),
+                        for k in range(STEPS + 1)),
         "valid": np.array([True, False, True]),
         "position": np.array([[3.0, 0.0, 3.5], [0.0, 3.0, 4.5], [-2.0, 0.0, 4.0]])},
     # set-points far from hover: the 0.5 rad tilt limit and the vehicle's
@@ -391,7 +390,7 @@ def _diagram(name):
     return d, blk
 
 
-def _trace(name, steps=6, params=None, change=None):
+def _trace(name, steps=STEPS, params=None, change=None):
     """Outputs and states of block ``b`` at every major step (Euler, 10 ms);
     ``change = (k, path, value)`` sets a parameter before step k."""
     d, blk = _diagram(name)
@@ -533,6 +532,23 @@ def test_gossip_reads_radius_and_loss_live(cls):
     assert informed() == [True, True]
     b.set_parameter("p_loss", 1.0)
     assert informed() == [True, False]
+
+
+def test_navigation_law_reads_half_live():
+    """One agent 0.2 m from the wall x = half, its goal 1.3 m behind it:
+    the wall pushes with 0.15 (1/0.2 - 1/0.35) = 9/28 (Khatib's field,
+    worked by hand), the slide term adds half of it sideways, and the sum
+    is scaled to norm 1. With the walls moved to half = 2 (0.7 m away, past
+    the 0.35 m reach) only the unit attraction is left."""
+    law = av.tasks.NavigationLaw(1, World([]), half=1.5)
+    u = {"position": np.array([[1.3, 0.0]]), "goals": np.array([[0.0, 0.0]])}
+    rep = 0.15 * (1 / 0.2 - 1 / 0.35)
+    v = np.array([-1.0 - rep, -0.5 * rep])
+    np.testing.assert_allclose(law.output(0.0, {}, u, np)["cmd"][0], v / np.hypot(*v),
+                               rtol=1e-9)
+    law.set_parameter("half", 2.0)
+    np.testing.assert_allclose(law.output(0.0, {}, u, np)["cmd"][0], [-1.0, 0.0],
+                               rtol=1e-9, atol=1e-12)
 
 
 # blocks whose functions use NumPy-only libraries (k-d trees): their

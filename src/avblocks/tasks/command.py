@@ -38,6 +38,13 @@ class TaskCommand(Block):
     speed : float
         [m/s] per unit of the policy's command.
 
+    Numeric parameters
+    ------------------
+
+    ``speed`` (read at every call: ``"command.speed"``); it scales a
+    policy's command only (the scripted command passes through as is).
+    ``policy`` and ``n`` are structural.
+
     Equations
     ---------
     ``velocity = scripted`` without a policy, else

@@ -92,6 +92,16 @@ class NavigationTask(Block):
         measured from it; default zeros). The case study sets it from the
         starts and goals.
 
+    Numeric parameters
+    ------------------
+
+    ``half``, ``radius``, ``goal_radius``, ``max_range``, ``margin`` and the
+    reward weights ``progress``, ``collision``, ``proximity``,
+    ``goal_bonus``, ``first_hit``, ``success_bonus`` (scalars, read at every
+    call: ``"task.progress"``...). ``n``, ``rays``, ``world`` (its edges),
+    ``sort_others``, ``observe_velocity`` are structural; ``prev0`` is the
+    initial state of ``prev``.
+
     Equations
     ---------
     With ``d`` the distance to the goal, ``d_prev`` its value at the last
@@ -214,57 +224,58 @@ REWARD = {k: inspect.signature(NavigationTask).parameters[k].default
                     "proximity", "margin")}
 
 
-def scripted_law(edges, half, speed, radius):
-    """The hand-written controller: unit attraction to the goal (slowing
-    within 0.3 m), repulsion from the nearest point of each obstacle edge,
-    the walls and other agents within 0.35 m, plus a sideways term that
-    slides around an obstacle in front. Returns ``f(t, position, goals, xp)``
-    giving a command in ``[-1, 1]^2``."""
-    edges = np.asarray(edges, float)
+def navigation_command(position, goals, edges, half, xp):
+    """The hand-written controller's command (N, 2) in ``[-1, 1]^2``: unit
+    attraction to the goal (slowing within 0.3 m), repulsion from the
+    nearest point of each obstacle edge (``edges`` (E, 4)), the walls of
+    ``[-half, half]^2`` and other agents within 0.35 m, plus a sideways term
+    that slides around an obstacle in front (:class:`NavigationLaw`'s
+    equations)."""
     d0 = 0.35
+    p = position
+    rel = goals - p
+    dist = xp.sqrt(xp.sum(rel * rel, -1, keepdims=True) + 1e-12)
+    att = rel / dist * xp.minimum(1.0, dist / 0.3)
+    # nearest points on edges
+    a, b = edges[:, :2], edges[:, 2:]
+    ab = b - a
+    ap = p[:, None, :] - a
+    s = xp.clip(xp.sum(ap * ab, -1) / xp.sum(ab * ab, -1), 0.0, 1.0)
+    away = ap - s[..., None] * ab                              # (n, E, 2)
+    da = xp.sqrt(xp.sum(away * away, -1) + 1e-12)
+    w = xp.where(da < d0, (1.0 / da - 1.0 / d0) * 0.15, 0.0)
+    rep = xp.sum(away / da[..., None] * w[..., None], axis=1)
+    # walls
+    for k in (0, 1):
+        lo = p[:, k] + half
+        hi = half - p[:, k]
+        f = xp.where(lo < d0, (1.0 / lo - 1.0 / d0) * 0.15, 0.0) - \
+            xp.where(hi < d0, (1.0 / hi - 1.0 / d0) * 0.15, 0.0)
+        rep = rep + f[:, None] * np.eye(2)[k]
+    # agents
+    dp = p[:, None, :] - p[None, :, :]
+    dd = xp.sqrt(xp.sum(dp * dp, -1) + 1e-12) + np.eye(p.shape[0]) * 1e3
+    wa = xp.where(dd < d0, (1.0 / dd - 1.0 / d0) * 0.1, 0.0)
+    rep = rep + xp.sum(dp / dd[..., None] * wa[..., None], axis=1)
+    # slide: the repulsion turned 90 degrees towards the goal's side
+    perp = xp.stack([-rep[:, 1], rep[:, 0]], axis=-1)
+    side = xp.sign(xp.sum(perp * rel, -1, keepdims=True) + 1e-9)
+    v = att + rep + 0.5 * side * perp
+    nv = xp.sqrt(xp.sum(v * v, -1, keepdims=True) + 1e-12)
+    return v / xp.maximum(nv, 1.0)
+
+
+def scripted_law(edges, half, speed, radius):
+    """The hand-written controller (``navigation_command``) with its
+    edges and walls fixed: returns ``f(t, position, goals, xp)`` giving a
+    command in ``[-1, 1]^2``. ``speed`` and ``radius`` are not used (kept
+    for callers)."""
+    edges = np.asarray(edges, float)
 
     def law(t, position, goals, xp):
-        p = position
-        rel = goals - p
-        dist = xp.sqrt(xp.sum(rel * rel, -1, keepdims=True) + 1e-12)
-        att = rel / dist * xp.minimum(1.0, dist / 0.3)
-        # nearest points on edges
-        a, b = edges[:, :2], edges[:, 2:]
-        ab = b - a
-        ap = p[:, None, :] - a
-        s = xp.clip(xp.sum(ap * ab, -1) / xp.sum(ab * ab, -1), 0.0, 1.0)
-        away = ap - s[..., None] * ab                              # (n, E, 2)
-        da = xp.sqrt(xp.sum(away * away, -1) + 1e-12)
-        w = xp.where(da < d0, (1.0 / da - 1.0 / d0) * 0.15, 0.0)
-        rep = xp.sum(away / da[..., None] * w[..., None], axis=1)
-        # walls
-        for k in (0, 1):
-            lo = p[:, k] + half
-            hi = half - p[:, k]
-            f = xp.where(lo < d0, (1.0 / lo - 1.0 / d0) * 0.15, 0.0) - \
-                xp.where(hi < d0, (1.0 / hi - 1.0 / d0) * 0.15, 0.0)
-            rep = rep + f[:, None] * np.eye(2)[k]
-        # agents
-        dp = p[:, None, :] - p[None, :, :]
-        dd = xp.sqrt(xp.sum(dp * dp, -1) + 1e-12) + np.eye(p.shape[0]) * 1e3
-        wa = xp.where(dd < d0, (1.0 / dd - 1.0 / d0) * 0.1, 0.0)
-        rep = rep + xp.sum(dp / dd[..., None] * wa[..., None], axis=1)
-        # slide: the repulsion turned 90 degrees towards the goal's side
-        perp = xp.stack([-rep[:, 1], rep[:, 0]], axis=-1)
-        side = xp.sign(xp.sum(perp * rel, -1, keepdims=True) + 1e-9)
-        v = att + rep + 0.5 * side * perp
-        nv = xp.sqrt(xp.sum(v * v, -1, keepdims=True) + 1e-12)
-        return v / xp.maximum(nv, 1.0)
+        return navigation_command(position, goals, edges, half, xp)
 
     return law
-
-
-def _obstacle_edges(world):
-    """(E, 4) edges of the obstacles (walls excluded): the scripted law's."""
-    keep = np.asarray(world.segment_owner) < world.n_user
-    return np.asarray(world.segments, float)[keep]
-
-
 
 
 def obstacle_edges(world):
@@ -293,6 +304,12 @@ class NavigationLaw(Block):
     half : float
         The walls bound ``[-half, half]^2`` [m].
 
+    Numeric parameters
+    ------------------
+
+    ``half`` (read at every call: the walls move with it); the obstacle
+    edges are fixed by ``world`` at construction (structural).
+
     Equations
     ---------
     Attraction ``a = (g - p) / |g - p| min(1, |g - p| / 0.3)``; repulsion,
@@ -300,7 +317,7 @@ class NavigationLaw(Block):
     edge's nearest point and from each wall, ``0.1 (1/d - 1/d0)`` from each
     other agent (a potential field, Khatib 1986); the repulsion ``r`` turned
     90 degrees towards the goal's side, ``s``; ``v = a + r + 0.5 s`` and
-    ``cmd = v / max(|v|, 1)`` (:func:`scripted_law`).
+    ``cmd = v / max(|v|, 1)`` (``navigation_command``).
 
     Examples
     --------
@@ -319,12 +336,13 @@ class NavigationLaw(Block):
     def __init__(self, n, world, *, half=1.5):
         super().__init__()
         self.n = n = count(n, "NavigationLaw", "n", lo=1)
-        self.half = float(positive_scalar(half, "NavigationLaw", "half"))
-        self.law = scripted_law(obstacle_edges(_world(world, "NavigationLaw")),
-                                self.half, 1.0, 0.1)
+        self.declare_parameter("half", positive_scalar(half, "NavigationLaw", "half"),
+                               bounds=(1e-12, None), unit="m")
+        self.edges = obstacle_edges(_world(world, "NavigationLaw"))
         self.declare_input("position", (n, 2), unit="m")
         self.declare_input("goals", (n, 2), unit="m")
         self.declare_output("cmd", (n, 2))
 
     def output(self, t, x, u, xp):
-        return {"cmd": self.law(t, u["position"], u["goals"], xp)}
+        return {"cmd": navigation_command(u["position"], u["goals"], self.edges, self.half,
+                                          xp)}

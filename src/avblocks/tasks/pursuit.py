@@ -40,6 +40,12 @@ class PursuitTask(Block):
     capture : float
         Capture distance [m].
 
+    Numeric parameters
+    ------------------
+
+    ``half`` and ``capture`` (scalars, read at every call:
+    ``"task.capture"``...); ``n`` is structural.
+
     Equations
     ---------
     With ``p_i`` the pursuers and ``e`` the evader, ``d = min_i |e - p_i|``:
@@ -123,6 +129,13 @@ class Flee(Block):
     speed : float
         The evader's speed [m/s].
 
+    Numeric parameters
+    ------------------
+
+    ``half`` (the walls, hence the margin ``0.3 half``) and ``speed``
+    (scalars, read at every call: ``"flee.speed"``...); ``n`` is
+    structural.
+
     Equations
     ---------
     With ``d_i = e - p_i``, ``a = sum_i d_i / (|d_i|^2 + 1e-6)`` (inverse
@@ -170,6 +183,12 @@ class Chase(Block):
     ----------
     n : int
         Pursuers.
+
+    Numeric parameters
+    ------------------
+
+    None: the law owns no number (the command is a unit vector; the
+    pursuers' speed is the vehicles' or the task command's).
 
     Equations
     ---------

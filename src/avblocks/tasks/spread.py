@@ -42,6 +42,12 @@ class SpreadTask(Block):
     collision : float
         Penalty per colliding neighbour.
 
+    Numeric parameters
+    ------------------
+
+    ``radius``, ``cover`` and ``collision`` (scalars, read at every call:
+    ``"task.cover"``...); ``n`` is structural.
+
     Equations
     ---------
     With ``p_i`` the agents and ``l_k`` the landmarks:

@@ -258,9 +258,19 @@ class VelocityControlledQuadrotor(Diagram):
     Numeric parameters
     ------------------
 
-    Those of the two blocks inside, addressed through the subsystem:
-    ``"fleet.quad.mass"``, ``"fleet.ctrl.kv"``... (``fleet`` the name it
-    is added under).
+    The subsystem owns none itself: its numeric keywords become parameters
+    of the two blocks inside, addressed through it as
+    ``"<name>.quad.<parameter>"`` and ``"<name>.ctrl.<parameter>"``
+    (``<name>`` the name it is added under, e.g. ``"fleet.ctrl.kv"``).
+    The vehicle ``quad`` has ``mass``, ``inertia``, ``drag``,
+    ``arm_length``, ``yaw_coeff``, ``gravity``, ``rotor_max``,
+    ``thrust_max``, ``torque_max`` and ``quat_gain``; the controller
+    ``ctrl`` has the gains ``kv``, ``k_att``, ``k_rate``, the limits
+    ``tilt_max``, ``rate_max``, ``thrust_max``, ``rotor_max``, the set-point
+    ``yaw`` and its own model of the vehicle (``mass``, ``inertia``,
+    ``drag``, ``arm_length``, ``yaw_coeff``, ``gravity``: copies made at
+    construction, so setting ``"fleet.quad.mass"`` alone gives a controller
+    whose model is off; set both to change the vehicle it knows).
 
     Equations
     ---------

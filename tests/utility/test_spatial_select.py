@@ -8,16 +8,19 @@ import numpy as np
 import pytest
 
 from avblocks.utility import spatial as sp
-from avblocks.utility.spatial.queries import GROUP, _tournament
+from avblocks.utility.spatial.queries import _group, _tournament
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
 TOP = np.iinfo(np.int64).max
 
 
-@pytest.mark.parametrize("width", [3, 2 * GROUP, 2 * GROUP + 1, 100, 257])
+@pytest.mark.parametrize("width", [3, 16, 17, 50, 100, 257, 1100])
 @pytest.mark.parametrize("m", [1, 13])
 def test_tournament_takes_the_smallest_keys_in_order(width, m):
+    """Against NumPy's sort; widths on both sides of the passes/tournament
+    switch (``2 * _group(width)``) and groups of 8, 16 and 32."""
+    assert _group(50) == 8 and _group(456) == 16 and _group(1100) == 32
     rng = np.random.default_rng(width * 31 + m)
     rows = 70
     # unique keys per row, from a narrow range so neighbours in value sit in

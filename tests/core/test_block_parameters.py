@@ -245,8 +245,6 @@ INPUTS.update({
     # the evader 0.2 m from pursuer 0: caught only with a larger capture
     "tasks.PursuitTask": {"pursuers": np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]),
                           "evader": np.array([[0.2, 0.0]])},
-    # pairs 0.15, 0.13, 0.28 m apart (two collide at radius 0.1, three at
-    # 0.175); each landmark 0.15 m from its agent (covered only with a larger cover)
     # a target moving 0.1 m per step, seen by agents 0 and 2 (the filter's
     # innovation is not zero: alpha and beta act), 2 to 3 m from the
     # followers (the speed limit 0.5 m/s acts)
@@ -259,6 +257,8 @@ INPUTS.update({
     # torque limit (when finite) act
     "vehicles.VelocityControlledQuadrotor": {
         "velocity": np.array([[5.0, 0.0, 0.0], [0.0, -5.0, 1.0], [3.0, 3.0, -1.0]])},
+    # pairs 0.15, 0.13, 0.28 m apart (two collide at radius 0.1, three at
+    # 0.175); each landmark 0.15 m from its agent (covered only with a larger cover)
     "tasks.SpreadTask": {"position": np.array([[0.0, 0.0], [0.15, 0.0], [0.28, 0.0]]),
                          "landmarks": np.array([[0.0, 0.15], [0.15, 0.15], [0.28, 0.15]])},
 })

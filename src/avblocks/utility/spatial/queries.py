@@ -574,7 +574,8 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
     ps, order, query, cap = _prepare(cells, points, queries, xp,
                                      exclude_self=exclude_self)
     args = _args(query, None, xp)
-    if xp is np or cells.brute or len(width_classes(cap)) <= 1 or _batched(args):
+    batched = xp is not np and _batched(args)
+    if xp is np or cells.brute or len(width_classes(cap)) <= 1 or batched:
         # one width: the candidates of all rows, then one compaction
         f = _chunk_fn(cells, ps, order, cap, radius, xp)
 
@@ -582,8 +583,7 @@ def within(cells, points, radius, queries=None, xp=np, *, exclude_self=True):
             pos, _, val, d2, cnt = f(*args)
             return order[pos], val, d2, cnt, xp.sum(val, axis=1)
 
-        idx, val, d2, cnt, nh = _rowmap(row, args, xp, _chunk_rows(
-            cap, xp, xp is not np and _batched(args)))
+        idx, val, d2, cnt, nh = _rowmap(row, args, xp, _chunk_rows(cap, xp, batched))
         (ci, cd), _ = compact(val, [(idx, -1), (d2, np.inf)], cells.hits, xp)
     else:
         # a width per chunk: each chunk compacts its own rows

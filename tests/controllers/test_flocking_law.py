@@ -97,12 +97,20 @@ def test_flocking_block_with_gamma_equals_algorithm_2_and_reuses_the_padded_inde
     assert m.misses == 1 and m.hits == 2          # flat pair list made once
 
 
-@pytest.mark.parametrize("rows", [True, False])
-def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite(rows, monkeypatch):
+@pytest.mark.parametrize("form", ["rows", "columns", "blocks"])
+def test_flocking_law_traced_equals_numpy_and_its_gradient_is_finite(form, monkeypatch):
     jax = pytest.importorskip("jax")
     import jax.numpy as jnp
-    # the neighbours gathered as rows (small tables) or column by column
-    monkeypatch.setattr(F, "ROW_GATHER_BYTES", 1 << 30 if rows else 0)
+
+    from avblocks.utility import arrays
+    # the neighbours gathered as rows (small tables) or column by column;
+    # "blocks": the law in blocks of 8 agents (a large fleet on a CPU),
+    # the last block ragged (30 agents)
+    monkeypatch.setattr(F, "ROW_GATHER_BYTES", 1 << 30 if form == "rows" else 0)
+    if form == "blocks":
+        monkeypatch.setattr(arrays, "CACHE_TABLE_BYTES", 0)
+        monkeypatch.setattr(arrays, "CACHE_BLOCK_BYTES", 8 * 9 * 8)
+        assert arrays.cache_rows(30, 9, np.float64, jnp) == 8
     rng = np.random.default_rng(12)
     d, r = 2.0, 2.4
     q, p, idx = _cloud(rng, 30, 2, d, r)

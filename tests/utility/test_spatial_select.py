@@ -8,18 +8,19 @@ import numpy as np
 import pytest
 
 from avblocks.utility import spatial as sp
-from avblocks.utility.spatial.queries import _group, _tournament
+from avblocks.utility.spatial.queries import PASSES_WIDTH, _group, _tournament
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
 TOP = np.iinfo(np.int64).max
 
 
-@pytest.mark.parametrize("width", [3, 16, 17, 50, 100, 257, 1100])
+@pytest.mark.parametrize("width", [3, 16, 17, 32, 33, 50, 100, 257, 1100])
 @pytest.mark.parametrize("m", [1, 13])
 def test_tournament_takes_the_smallest_keys_in_order(width, m):
     """Against NumPy's sort; widths on both sides of the passes/tournament
-    switch (``2 * _group(width)``) and groups of 8, 16 and 32."""
+    switch (``PASSES_WIDTH``) and groups of 8, 16 and 32."""
+    assert PASSES_WIDTH == 32
     assert _group(50) == 8 and _group(456) == 16 and _group(1100) == 32
     rng = np.random.default_rng(width * 31 + m)
     rows = 70
@@ -92,3 +93,32 @@ def test_an_accelerator_takes_big_chunks_with_the_same_results(monkeypatch):
     dd, ii = dd[:, 1:], np.where(np.isfinite(dd[:, 1:]), ii[:, 1:], -1)
     np.testing.assert_allclose(np.asarray(d), dd, rtol=1e-12)
     np.testing.assert_array_equal(np.asarray(i), ii)       # no ties in a random cloud
+
+
+@pytest.mark.parametrize("spread", [False, True])
+def test_slot_ranges_by_table_or_by_search_equal_the_kd_tree(spread):
+    """Traced in free space the frame's cell count is data: a frame of at
+    most ``4 N + 4096`` cells looks its slot ranges up in a table of cell
+    starts, a larger one (``spread``: a few points far away) searches the
+    sorted keys. Both give the k-d tree's neighbours."""
+    from scipy.spatial import cKDTree
+
+    from avblocks.utility.spatial.layout import layout
+    rng = np.random.default_rng(6)
+    p = rng.uniform(0, 60, (4000, 2))
+    if spread:
+        p[:3] = [[5000.0, 5000.0], [5000.5, 5000.0], [-3000.0, 20.0]]
+    r, k = 1.0, 6
+    plan = sp.plan_cells(p, r)
+    frame = int(np.prod(np.asarray(layout(plan, p, np).dims)))
+    assert (frame > 4 * len(p) + 4096) == spread          # the branch this case takes
+    with jax.enable_x64(True):
+        i, d, _ = jax.jit(lambda a: sp.nearest(plan, a, r, k, xp=jnp))(jnp.asarray(p))
+        wi, wd, _ = jax.jit(lambda a: sp.within(plan, a, r, xp=jnp))(jnp.asarray(p))
+    tree = cKDTree(p)
+    dd, ii = tree.query(p, k=k + 1, distance_upper_bound=np.nextafter(r, np.inf))
+    dd, ii = dd[:, 1:], np.where(np.isfinite(dd[:, 1:]), ii[:, 1:], -1)
+    np.testing.assert_allclose(np.asarray(d), dd, rtol=1e-12)
+    np.testing.assert_array_equal(np.asarray(i), ii)       # no ties in a random cloud
+    want = [set(s) - {a} for a, s in enumerate(tree.query_ball_point(p, r))]
+    assert [set(int(j) for j in row if j >= 0) for row in np.asarray(wi)] == want

@@ -67,3 +67,86 @@ def norm2(v):
     """Squared length of 2-vectors ``v`` (..., 2): ``v_x^2 + v_y^2`` (no
     reduce over the short last axis: see :func:`fold`)."""
     return v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
+
+
+def map_rows(fn, arrays, xp, size):
+    """``fn(*arrays)`` over blocks of ``size`` rows (all ``arrays`` share
+    their leading length Q), the outputs (a tuple of arrays) joined along
+    their first axis: a Python loop of blocks under NumPy, ``lax.map`` when
+    traced (one compiled body; the last block is padded by repeating the
+    last row, and the padding is cut off). One block when ``size`` is None
+    or Q fits it."""
+    qn = arrays[0].shape[0]
+    if size is None or qn <= size:
+        return fn(*arrays)
+    if xp is np:
+        outs = [fn(*[x[i:i + size] for x in arrays]) for i in range(0, qn, size)]
+        return tuple(np.concatenate(parts, axis=0) for parts in zip(*outs))
+    import jax
+    m = -(-qn // size)
+    pad = m * size - qn
+
+    def blocks(x):
+        if pad:
+            x = xp.concatenate([x, xp.broadcast_to(x[-1:], (pad,) + x.shape[1:])], 0)
+        return x.reshape((m, size) + x.shape[1:])
+
+    outs = jax.lax.map(lambda xs: fn(*xs), [blocks(x) for x in arrays])
+    return tuple(o.reshape((m * size,) + o.shape[2:])[:qn] for o in outs)
+
+
+def batched(arrays):
+    """True while the compiled engine traces a ``vmap``ped run (an
+    ensemble; :func:`avblocks.core.diagnostics.vmapped`) or when a value
+    is batched where it is traced (``vmap`` of a step, as the
+    reinforcement-learning environments do). There a conditional on a
+    batched value runs every branch (a traced spatial search then keeps its
+    plan's one width) and the runs already divide the work. Inside a
+    ``lax.scan`` under a ``vmap`` the engine does not know of, a batched
+    value looks like any other: every branch runs (the same results, more
+    work)."""
+    from ..core import diagnostics
+    if diagnostics.is_vmapped():
+        return True
+    try:
+        from jax._src.interpreters.batching import BatchTracer
+    except ImportError:             # pragma: no cover - another JAX layout
+        return False
+    return any(isinstance(a, BatchTracer) for a in arrays)
+
+
+#: A traced per-agent law whose (N, K) tables of one float are larger than
+#: this is evaluated in blocks of rows on a CPU (:func:`cache_rows`): each
+#: of its elementwise passes then stays in the core's cache instead of
+#: streaming the whole table through memory once per pass.
+CACHE_TABLE_BYTES = 4 * 2 ** 20
+
+#: Bytes of one (rows, K) table of a block of :func:`cache_rows`.
+CACHE_BLOCK_BYTES = 384 * 1024
+
+
+def cache_rows(n, width, dtype, xp, batched=False):
+    """Rows per block for a traced per-row law over (``n``, ``width``)
+    tables of ``dtype`` floats, or None (the whole table in one pass).
+
+    Blocks of about :data:`CACHE_BLOCK_BYTES` per table on a CPU when the
+    table exceeds :data:`CACHE_TABLE_BYTES`. None under NumPy, under
+    ``vmap`` (``batched``: the runs already split the work) and on an
+    accelerator, where one wide pass is what the device is made for.
+
+    Measured on the flocking law (Olfati-Saber, K = 12, four evaluations as
+    in an RK4 step, XLA on a 2-core CPU with 1 MiB of L2 per core): N =
+    10^5, one pass 95.5 ms, blocks of 4096 rows 54-64 ms (1024 rows: 103;
+    8192: 59; 16384: 77); N = 10^6 866 -> 563 ms; N = 3 x 10^4 20.5 ->
+    18.8 ms; N = 10^4 (a 0.9 MiB table) 5.0 ms in one pass, 7.7 in blocks."""
+    if xp is np or batched:
+        return None
+    import jax
+    if jax.default_backend() != "cpu":
+        return None
+    width = max(1, int(width))
+    item = np.dtype(dtype).itemsize
+    if n * width * item <= CACHE_TABLE_BYTES:
+        return None
+    rows = CACHE_BLOCK_BYTES // (width * item)
+    return 1 << max(0, int(rows).bit_length() - 1)

@@ -136,9 +136,19 @@ def _windows(cells, lay, qc, xp):
     return out
 
 
-def _bounds(cells, lay, wins, xp):
-    """Slots ``[a, b)`` in the sorted order of each key range."""
+def _bounds(cells, lay, wins, xp, *, batched=False):
+    """Slots ``[a, b)`` in the sorted order of each key range.
+
+    Where the frame has at most ``4 N + 4096`` cells, a dense table of cell
+    starts (a count per cell, its running sum) answers every range by two
+    lookups; else a binary search of the sorted keys per range end. Traced
+    in free space the frame's size is data: the table's length is then that
+    static bound, and a conditional takes the binary search when the frame
+    is larger (one branch runs; ``batched``, under ``vmap``, where both
+    would, only the search). Measured, N = 10^5 points, 10 range ends, XLA
+    on a 2-core CPU: table 4.4 ms, searches 10 x 4.1 ms."""
     n = lay.skey.shape[0]
+    bound = 4 * n + 4096
     g = None
     if cells.box is not None:
         g = int(np.prod(cells.cells_per_axis()))
@@ -146,19 +156,34 @@ def _bounds(cells, lay, wins, xp):
         g = 1
         for x in np.asarray(lay.dims).tolist():
             g *= int(x)                               # Python int: no overflow
-    if g is not None and g <= 4 * n + 4096:          # dense table of cell starts
-        it = lay.skey.dtype
+    it = lay.skey.dtype
+
+    def table(length):
         if xp is np:
-            count = np.bincount(lay.skey, minlength=g)
+            count = np.bincount(lay.skey, minlength=length)
         else:
-            count = xp.bincount(lay.skey, length=g)
+            count = xp.bincount(lay.skey, length=length)
         start = xp.concatenate([xp.zeros(1, dtype=it), xp.cumsum(count).astype(it)])
-        return [(start[xp.clip(lo, 0, g)], start[xp.clip(hi, 0, g)]) for lo, hi in wins]
-    out = []
-    for lo, hi in wins:
-        out.append((xp.searchsorted(lay.skey, lo, side="left"),
-                    xp.searchsorted(lay.skey, hi, side="left")))
-    return out
+        return [(start[xp.clip(lo, 0, length)], start[xp.clip(hi, 0, length)])
+                for lo, hi in wins]
+
+    def search():
+        return [(xp.searchsorted(lay.skey, lo, side="left"),
+                 xp.searchsorted(lay.skey, hi, side="left")) for lo, hi in wins]
+
+    if g is not None:
+        return table(g) if g <= bound else search()
+    if batched:
+        return search()
+    import jax
+
+    def slots(ranges):              # the search's slot type (int32 below 2^31)
+        return [(a.astype(dt), b.astype(dt)) for a, b in ranges]
+    dt = jax.eval_shape(search)[0][0].dtype
+    frame = lay.dims[0].astype(float)             # float: no overflow
+    for a in range(1, len(lay.strides)):
+        frame = frame * lay.dims[a].astype(float)
+    return jax.lax.cond(frame <= bound, lambda: slots(table(bound)), search)
 
 
 def _gather_slots(bounds, cap, xp):

@@ -9,6 +9,8 @@ from typing import NamedTuple
 import numpy as np
 
 from ...core.errors import ParameterError
+from ..arrays import batched as _batched
+from ..arrays import map_rows
 from .cells import CellList, Need
 from .layout import _bounds, _gather_slots, _int_type, _query_cells, _windows, layout
 
@@ -127,7 +129,8 @@ def _prepare(cells, points, queries, xp, *, exclude_self=True, ids=None):
             ids = xp.asarray(ids).astype(it)
             inv = _inverse(lay.order, xp)
             me = xp.where(ids >= 0, inv[xp.clip(ids, 0, n - 1)], -1).astype(it)
-    bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp)
+    bounds = _bounds(cells, lay, _windows(cells, lay, qc, xp), xp,
+                     batched=xp is not np and _batched([points]))
     cap = cells.capacity
     if cap is None:
         if xp is not np:
@@ -160,26 +163,11 @@ def _chunk_rows(width, xp, batched):
 
 def _rowmap(fn, arrays, xp, size=None):
     """``fn`` over row chunks of ``arrays`` (all with Q leading rows),
-    outputs concatenated: a Python loop of a few chunks under NumPy,
-    ``lax.map`` when traced."""
+    outputs concatenated (:func:`~avblocks.utility.arrays.map_rows`;
+    ``size`` None: :data:`CHUNK` rows under NumPy, :data:`TRACED_CHUNK`
+    traced)."""
     size = (CHUNK if xp is np else TRACED_CHUNK) if size is None else size
-    qn = arrays[0].shape[0]
-    if qn <= size:
-        return fn(*arrays)
-    if xp is np:
-        outs = [fn(*[x[i:i + size] for x in arrays]) for i in range(0, qn, size)]
-        return tuple(np.concatenate(parts, axis=0) for parts in zip(*outs))
-    import jax
-    m = -(-qn // size)
-    pad = m * size - qn
-
-    def fold(x):
-        if pad:
-            x = xp.concatenate([x, xp.broadcast_to(x[-1:], (pad,) + x.shape[1:])], 0)
-        return x.reshape((m, size) + x.shape[1:])
-
-    outs = jax.lax.map(lambda xs: fn(*xs), [fold(x) for x in arrays])
-    return tuple(o.reshape((m * size,) + o.shape[2:])[:qn] for o in outs)
+    return map_rows(fn, arrays, xp, size)
 
 
 def in_view(d, heading, fov, xp):
@@ -381,6 +369,14 @@ def _group(w):
     return min(32, max(8, g))
 
 
+#: Rows of at most this many candidates take :func:`_tournament`'s passes
+#: (each pass one fused minimum over the row, of the keys above the one the
+#: last pass took), wider rows its groups. 98 chunks of 1024 rows, 13
+#: smallest, XLA on this CPU: width 16 13 ms (groups: 27), 24 18 (43), 32
+#: 24 (46), 40 69 (55), 64 121 (62).
+PASSES_WIDTH = 32
+
+
 def _tournament(key, m, xp):
     """Traced: the ``m`` smallest of each row of ``key`` (Q, W) int64, keys
     unique within a row (equal keys count once), ascending: (Q, m).
@@ -389,16 +385,19 @@ def _tournament(key, m, xp):
     into groups of :func:`_group` candidates, each group's minimum kept; a pass takes
     the smallest group minimum and replaces that group's minimum by its
     smallest key above the one taken (one group read). ``O(W + m (W / G +
-    G))`` per row instead of ``O(m W)``; the same keys, exactly."""
+    G))`` per row instead of ``O(m W)``; the same keys, exactly. Rows of
+    at most :data:`PASSES_WIDTH` take ``m`` passes over the row instead.
+    Pass ``j`` reads the row once and writes nothing: the smallest key
+    above pass ``j - 1``'s (unique keys).
+    """
     top = np.int64(np.iinfo(np.int64).max)
     qn, w = key.shape
     group = _group(w)
-    if w <= 2 * group:                  # few candidates: plain passes
-        got, kt = [], key.T
-        for _ in range(m):
-            v = xp.min(kt, axis=0)
+    if w <= PASSES_WIDTH:               # few candidates: passes over the row
+        got, kt, v = [], key.T, None
+        for _ in range(m):              # the smallest key above the last one taken
+            v = xp.min(kt if v is None else xp.where(kt > v[None, :], kt, top), axis=0)
             got.append(v)
-            kt = xp.where(kt == v[None, :], top, kt)
         return xp.stack(got, axis=1)
     ng = -(-w // group)
     if ng * group > w:
@@ -469,25 +468,6 @@ def width_classes(cap):
         if MIN_WIDTH <= w < cap:
             out.add(w)
     return tuple(sorted(out))
-
-
-def _batched(arrays):
-    """True while the compiled engine traces a ``vmap``ped run (an
-    ensemble; :func:`avblocks.core.diagnostics.vmapped`) or when a value
-    is batched where it is traced (``vmap`` of a step, as the
-    reinforcement-learning environments do): there a ``lax.switch`` on a
-    batched index would run every branch, so one width (the plan's) serves.
-    Inside a ``lax.scan`` under a ``vmap`` the engine does not know of, a
-    batched value looks like any other: every branch runs (the same
-    results, more work)."""
-    from ...core import diagnostics
-    if diagnostics.is_vmapped():
-        return True
-    try:
-        from jax._src.interpreters.batching import BatchTracer
-    except ImportError:             # pragma: no cover - another JAX layout
-        return False
-    return any(isinstance(a, BatchTracer) for a in arrays)
 
 
 def _pad_cols(a, k, fill, xp):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from avblocks.utility import spatial as sp
-from avblocks.utility.spatial.queries import PASSES_WIDTH, _group, _tournament
+from avblocks.utility.spatial.queries import PASSES_WIDTH, _group, _slots, _tournament
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
@@ -35,6 +35,26 @@ def test_tournament_takes_the_smallest_keys_in_order(width, m):
     real = want < TOP
     np.testing.assert_array_equal(got[:, :want.shape[1]][real], want[real])
     assert (got[:, :want.shape[1]][~real] == TOP).all()
+
+
+@pytest.mark.parametrize("width", [40, 50, 240, 472, 480, 1100])
+def test_tournament_reads_the_group_from_a_column_key(width):
+    """Keys whose low bits hold their column (as the k-nearest search makes
+    them): the group of each pick is read from the key, not searched for.
+    Equal distances (high bits) in a row, rows that run out (keys of the
+    infinite distance), a width that is not a whole number of groups (472:
+    the tournament pads) and one that is (480, ``_slots``)."""
+    b = (width - 1).bit_length()
+    rng = np.random.default_rng(width)
+    rows, m = 60, 13
+    high = rng.integers(0, 40, (rows, width)).astype(np.int64)       # many ties
+    high[:8, 5:] = np.array(np.inf).view(np.int64) >> b              # few finite
+    keys = (high << b) | np.arange(width, dtype=np.int64)[None, :]
+    want = np.sort(keys, axis=1)[:, :m]
+    with jax.enable_x64(True):
+        got = np.asarray(jax.jit(lambda k: _tournament(k, m, jnp, col_bits=b))(keys))
+    np.testing.assert_array_equal(got, want)
+    assert _slots(width) % _group(_slots(width)) == 0 and _slots(width) >= width
 
 
 def brute_ids(p, queries, ids, r, k):

@@ -46,10 +46,12 @@ def wrapped_pose(p, xp=np):
     """``(x, y, wrap_angle(theta))`` of poses (N, 3)."""
     if xp is np:
         th = p[:, 2]
-        if th.max() <= np.pi and th.min() > -np.pi:
-            # already in (-pi, pi]: wrapping is the identity there, bit for
+        if np.maximum.reduce(np.abs(th)) < np.pi:
+            # already in (-pi, pi): wrapping is the identity there, bit for
             # bit; the state array itself is returned (nothing writes into
-            # states or outputs)
+            # states or outputs). One reduction of |theta| (2.6 us at N =
+            # 10^3, 1.9 at 10) where th.max() and th.min() of the strided
+            # column took 4.2 and 6.1; +-pi itself and NaN go below
             return p
         # wrap_angle's arithmetic, operation for operation, in one buffer
         w = th - np.pi

@@ -646,10 +646,10 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
             oi, od = _smallest_np(d2, order[pos], k, n)
         elif keyed:
             import jax
-            # selected by (distance, slot in the sorted order): the order of
+            # selected by (distance, column in the row): the order of
             # (distance, index) wherever the k + 1 smallest distances differ,
             # and the exact passes where they may not; only the selected
-            # slots are turned into point indices
+            # columns are turned into slots and point indices
             sel, ok = _smallest_keyed(d2, pos, k, xp)
             got = sel >= 0
             safe = xp.where(got, sel, 0)

@@ -186,3 +186,31 @@ def test_ackermann_steer_rate_limit():
     blk = Ackermann(np.zeros((1, 3)), steer_tau=0.01, steer_rate_max=0.1, delta_max=0.5)
     t, y = run_const(blk, "cmd", [[1.0, 0.5]], 2.0, log=("steer",))
     np.testing.assert_allclose(y["steer"][:, 0], 0.1 * t, atol=1e-9)
+
+
+def test_wrapped_pose_numpy_path_equals_wrap_angle_bit_for_bit():
+    """The NumPy fast path of the unicycle's pose output: the state itself
+    when every heading is already in (-pi, pi], otherwise x and y untouched
+    and the heading exactly ``wrap_angle`` of it (the JAX path's formula)."""
+    from avblocks.utility.angles import wrap_angle
+    from avblocks.vehicles.unicycle import wrapped_pose
+
+    rng = np.random.default_rng(3)
+    inside = np.column_stack([rng.normal(size=(50, 2)),
+                              rng.uniform(-np.pi, np.pi, 50)])
+    inside[0, 2] = np.pi                    # pi itself stays: (-pi, pi]
+    assert wrapped_pose(inside) is inside
+    for th in (rng.uniform(-40, 40, 200),
+               np.array([-np.pi, 3 * np.pi, -3 * np.pi, 1e6, np.nextafter(np.pi, 4)])):
+        p = np.column_stack([rng.normal(size=(th.size, 2)), th])
+        before = p.copy()
+        w = wrapped_pose(p)
+        np.testing.assert_array_equal(p, before)           # input not written
+        np.testing.assert_array_equal(w[:, :2], p[:, :2])
+        np.testing.assert_array_equal(w[:, 2], wrap_angle(th))
+        assert np.all((w[:, 2] > -np.pi) & (w[:, 2] <= np.pi))
+    nan = inside.copy()
+    nan[3, 2] = np.nan
+    w = wrapped_pose(nan)
+    assert np.isnan(w[3, 2])
+    np.testing.assert_array_equal(np.delete(w, 3, 0), np.delete(nan, 3, 0))

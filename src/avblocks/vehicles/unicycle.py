@@ -45,18 +45,19 @@ def unicycle_rhs(pose, cmd, xp=np):
 def wrapped_pose(p, xp=np):
     """``(x, y, wrap_angle(theta))`` of poses (N, 3)."""
     if xp is np:
+        # wrap_angle's arithmetic, operation for operation, in one buffer:
+        # w = ceil((theta - pi) / (2 pi)) turns. When no heading needs a turn
+        # (all in (-pi, pi], or NaN) the state array itself is returned
+        # (nothing writes into states or outputs). Counting the nonzero
+        # turns decides that for the price of one cheap pass, where a test of
+        # max |theta| cost two more passes over the strided column whenever
+        # the headings have left (-pi, pi] (most steps of a long run)
         th = p[:, 2]
-        if np.maximum.reduce(np.abs(th)) < np.pi:
-            # already in (-pi, pi): wrapping is the identity there, bit for
-            # bit; the state array itself is returned (nothing writes into
-            # states or outputs). One reduction of |theta| (2.6 us at N =
-            # 10^3, 1.9 at 10) where th.max() and th.min() of the strided
-            # column took 4.2 and 6.1; +-pi itself and NaN go below
-            return p
-        # wrap_angle's arithmetic, operation for operation, in one buffer
         w = th - np.pi
         w *= 0.5 / np.pi
         np.ceil(w, out=w)
+        if not np.count_nonzero(w):
+            return p
         w *= 2 * np.pi
         out = p.copy()
         np.subtract(th, w, out=out[:, 2])

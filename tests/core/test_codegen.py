@@ -183,3 +183,40 @@ def test_generated_source_is_straight_line():
     d, _ = _multirate()
     src = av.Simulator(d, 0.01, "rk4").init()._fast.source
     assert "der5(tm, s5, {'u': y4['y']}, np)" in src and "out2(tm" not in src
+
+
+def test_compiled_code_is_reused_per_source_and_bound_per_simulator(monkeypatch):
+    """Simulating the same structure again reuses the compiled code object
+    (no second call to Python's compiler), while each simulator's step is
+    bound to its own blocks: a diagram of another size and other values
+    steps to its own results, those of the generic engine."""
+    compiles = []
+
+    def counting(*a, **k):
+        compiles.append(a[1])
+        return compile(*a, **k)
+
+    monkeypatch.setattr(codegen, "compile", counting, raising=False)
+    codegen._CODE.clear()
+    s1 = av.Simulator(_w1()[0], 0.01, "euler").init()
+    s2 = av.Simulator(_w1()[0], 0.01, "euler").init()
+    assert compiles == ["<avblocks generated step>"]
+    assert s1._fast.__code__ is s2._fast.__code__ and s1._fast is not s2._fast
+    s3 = av.Simulator(_w1()[0], 0.01, "rk4").init()      # other source, other code
+    assert len(compiles) == 2 and s3._fast.__code__ is not s1._fast.__code__
+    # the source names no sizes or values: 7 agents reuse the code, and step
+    # as the generic engine steps them
+    s4 = av.Simulator(_w1(n=7)[0], 0.01, "euler").init()
+    assert len(compiles) == 2 and s4._fast.__code__ is s1._fast.__code__
+    monkeypatch.setattr(av.Simulator, "use_codegen", False)
+    ref = av.Simulator(_w1(n=7)[0], 0.01, "euler").init()
+    for _ in range(20):
+        s1.step()
+        s4.step()
+        ref.step()
+    assert s4.X[0]["pose"].tobytes() == ref.X[0]["pose"].tobytes()
+    assert s1.X[0]["pose"].shape == (6, 3)
+    for _ in range(codegen._CODE_MAX + 3):              # bounded, oldest out
+        codegen._compiled(f"x = {len(compiles)}\n" + "#" * len(codegen._CODE))
+        compiles.append("")
+    assert len(codegen._CODE) == codegen._CODE_MAX

@@ -69,7 +69,7 @@ def within_widths(ns, blob, rounds):
         plan = sp.plan_cells(p, r)
         pj = jnp.asarray(p)
         fs = {}
-        for name, wc in (("classes", classes), ("one", lambda cap: (int(cap),))):
+        for name, wc in (("classes", classes), ("one", lambda cap, most=None: (int(cap),))):
             q.width_classes = wc
             try:
                 f = jax.jit(lambda x: sp.within(plan, x, r, xp=jnp)[0])  # noqa: B023

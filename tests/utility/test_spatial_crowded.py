@@ -11,7 +11,13 @@ import pytest
 from scipy.spatial import cKDTree
 
 from avblocks.utility import spatial as sp
-from avblocks.utility.spatial.queries import TRACED_CHUNK, width_classes
+from avblocks.utility.spatial.queries import (
+    MAX_CLASSES,
+    MIN_WIDTH,
+    ONE_CHUNK_CLASSES,
+    TRACED_CHUNK,
+    width_classes,
+)
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
@@ -94,11 +100,21 @@ def test_an_undersized_plan_is_reported_not_silent():
 
 
 def test_width_classes():
-    assert width_classes(256) == (64, 128, 256)
-    assert width_classes(100) == (32, 56, 100)
+    # halvings of the plan's capacity rounded up to multiples of 8, down to
+    # MIN_WIDTH, at most MAX_CLASSES of them
+    assert width_classes(256) == (16, 32, 64, 128, 256)
+    assert width_classes(100) == (16, 32, 56, 100)
+    assert width_classes(930) == (32, 64, 120, 240, 472, 930)   # six at most
     assert width_classes(40) == (16, 24, 40)
     assert width_classes(24) == (16, 24)           # a quarter would be below 16
     assert width_classes(16) == (16,)
+    assert width_classes(9) == (9,)
+    assert width_classes(930, ONE_CHUNK_CLASSES) == (240, 472, 930)   # one chunk
+    for cap in range(1, 3000, 7):                  # each class holds at least half
+        w = width_classes(cap)
+        assert w[-1] == cap and len(w) <= MAX_CLASSES and list(w) == sorted(set(w))
+        assert all(b <= 2 * a + 8 for a, b in zip(w, w[1:]))
+        assert w[0] >= MIN_WIDTH or w == (cap,)
 
 
 # ------------------------------------------------- within and candidates

@@ -131,7 +131,9 @@ def test_a_vehicle_gone_silent_lands_the_others_and_falls_by_its_own_watchdog(
     (off,) = events(recs, "wdt_motors_off", "cf2")
     (g,) = events(recs, "ground", "cf2")
     assert 0.5 < lv["age"] <= 0.521 and 2.0 < off["age"] <= 2.021      # physics clock
-    assert 0.5 < lv["t"] - last < 0.8 and 2.0 < off["t"] - last < 2.3   # wall clock
+    # the wall clock, loosely: a set-point's line is written a little after
+    # the firmware stamped it (up to tens of ms on a loaded machine)
+    assert 0.45 < lv["t"] - last < 0.8 and 1.95 < off["t"] - last < 2.3
     assert g["mode"] == "falling" and g["speed"] > 2.0
 
 
@@ -171,10 +173,12 @@ def test_ctrl_c_and_sigterm_land_every_vehicle_and_save_the_logs(router, tmp_pat
         recs = wait_for(log, _all_down(NAMES), timeout=15)
     assert "saved" in out, out
     _landed_softly(recs, NAMES, after=t_sig)
-    # no set-point reached a vehicle after the land command
+    # no set-point reached a vehicle after the land command (on the emulator's
+    # clock: when the firmware took each set-point, against when the land
+    # request came in; a set-point's line may be written after the land's)
     for nm in NAMES:
-        t_land = [x["wall"] for x in events(recs, "service", nm) if x["service"] == "land"][0]
-        assert all(s["wall"] < t_land for s in events(recs, "setpoint", nm))
+        t_land = [x["t"] for x in events(recs, "service", nm) if x["service"] == "land"][0]
+        assert all(s.get("at", s["t"]) < t_land for s in events(recs, "setpoint", nm))
     res = Results.load(results)
     assert 0.8 < res.t[-1] < 10 and np.isfinite(res["fleet.position"]).all()
     fl = [json.loads(s) for s in flight.read_text().splitlines()]
@@ -204,7 +208,11 @@ def test_sigkill_leaves_every_vehicle_to_the_firmware_watchdog(router, tmp_path)
         (off,) = events(recs, "wdt_motors_off", nm)
         (g,) = events(recs, "ground", nm)
         assert 0.5 < lv["age"] <= 0.521 and 2.0 < off["age"] <= 2.021
-        assert 0.5 < lv["t"] - last["t"] < 0.8 and 2.0 < off["t"] - last["t"] < 2.3
+        # the ages count from the last set-point's stamp (physics clock) ...
+        assert off["at"] - last["at"] == pytest.approx(off["age"], abs=1e-5)
+        # ... and the wall clock agrees loosely (a line is written a little
+        # after its event: tens of ms on a loaded machine)
+        assert 0.45 < lv["t"] - last["t"] < 0.8 and 1.95 < off["t"] - last["t"] < 2.3
         assert g["mode"] == "falling"
     # the flight log up to the kill is on disk (written and flushed as it happened)
     fl = [json.loads(s) for s in flight.read_text().splitlines()]

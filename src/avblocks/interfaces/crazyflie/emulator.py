@@ -239,7 +239,9 @@ class CrazyflieEmulator:
         rec = {"ev": "setpoint", "vehicle": self.names[i], **{k: v for k, v in sp.items()
                                                               if k != "t"},
                "accepted": ok}
-        if not ok:
+        if ok:      # the physics time the firmware stamped it with (its watchdog's
+            rec["at"] = round(t, 6)     # reference; "t" is when the line is written)
+        else:
             rec["reason"] = f"vehicle is {mode}"
         self.write(rec)
 

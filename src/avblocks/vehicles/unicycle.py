@@ -47,7 +47,7 @@ def wrapped_pose(p, xp=np):
     if xp is np:
         # wrap_angle's arithmetic, operation for operation, in one buffer:
         # w = ceil((theta - pi) / (2 pi)) turns. When no heading needs a turn
-        # (all in (-pi, pi], or NaN) the state array itself is returned
+        # (all in (-pi, pi]; a NaN counts as one) the state array is returned
         # (nothing writes into states or outputs). Counting the nonzero
         # turns decides that for the price of one cheap pass, where a test of
         # max |theta| cost two more passes over the strided column whenever

@@ -475,9 +475,10 @@ def _smallest_np(d2, idx, k, n):
 MIN_WIDTH = 16
 
 #: the most width classes a traced search compiles (each is a branch of
-#: the chunk's ``lax.switch``: a copy of the row function for XLA, about
-#: 5-10 s more of a flocking program's first compile), and the most when all
-#: rows fit one chunk (a step's one search: its narrow widths save little)
+#: the chunk's ``lax.switch``: a copy of the row function for XLA; three
+#: more added 4.2 s to one search's compile at N = 10^4 and 30-40 s to the
+#: flocking program's), and the most when all rows fit one chunk (a step's
+#: one search: its narrow widths save little there)
 MAX_CLASSES = 6
 ONE_CHUNK_CLASSES = 3
 
@@ -489,7 +490,8 @@ def width_classes(cap, most=MAX_CLASSES):
     4``, ... rounded up to multiples of 8), none below :data:`MIN_WIDTH`,
     at most ``most`` in all (ascending). A chunk takes the smallest that
     holds its most crowded row, so its work follows its own crowding, not
-    the plan's worst point, within a factor of two.
+    the plan's worst point: within a factor of two of it, down to the
+    smallest class.
 
     Why halvings all the way down: a plan is grown for the most crowded
     moment of a run, and a flock that contracts is sparse for most of it.

@@ -197,7 +197,7 @@ def test_compiled_code_is_reused_per_source_and_bound_per_simulator(monkeypatch)
         return compile(*a, **k)
 
     monkeypatch.setattr(codegen, "compile", counting, raising=False)
-    codegen._CODE.clear()
+    codegen._compiled.cache_clear()
     s1 = av.Simulator(_w1()[0], 0.01, "euler").init()
     s2 = av.Simulator(_w1()[0], 0.01, "euler").init()
     assert compiles == ["<avblocks generated step>"]
@@ -216,7 +216,7 @@ def test_compiled_code_is_reused_per_source_and_bound_per_simulator(monkeypatch)
         ref.step()
     assert s4.X[0]["pose"].tobytes() == ref.X[0]["pose"].tobytes()
     assert s1.X[0]["pose"].shape == (6, 3)
-    for _ in range(codegen._CODE_MAX + 3):              # bounded, oldest out
-        codegen._compiled(f"x = {len(compiles)}\n" + "#" * len(codegen._CODE))
-        compiles.append("")
-    assert len(codegen._CODE) == codegen._CODE_MAX
+    most = codegen._compiled.cache_parameters()["maxsize"]
+    for j in range(most + 3):                            # bounded, oldest out
+        codegen._compiled(f"x = {j}\n")
+    assert codegen._compiled.cache_info().currsize == most

@@ -25,6 +25,8 @@ The generated function is ``step(X, Y, t, t1, k) -> (X, Y)`` with ``X``,
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .errors import SimulationError
@@ -173,23 +175,15 @@ def make_step(eng, solver):
     return fn
 
 
-#: compiled code objects of recent generated steps, by source text: a sweep
-#: or a benchmark that simulates the same structure again and again skips
-#: Python's compiler (0.3-0.4 ms a call, a third of a short run's set-up).
-#: The source holds no values, only block indices and port names, so equal
-#: source means equal code; each call still binds its own blocks' methods.
-_CODE = {}
-_CODE_MAX = 64
-
-
+@functools.lru_cache(maxsize=64)
 def _compiled(src):
-    code = _CODE.pop(src, None)
-    if code is None:
-        code = compile(src, "<avblocks generated step>", "exec")
-        if len(_CODE) >= _CODE_MAX:            # forget the least recently used
-            del _CODE[next(iter(_CODE))]
-    _CODE[src] = code
-    return code
+    """The code object of a generated step's source, kept for the 64 most
+    recent: a sweep or a benchmark that simulates the same structure again
+    and again skips Python's compiler (0.3-0.4 ms a call, a third of a short
+    run's set-up). The source holds no values, only block indices and port
+    names, so equal source means equal code; each call of :func:`make_step`
+    still binds its own blocks' methods."""
+    return compile(src, "<avblocks generated step>", "exec")
 
 
 def _stage_blocks(eng):

@@ -511,7 +511,7 @@ def width_classes(cap, most=MAX_CLASSES):
             break
         out.append(w)
         div *= 2
-    return tuple(sorted(set(out)))
+    return tuple(reversed(out))                 # strictly decreasing: no repeats
 
 
 def _pad_cols(a, k, fill, xp):

@@ -492,66 +492,171 @@ def float32_error(n, seconds):
           f"{__import__('jax').devices()[0].platform}")
 
 
-def gpu_child(n, dtype, steps):
-    """One GPU row (in its own process): plan + compile, then ``steps`` steps."""
+def _gpu_runner_row(n, dtype, steps, calls=3):
+    """One (N, dtype) runner on JAX's default device: planning (the NumPy
+    evaluation at t0 and the plan; a plan kept from an earlier row of the
+    same structure is reused), the first call (XLA compile, any re-plan
+    and its compile, the run) and the best of ``calls`` later calls."""
     import jax
 
     import avblocks as av
     t = time.perf_counter()
     runner = av.compile(diagram(n), steps * DT, dt=DT, log=["flock.position"],
                         log_every=steps, dtype=dtype)
-    plan_compile = time.perf_counter() - t      # planning (XLA compiles at the first call)
-    t = time.perf_counter()
-    runner()                                        # first call (re-plan if needed)
-    first = time.perf_counter() - t
+    plan_s = time.perf_counter() - t
     t = time.perf_counter()
     runner()
-    wall = time.perf_counter() - t
+    first = time.perf_counter() - t
+    walls = []
+    for _ in range(calls):
+        t = time.perf_counter()
+        res = runner()
+        walls.append(time.perf_counter() - t)
+    wall = min(walls)
     dev = jax.devices()[0]
     stats = dev.memory_stats() or {}
+    pos = np.asarray(res["flock.position"][-1], float)
     return {"n": n, "dtype": dtype, "steps": steps, "device": str(dev),
-            "plan_compile_s": plan_compile, "first_call_s": first,
-            "ms_per_step": 1e3 * wall / steps, "realtime_factor": DT * steps / wall,
+            "plan_s": plan_s, "first_call_s": first,
+            "ms_per_step": 1e3 * wall / steps, "ms_per_step_calls":
+            [round(1e3 * w / steps, 3) for w in walls],
+            "realtime_factor": DT * steps / wall,
             "peak_device_mib": stats.get("peak_bytes_in_use", 0) / 2**20,
-            "plan": str(next(iter(runner.plans.values())))}
+            "finite": bool(np.isfinite(pos).all()),
+            "plan": str(next(iter(runner.plans.values())))}, runner
 
 
-def gpu(out_dir, limit):
-    """The GPU rows of issue 32, each in a child process with a time limit;
-    tables written to ``out_dir``."""
-    rows = []
-    cases = [(10**6, "float64", 50), (10**6, "float32", 50), (10**7, "float32", 10),
-             (10**7, "float64", 10)]
-    for n, dt, steps in cases:
-        try:
-            out = subprocess.run([sys.executable, __file__, "--gpu-one", str(n), dt,
-                                  str(steps)], capture_output=True, text=True,
-                                 timeout=limit)
-            r = json.loads(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 \
-                else {"n": n, "dtype": dt, "error": out.stderr.strip()[-300:]}
-        except subprocess.TimeoutExpired:
-            r = {"n": n, "dtype": dt, "error": f"over {limit} s"}
+def _gpu_search_ms(runner, n, calls=10):
+    """The k-nearest search alone (``spatial.nearest`` with the run's plan,
+    jitted, float64, on the initial lattice): ms per call, best of
+    ``calls`` -- how much of a step the search is."""
+    import jax
+    import jax.numpy as jnp
+
+    from avblocks.utility import spatial as sp
+    jax.config.update("jax_enable_x64", True)
+    plan = next(iter(runner.plans.values()))
+    f = jax.jit(lambda p: sp.nearest(plan, p, R, K, None, jnp)[:2])
+    p = jnp.asarray(initial(n)[0])
+    jax.block_until_ready(f(p))
+    best = np.inf
+    for _ in range(calls):
+        t = time.perf_counter()
+        jax.block_until_ready(f(p))
+        best = min(best, time.perf_counter() - t)
+    return 1e3 * best
+
+
+def _gpu_check(n=2000, steps=10):
+    """Correctness on the device: the compiled run (float64 and float32)
+    against the NumPy engine on the host, final positions."""
+    import avblocks as av
+    ref = av.simulate(diagram(n), steps * DT, dt=DT, backend="numpy",
+                      log=["flock.position"], log_every=steps)
+    want = np.asarray(ref["flock.position"][-1], float)
+    out = {"n": n, "steps": steps, "case": "check"}
+    for dt in ("float64", "float32"):
+        res = av.simulate(diagram(n), steps * DT, dt=DT, backend="jax", dtype=dt,
+                          log=["flock.position"], log_every=steps)
+        got = np.asarray(res["flock.position"][-1], float)
+        out[f"max_dp_{dt}_m"] = float(np.abs(got - want).max())
+    return out
+
+
+def gpu_child(case, n, dtypes, steps):
+    """One GPU case in its own process: ``rows`` (one runner row per dtype,
+    in order, the first row's plan reused by the next), ``search`` (rows
+    and the search alone) or ``check`` (device against the NumPy engine)."""
+    import jax
+    print(f"# device {jax.devices()[0]} (JAX {jax.__version__})", file=sys.stderr, flush=True)
+    if case == "check":
+        return [_gpu_check(n, steps)]
+    rows, runner = [], None
+    for dt in dtypes:
+        r, runner = _gpu_runner_row(n, dt, steps)
+        print(json.dumps(r), file=sys.stderr, flush=True)   # kept if a later row dies
         rows.append(r)
-        print(json.dumps(r), flush=True)
+    if case == "search":
+        rows[0]["search_ms"] = _gpu_search_ms(runner, n)
+    return rows
+
+
+#: the GPU cases, most wanted first: (case, N, dtypes, steps)
+GPU_CASES = [("search", 10**6, ("float64", "float32"), 50),
+             ("rows", 10**7, ("float32", "float64"), 10),
+             ("check", 2000, (), 10),
+             ("rows", 10**6, ("float64",), 200),          # 4 s: the flock contracts
+             ("rows", 10**5, ("float64",), 50)]
+
+
+def gpu(out_dir, limit, budget):
+    """The GPU rows of issue 32, each case in a child process with a time
+    limit (``limit``, and what is left of ``budget`` seconds for all);
+    tables written to ``out_dir`` after every case."""
+    rows = []
+    end = time.perf_counter() + budget
     os.makedirs(out_dir, exist_ok=True)
+    for case, n, dts, steps in GPU_CASES:
+        left = min(limit, end - time.perf_counter())
+        if left < 20:
+            rows.append({"n": n, "case": case, "error": "skipped: out of time"})
+            continue
+        t = time.perf_counter()
+        try:
+            out = subprocess.run([sys.executable, __file__, "--gpu-one", case, str(n),
+                                  ",".join(dts) or "-", str(steps)],
+                                 capture_output=True, text=True, timeout=left)
+            got = json.loads(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 \
+                else None
+            err = out.stderr
+        except subprocess.TimeoutExpired as e:
+            got, err = None, (e.stderr.decode() if isinstance(e.stderr, bytes)
+                              else e.stderr or "") + f"\nover {left:.0f} s"
+        sys.stderr.write(err[-3000:])
+        if got is None:
+            # rows a child finished before it failed are on its stderr
+            done = [json.loads(x) for x in err.splitlines() if x.startswith('{"n"')]
+            got = done + [{"n": n, "case": case, "dtype": "-",
+                           "error": err.strip()[-400:]}]
+        for r in got:
+            r.setdefault("case", case)
+            r["case_s"] = time.perf_counter() - t
+        rows.extend(got)
+        for r in got:
+            print(json.dumps(r), flush=True)
+        _gpu_tables(rows, out_dir)
+    _gpu_tables(rows, out_dir)
+
+
+def _gpu_tables(rows, out_dir):
     with open(os.path.join(out_dir, "gpu_issue32.json"), "w") as f:
         json.dump(rows, f, indent=1)
-    lines = ["| N | dtype | ms per step | real-time factor | plan s | "
-             "first call (compile, re-plans, run) s | peak device MiB | plan |",
-             "|---:|---|---:|---:|---:|---:|---:|---|"]
+    lines = ["| N | dtype | steps | ms per step | real-time factor | plan s | "
+             "first call (compile, re-plans, run) s | peak device MiB | search alone ms | "
+             "plan |",
+             "|---:|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    checks = []
     for r in rows:
-        if "error" in r:
-            lines.append(f"| {r['n']} | {r['dtype']} | failed: {r['error'][-80:]} |||||")
+        if r.get("case") == "check" and "error" not in r:
+            checks.append(r)
+        elif "error" in r:
+            lines.append(f"| {r['n']} | {r.get('dtype', '-')} | | failed: "
+                         f"{r['error'][-120:]!r} |||||||")
         else:
-            lines.append(f"| {r['n']} | {r['dtype']} | {r['ms_per_step']:.2f} | "
-                         f"{r['realtime_factor']:.2f} | {r['plan_compile_s']:.1f} | "
-                         f"{r['first_call_s']:.1f} | {r['peak_device_mib']:.0f} | "
+            sm = f"{r['search_ms']:.2f}" if "search_ms" in r else ""
+            lines.append(f"| {r['n']} | {r['dtype']} | {r['steps']} | {r['ms_per_step']:.2f} | "
+                         f"{r['realtime_factor']:.2f} | {r['plan_s']:.1f} | "
+                         f"{r['first_call_s']:.1f} | {r['peak_device_mib']:.0f} | {sm} | "
                          f"{r['plan']} |")
     dev = next((r["device"] for r in rows if "device" in r), "?")
     text = f"device {dev}; flocking, K = {K}, RK4, dt = {DT} s\n\n" + "\n".join(lines)
+    for c in checks:
+        text += (f"\n\ncheck, N = {c['n']}, {c['steps']} steps, device against the NumPy "
+                 f"engine: max |dp| float64 {c['max_dp_float64_m']:.3g} m, float32 "
+                 f"{c['max_dp_float32_m']:.3g} m")
     with open(os.path.join(out_dir, "gpu_issue32.md"), "w") as f:
         f.write(text + "\n")
-    print(text)
+    print(text, flush=True)
 
 
 def main(argv=None):
@@ -578,16 +683,20 @@ def main(argv=None):
                     help="float32 against float64 positions after --seconds (--n)")
     ap.add_argument("--gpu", action="store_true", help="the GPU rows, tables to --out-dir")
     ap.add_argument("--out-dir", default=".", dest="out_dir")
-    ap.add_argument("--limit", type=float, default=240.0, help="--gpu: seconds per row")
+    ap.add_argument("--limit", type=float, default=240.0, help="--gpu: seconds per case")
+    ap.add_argument("--budget", type=float, default=480.0,
+                    help="--gpu: seconds for all cases (later cases are skipped)")
     ap.add_argument("--one", nargs=3, metavar=("ENGINE", "N", "STEPS"),
                     help=argparse.SUPPRESS)
-    ap.add_argument("--gpu-one", nargs=3, dest="gpu_one", help=argparse.SUPPRESS)
+    ap.add_argument("--gpu-one", nargs=4, dest="gpu_one", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.gpu_one:
-        print(json.dumps(gpu_child(int(a.gpu_one[0]), a.gpu_one[1], int(a.gpu_one[2]))))
+        case, n, dts, steps = a.gpu_one
+        print(json.dumps(gpu_child(case, int(n), [d for d in dts.split(",") if d != "-"],
+                                   int(steps))))
         return
     if a.gpu:
-        gpu(a.out_dir, a.limit)
+        gpu(a.out_dir, a.limit, a.budget)
         return
     if a.long:
         long_runs(a.n or [1000, 10000], a.seconds, a.rounds, a.numba2)

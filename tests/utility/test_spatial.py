@@ -103,6 +103,38 @@ def test_within_is_the_radius_set():
         set(np.nonzero((full[a] <= 1.0) & (np.arange(len(p)) != a))[0]) for a in range(len(p))])
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_plan_counts_the_candidates_and_hits_of_the_most_crowded_point(seed):
+    """plan_cells' capacity and hits are headroom times the most candidates
+    and the most others within reach of one point: counted here by all
+    pairs (hits, periodic minimum image) and by the cells around each point
+    (candidates), on clouds with lattice ties at exactly the reach,
+    duplicates and a periodic box."""
+    rng = np.random.default_rng(seed)
+    n, r = 300, 1.0
+    box = None if seed % 2 == 0 else np.array([12.0, 9.0])
+    p = rng.uniform(0, 9, (n, 2))
+    if seed % 3 == 1:
+        p = np.round(p * 2) / 2                  # pairs at exactly r = 1.0
+    if seed % 3 == 2:
+        p[: n // 4] = p[0]                       # a stack of duplicates
+    d = p[None, :, :] - p[:, None, :]
+    if box is not None:
+        d = d - box * np.round(d / box)
+    within_r = (np.sqrt((d ** 2).sum(-1)) <= r) & ~np.eye(n, dtype=bool)
+    most_hits = int(within_r.sum(1).max())
+    plan = sp.plan_cells(p, r, box=box, headroom=1.0, min_capacity=1)
+    assert plan.hits == max(1, most_hits)
+    # candidates: the cell list's own rows (the need of a within search,
+    # which is how plans were counted before the tree counted the hits)
+    _, _, need = sp.within(sp.CellList(r, box=box), p, r)
+    assert plan.capacity == int(need.capacity)
+    assert plan.hits == max(1, int(need.hits))
+    assert int(need.capacity) >= most_hits
+    wide = sp.plan_cells(p, r, box=box, headroom=1.5)
+    assert wide.hits == max(8, int(np.ceil(1.5 * most_hits)))
+
+
 def test_overflow_is_reported():
     p = np.random.default_rng(0).uniform(0, 10, (200, 2))
     plan = sp.plan_cells(p, 1.0)

@@ -235,7 +235,8 @@ def _alpha_pairs(position, velocity, pairs, k):
     (``out=``), never the inputs."""
     n, dim = position.shape
     qt = position.T.copy()                                         # (D, N)
-    pt = velocity.T * k["c2"]                                      # c2 / 2 p
+    pt = np.multiply(velocity.T, k["c2"], order="C")               # c2 / 2 p (rows
+    #                          contiguous: take() of a strided row copies all of it)
     ae, be = k["c1"] * k["ae"], k["c1"] * k["be"]
     shift, lo, hi, gain2 = k["shift"], k["lo"], k["hi"], 2.0 * k["gain"]
     acc = np.zeros((dim, n))

@@ -32,14 +32,37 @@ def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=No
     if base.brute:
         return CellList(base.reach, 1, table, base.box, base.dim,
                         max(1, n - 1) if hits is None else int(hits))
-    if capacity is None or hits is None:
-        _, _, need = within(base, pts, base.reach, None, np)
-        if capacity is None:
-            capacity = max(int(min_capacity),
-                           int(math.ceil(float(headroom) * int(need.capacity))))
-        if hits is None:
-            hits = max(int(min_capacity), int(math.ceil(float(headroom) * int(need.hits))))
+    if capacity is None:
+        # the most candidates of a point: its cell window's slot ranges
+        capacity = max(int(min_capacity),
+                       int(math.ceil(float(headroom) * (_prepare(base, pts, None, np)[3]
+                                                        if n else 0))))
+    if hits is None:
+        hits = max(int(min_capacity), int(math.ceil(float(headroom) * _most_hits(base, pts))))
     return CellList(base.reach, int(capacity), table, base.box, base.dim, int(hits))
+
+
+def _most_hits(cells, pts):
+    """The most other points within ``cells.reach`` (inclusive) of one of
+    ``pts``: the ``within`` search's ``need.hits``, counted by SciPy's k-d
+    tree on all cores (planning 10^7 points by the cell list's rows took
+    minutes). The tree's own test may differ from ``within``'s ``d2 <=
+    r^2`` by a rounding at the very edge, which moves a plan's headroom by
+    one point at most; a run that needs more is caught all the same."""
+    from scipy.spatial import cKDTree
+    if pts.shape[0] < 2:
+        return 0
+    if cells.box is not None:
+        b = np.asarray(cells.box, dtype=float)
+        p = pts - b * np.floor(pts / b)
+        tree = cKDTree(np.where(p >= b, 0.0, p), boxsize=b, balanced_tree=False,
+                       compact_nodes=False)
+        q = tree.data
+    else:
+        tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
+        q = pts
+    cnt = tree.query_ball_point(q, cells.reach, return_length=True, workers=-1)
+    return int(np.max(cnt)) - 1                     # itself
 
 
 # ---------------------------------------------------------------- internals

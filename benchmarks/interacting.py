@@ -659,6 +659,61 @@ def _gpu_tables(rows, out_dir):
     print(text, flush=True)
 
 
+def _best_ms(f, *args, calls=10):
+    import jax
+    jax.block_until_ready(f(*args))
+    best = np.inf
+    for _ in range(calls):
+        t = time.perf_counter()
+        jax.block_until_ready(f(*args))
+        best = min(best, time.perf_counter() - t)
+    return 1e3 * best
+
+
+def gpu_parts(out_dir, ns=(10**6, 10**7), chunk_bytes=(2**31, 2**33)):
+    """Where a GPU step goes (float64, the initial lattice, each part
+    jitted alone, best of 10): the cell sort (``layout``), the k-nearest
+    search at each accelerator chunk budget (``ACCEL_CHUNK_BYTES``), and
+    one evaluation of the flocking law on the found neighbours (a step
+    evaluates it four times). Written to ``gpu_parts.md`` / ``.json``."""
+    import jax
+    import jax.numpy as jnp
+
+    from avblocks.controllers.flocking import flocking_law
+    from avblocks.utility import spatial as sp
+    from avblocks.utility.spatial import queries
+    from avblocks.utility.spatial.layout import layout
+    jax.config.update("jax_enable_x64", True)
+    plan = sp.CellList(R, capacity=50, hits=24)       # the runs' plan at t0
+    rows = []
+    for n in ns:
+        p0, v0, _ = initial(n)
+        p, v = jnp.asarray(p0), jnp.asarray(v0)
+        r = {"n": n, "device": str(jax.devices()[0]),
+             "layout_ms": _best_ms(jax.jit(lambda p: layout(plan, p, jnp).order), p)}
+        for cb in chunk_bytes:
+            queries.ACCEL_CHUNK_BYTES = cb
+            f = jax.jit(lambda p: sp.nearest(plan, p, R, K, None, jnp)[:2])
+            r[f"nearest_ms_chunk_{cb >> 20}MiB"] = _best_ms(f, p)
+            r[f"rows_per_chunk_{cb >> 20}MiB"] = queries.traced_rows(plan.capacity)
+        queries.ACCEL_CHUNK_BYTES = chunk_bytes[0]
+        idx, dist = jax.jit(lambda p: sp.nearest(plan, p, R, K, None, jnp)[:2])(p)
+        r["law_ms"] = _best_ms(jax.jit(lambda p, v, i: flocking_law(p, v, i, D, R, xp=jnp)),
+                               p, v, idx)
+        print(json.dumps(r), flush=True)
+        rows.append(r)
+    os.makedirs(out_dir, exist_ok=True)
+    with open(os.path.join(out_dir, "gpu_parts.json"), "w") as f:
+        json.dump(rows, f, indent=1)
+    keys = [k for k in rows[0] if k not in ("n", "device")]
+    text = "| N | " + " | ".join(keys) + " |\n|" + "---:|" * (len(keys) + 1) + "\n"
+    for r in rows:
+        text += f"| {r['n']} | " + " | ".join(f"{r[k]:.3g}" for k in keys) + " |\n"
+    with open(os.path.join(out_dir, "gpu_parts.md"), "w") as f:
+        f.write(f"device {rows[0]['device']}\n\n" + text)
+    print(text, flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="N up to 1e4")
@@ -682,6 +737,8 @@ def main(argv=None):
     ap.add_argument("--float32", action="store_true",
                     help="float32 against float64 positions after --seconds (--n)")
     ap.add_argument("--gpu", action="store_true", help="the GPU rows, tables to --out-dir")
+    ap.add_argument("--gpu-parts", action="store_true", dest="gpu_parts",
+                    help="a GPU step's parts timed alone (--n), table to --out-dir")
     ap.add_argument("--out-dir", default=".", dest="out_dir")
     ap.add_argument("--limit", type=float, default=240.0, help="--gpu: seconds per case")
     ap.add_argument("--budget", type=float, default=480.0,
@@ -694,6 +751,9 @@ def main(argv=None):
         case, n, dts, steps = a.gpu_one
         print(json.dumps(gpu_child(case, int(n), [d for d in dts.split(",") if d != "-"],
                                    int(steps))))
+        return
+    if a.gpu_parts:
+        gpu_parts(a.out_dir, tuple(a.n or (10**6, 10**7)))
         return
     if a.gpu:
         gpu(a.out_dir, a.limit, a.budget)

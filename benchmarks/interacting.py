@@ -36,6 +36,7 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py --long --n 100000 --numba2   # jax / two-thread Numba
     python benchmarks/interacting.py --float32 --n 1000       # float32 error, flocking
     python benchmarks/interacting.py --gpu --out-dir OUT      # the GPU rows (one call)
+    python benchmarks/interacting.py --gpu-parts --out-dir OUT   # a GPU step's parts
 
 ``--long`` (issue 32; one process, so the ratios share the machine's
 state): the flock over ``--seconds`` (4) s contracts towards the target,
@@ -47,11 +48,15 @@ no trace, no compile); the compiled runner's second call; each ratio to
 the Numba loop timed next to it (``--numba2``: the two-thread loop).
 
 ``--gpu`` writes ``gpu_issue32.md`` (and ``.json``) into ``--out-dir``: on
-JAX's default device, flocking at N = 10^6 (RK4, dt 0.02, float64 and
-float32: ms per step, plan + compile seconds, peak device memory) and
-N = 10^7 (float32 and float64: plan + compile seconds, 10 steps, ms per
-step, memory), each in a child process with a time limit
-(``--limit``, 240 s).
+JAX's default device, the cases of ``GPU_CASES`` in order of need, each in
+a child process with a time limit (``--limit``, 240 s; all within
+``--budget``, 480 s, later cases skipped): flocking at N = 10^6 (RK4, dt
+0.02, float64 then float32: ms per step, planning and first-call seconds,
+peak device memory, and the search alone), N = 10^7 (float32 then
+float64, 10 steps), a check of the device against the NumPy engine (N =
+2000), N = 10^6 over 4 s (the flock contracts, one re-plan) and N = 10^5.
+``--gpu-parts`` times a GPU step's parts alone (cell sort, k-nearest at two
+chunk budgets, one law evaluation) at ``--n`` (10^6, 10^7).
 
 On an accelerator the ``jax`` column runs there (JAX's default device,
 printed first); ``numpy`` and ``numba`` always run on the host's CPU.

@@ -68,6 +68,35 @@ def test_point_to_point_law_is_feedback_linearization():
     assert np.allclose(pdot, K * (goal - p), atol=1e-12)
 
 
+def test_point_to_point_law_saturates_and_its_numpy_path_equals_the_generic_one():
+    """The NumPy path (in-place buffers) against the expressions every other
+    array namespace runs (a namespace that is not ``numpy`` itself), bit for
+    bit; and the controlled point's speed is min(K |e|, v_max)."""
+    import types
+    generic = types.SimpleNamespace(**{k: getattr(np, k) for k in dir(np)
+                                       if not k.startswith("_")})
+    rng = np.random.default_rng(5)
+    n = 40
+    pose = np.column_stack([rng.normal(0, 5, (n, 2)), rng.uniform(-9, 9, n)])
+    goal = rng.normal(0, 5, (n, 2))
+    d, gain, vmax = 0.25, rng.uniform(0.2, 2.0, n), rng.uniform(0.1, 3.0, n)
+    cmd, near = av.controllers.point_to_point_law(pose, goal, d, gain, vmax, radius=1.5)
+    cmd_g, near_g = av.controllers.point_to_point_law(pose, goal, d, gain, vmax,
+                                                      xp=generic, radius=1.5)
+    assert np.array_equal(cmd, cmd_g) and np.array_equal(near, near_g)
+    th = pose[:, 2]
+    p = pose[:, :2] + d * np.column_stack([np.cos(th), np.sin(th)])
+    e = np.linalg.norm(goal - p, axis=1)
+    v, w = cmd[:, 0], cmd[:, 1]
+    pdot = np.column_stack([v * np.cos(th) - d * w * np.sin(th),
+                            v * np.sin(th) + d * w * np.cos(th)])
+    assert np.allclose(np.linalg.norm(pdot, axis=1), np.minimum(gain * e, vmax),
+                       rtol=1e-12, atol=1e-12)
+    assert np.array_equal(near, e <= 1.5)
+    assert (e > 1.5).any() and (e <= 1.5).any()
+    assert (gain * e > vmax).any() and (gain * e < vmax).any()   # both regimes
+
+
 @pytest.mark.jax
 def test_demo_traced_under_jax_matches_numpy():
     pytest.importorskip("jax")

@@ -105,18 +105,48 @@ def point_to_point_law(pose, goal, d, gain, v_max, xp=np, radius=None):
     With ``radius`` also returns whether each point is within it of its goal.
     """
     c, s = shared(heading_trig, pose, xp)
+    if xp is np:
+        return _law_np(pose, goal, c, s, d, gain, v_max, radius)
     ex = goal[:, 0] - pose[:, 0] - d * c
     ey = goal[:, 1] - pose[:, 1] - d * s
     # |K e| saturated at v_max: w = K e * min(1, v_max / (K |e|))
     e2 = ex * ex + ey * ey
     k = xp.minimum(gain, v_max / xp.maximum(xp.sqrt(e2), 1e-300))
     wx, wy = k * ex, k * ey
-    if xp is np:                        # same values, fewer temporaries
-        cmd = np.empty((c.shape[0], 2))
-        np.add(c * wx, s * wy, out=cmd[:, 0])
-        np.multiply(c * wy - s * wx, 1.0 / d, out=cmd[:, 1])
-    else:
-        cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
+    cmd = columns(xp, c * wx + s * wy, (c * wy - s * wx) * (1.0 / d))
+    if radius is None:
+        return cmd
+    return cmd, e2 <= radius * radius
+
+
+def _law_np(pose, goal, c, s, d, gain, v_max, radius):
+    """:func:`point_to_point_law` under NumPy: the same operations in the
+    same order (the same values, bit for bit), in five buffers instead of
+    about twenty temporaries (W1 at N = 10^3: each allocation is a few
+    tenths of a microsecond of a step of about 100)."""
+    ex = goal[:, 0] - pose[:, 0]
+    t = np.multiply(d, c)
+    ex -= t                              # ex = g_x - x - d c
+    ey = goal[:, 1] - pose[:, 1]
+    np.multiply(d, s, out=t)
+    ey -= t
+    e2 = ex * ex
+    np.multiply(ey, ey, out=t)
+    e2 += t
+    k = np.sqrt(e2)                      # k = min(K, v_max / max(|e|, tiny))
+    np.maximum(k, 1e-300, out=k)
+    np.divide(v_max, k, out=k)
+    np.minimum(gain, k, out=k)
+    wx = np.multiply(k, ex, out=ex)
+    wy = np.multiply(k, ey, out=ey)
+    cmd = np.empty((c.shape[0], 2))
+    np.multiply(c, wx, out=t)
+    np.multiply(s, wy, out=k)
+    np.add(t, k, out=cmd[:, 0])          # v = c wx + s wy
+    np.multiply(c, wy, out=t)
+    np.multiply(s, wx, out=k)
+    t -= k
+    np.multiply(t, 1.0 / d, out=cmd[:, 1])   # omega = (c wy - s wx) / d
     if radius is None:
         return cmd
     return cmd, e2 <= radius * radius

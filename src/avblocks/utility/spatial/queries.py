@@ -676,8 +676,10 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     k = int(k)
 
     n = points.shape[0]
+    # the key holds a candidate's column in its row, not its point index:
+    # any number of points (the index is gathered for the selected columns)
     keyed = (xp is not np and np.dtype(points.dtype).itemsize == 8 and k > 0
-             and n < 2 ** 31 and not cells.brute)
+             and not cells.brute)
 
     def exact(d2, idx):
         od, oi = k_smallest(d2, idx, k, xp)

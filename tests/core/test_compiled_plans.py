@@ -257,3 +257,44 @@ def test_a_run_in_segments_replans_and_a_stopped_one_says_it_overflowed():
     assert part.meta["interrupted"] and part.meta["overflowed"] == ["nb"]
     assert any("stopped compiled run" in str(x.message) for x in w)
     assert not any("re-planned" in str(x.message) for x in w)
+
+
+class _Blows(av.Block):
+    """Positions that are NaN for agent 2 from t0 on (a broken upstream block)."""
+
+    def __init__(self, n):
+        super().__init__()
+        self.declare_input("u", (n, 2))
+        self.declare_output("y", (n, 2))
+
+    def output(self, t, x, u, xp):
+        bad = xp.arange(u["u"].shape[0])[:, None] == 2
+        return {"y": xp.where(bad, xp.nan, u["u"])}
+
+
+def test_planning_from_non_finite_points_names_the_block_or_the_point():
+    """A search planned from positions that are NaN at t0 stops before any
+    tracing, naming the search's block (its NumPy evaluation at t0 refuses
+    them); plan_cells, called directly, names the point (it crashed inside
+    NumPy's bincount before)."""
+    n = 12
+    rng = np.random.default_rng(0)
+    d = av.Diagram()
+    ag = d.add(av.vehicles.SingleIntegrator(rng.uniform(-5, 5, (n, 2))), name="ag")
+    g = d.add(av.blocks.Gain(-1.0), name="g")
+    blows = d.add(_Blows(n), name="blows")
+    nb = d.add(Neighbors(n, 3, radius=2.0, input="position", method="cells"), name="nb")
+    d.connect(ag.position, g.u)
+    d.connect(g.y, ag.velocity)
+    d.connect(ag.position, blows.u)
+    d.connect(blows.y, nb.position)
+    with pytest.raises(av.SimulationError) as e:
+        av.simulate(d, 0.2, dt=0.05, backend="jax")
+    msg = str(e.value)
+    assert "block 'nb'" in msg and "t=0" in msg and "finite" in msg
+    from avblocks.utility import spatial as sp
+    for bad in (np.nan, np.inf, -np.inf):
+        p = rng.uniform(0, 5, (20, 2))
+        p[7, 1] = bad
+        with pytest.raises(av.ParameterError, match="point 7"):
+            sp.plan_cells(p, 1.0)

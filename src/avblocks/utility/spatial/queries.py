@@ -22,11 +22,18 @@ def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=No
     ``capacity`` defaults to ``max(min_capacity, ceil(headroom * most))``
     where ``most`` is the largest candidate count of a point at ``points``;
     ``hits`` likewise from the most points within ``reach`` of one point.
+    Non-finite points raise a ``ParameterError`` naming the first.
     """
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
         raise ParameterError("points must be (N, 2) or (N, 3)", param="points",
                              found=pts.shape)
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ParameterError("points to plan a search from must be finite",
+                             param="points", expected="finite coordinates",
+                             found=f"point {i}: {pts[i].tolist()}")
     base = CellList(reach, None, table, box, pts.shape[1])
     n = pts.shape[0]
     if base.brute:

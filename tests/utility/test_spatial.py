@@ -63,7 +63,13 @@ def test_nearest_numpy_matches_brute_force():
         assert plan.exceeded(need) is None
 
 
-def test_kd_nearest_equals_brute_force_with_ties():
+@pytest.mark.parametrize("threads", [False, True], ids=["one thread", "every core"])
+def test_kd_nearest_equals_brute_force_with_ties(threads, monkeypatch):
+    """Also with the tree queried on every core (as from
+    ``kdtree.PARALLEL_QUERY`` points on): the same answers."""
+    from avblocks.utility.spatial import kdtree
+    if threads:
+        monkeypatch.setattr(kdtree, "PARALLEL_QUERY", 1)
     for _, p, r, k, box in cases(5, 40):
         i, d = sp.kd_nearest(p, r, k, box=box)
         bi, bd = brute(p, r, k, box)

@@ -499,9 +499,10 @@ def float32_error(n, seconds):
 
 def _gpu_runner_row(n, dtype, steps, calls=3):
     """One (N, dtype) runner on JAX's default device: planning (the NumPy
-    evaluation at t0 and the plan; a plan kept from an earlier row of the
-    same structure is reused), the first call (XLA compile, any re-plan
-    and its compile, the run) and the best of ``calls`` later calls."""
+    evaluation at t0 and the plan, made again for every row: only a plan
+    grown by an overflow is kept for a structure), the first call (XLA
+    compile, any re-plan and its compile, the run) and the best of
+    ``calls`` later calls."""
     import jax
 
     import avblocks as av
@@ -570,8 +571,8 @@ def _gpu_check(n=2000, steps=10):
 
 def gpu_child(case, n, dtypes, steps):
     """One GPU case in its own process: ``rows`` (one runner row per dtype,
-    in order, the first row's plan reused by the next), ``search`` (rows
-    and the search alone) or ``check`` (device against the NumPy engine)."""
+    in order), ``search`` (rows, then the search alone with the
+    last row's plan) or ``check`` (device against the NumPy engine)."""
     import jax
     print(f"# device {jax.devices()[0]} (JAX {jax.__version__})", file=sys.stderr, flush=True)
     if case == "check":

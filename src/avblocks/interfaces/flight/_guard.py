@@ -4,7 +4,12 @@ The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
 the handler first commands every registered robot to zero velocity, then
 hands the signal to the handler that was there before (the CLI's guard
 raises its own interrupt), or raises :class:`KeyboardInterrupt` in the
-main thread, so that
+main thread. The stop runs on a thread of its own, which the handler
+waits for up to :data:`STOP_WAIT`: a handler runs in the main thread
+between two of its bytecodes, so a lock that thread holds when the signal
+comes (a flight-log line being written, a set-point being sent) would
+deadlock a stop made in the handler itself; the interrupt releases it, and
+the stop goes out after what the main thread was sending. So that
 ``simulate()`` takes its interrupted path: it returns the results logged so
 far (the CLI saves them) after calling every block's ``on_stop`` (which
 stops the robots again). An ``atexit`` hook stops any block still
@@ -34,8 +39,16 @@ def _stop_all():
             pass
 
 
+#: seconds the signal handler waits for the robots' stop before it raises
+#: in the main thread (the stop goes on after that if a lock held it back)
+STOP_WAIT = 0.2
+
+
 def _handler(signum, frame):
-    _stop_all()
+    # not a daemon: the interpreter waits for the stop before it exits
+    stop = threading.Thread(target=_stop_all, name="avblocks-signal-stop")
+    stop.start()
+    stop.join(STOP_WAIT)
     prev = _previous.get(signum)
     if callable(prev):          # e.g. the CLI's guard: it raises its own interrupt
         prev(signum, frame)

@@ -1,0 +1,64 @@
+"""The robots' signal guard (``interfaces.flight._guard``): a signal that
+comes while the main thread holds a lock the stop needs (a flight-log line
+being written, a set-point being sent) neither deadlocks the process nor
+skips the stop; without such a lock the stop is done before the handler
+raises. Driven by calling the installed handler, as Python does between
+two bytecodes of the main thread."""
+
+import signal
+import threading
+import time
+
+import pytest
+
+from avblocks.interfaces.flight import _guard
+
+
+class _Robot:
+    """Stands for a fleet block: its stop takes the lock its log takes."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.stopped = []
+
+    def stop_robots(self):
+        got = self.lock.acquire(timeout=5.0)     # the old handler: 5 s, then gives up
+        self.stopped.append((got, threading.current_thread() is threading.main_thread()))
+        if got:
+            self.lock.release()
+
+
+@pytest.fixture
+def robot():
+    r = _Robot()
+    _guard.register(r)
+    yield r
+    _guard.unregister(r)
+
+
+def test_a_signal_while_the_main_thread_holds_the_log_lock_stops_after_it(robot):
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        with robot.lock:                         # the main thread writes a log line
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+    deadline = time.monotonic() + 5.0
+    while not robot.stopped and time.monotonic() < deadline:
+        time.sleep(0.01)
+    # the stop took the lock once the interrupt released it, on its own thread
+    assert robot.stopped == [(True, False)]
+    assert time.monotonic() - t0 < 2.0
+
+
+def test_without_a_held_lock_the_stop_is_done_before_the_interrupt(robot):
+    with pytest.raises(KeyboardInterrupt):
+        signal.getsignal(signal.SIGTERM)(signal.SIGTERM, None)
+    assert robot.stopped == [(True, False)]
+
+
+def test_the_previous_handlers_come_back_when_the_last_robot_stops():
+    before = signal.getsignal(signal.SIGINT)
+    r = _Robot()
+    _guard.register(r)
+    assert signal.getsignal(signal.SIGINT) is _guard._handler
+    _guard.unregister(r)
+    assert signal.getsignal(signal.SIGINT) is before

@@ -103,6 +103,22 @@ function Editor({ transport }: { transport: Transport }) {
   const pasteCount = useRef(0);
   const searchRef = useRef<HTMLInputElement>(null);
   const dragStart = useRef(false);
+  // Moves of the view wait a frame or two for React Flow to measure what was just drawn.
+  // Only the newest one may happen: a move scheduled earlier (a click on a problem centres
+  // its block) must not land after, and undo, a fit the user asked for since.
+  const pendingView = useRef<ReturnType<typeof setTimeout> | null>(null);
+  const moveViewSoon = useCallback((move: () => void) => {
+    if (pendingView.current !== null) clearTimeout(pendingView.current);
+    pendingView.current = setTimeout(() => {
+      pendingView.current = null;
+      move();
+    }, 30);
+  }, []);
+  const moveViewNow = useCallback((move: () => void) => {
+    if (pendingView.current !== null) clearTimeout(pendingView.current);
+    pendingView.current = null;
+    move();
+  }, []);
   const toastId = useRef(0);
 
   const toast = useCallback((text: string, kind: Toast['kind'] = 'info') => {
@@ -138,8 +154,8 @@ function Editor({ transport }: { transport: Transport }) {
       setRunStatus(null);
       setRunId(null);
       setPlot(null);
-      if (Object.keys(d.blocks).length) setTimeout(() => rf.fitView({ ...FIT, duration: 0 }), 30);
-      else setTimeout(() => rf.setViewport({ x: 0, y: 0, zoom: 1 }), 30);
+      if (Object.keys(d.blocks).length) moveViewSoon(() => rf.fitView({ ...FIT, duration: 0 }));
+      else moveViewSoon(() => rf.setViewport({ x: 0, y: 0, zoom: 1 }));
     },
     [rf],
   );
@@ -395,7 +411,7 @@ function Editor({ transport }: { transport: Transport }) {
   const autoLayout = useCallback(async () => {
     const pos = await layoutLevel(doc, palette, level);
     setHist((h) => M.commit(h, M.moveItems(h.present, pos)));
-    setTimeout(() => rf.fitView({ ...FIT, duration: 200 }), 30);
+    moveViewSoon(() => rf.fitView({ ...FIT, duration: 200 }));
   }, [doc, palette, level, rf]);
 
   const openGroup = useCallback(
@@ -403,7 +419,7 @@ function Editor({ transport }: { transport: Transport }) {
       setPath((p) => [...p, g]);
       setSelected(new Set());
       setSelectedEdges(new Set());
-      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
+      moveViewSoon(() => rf.fitView({ ...FIT, duration: 150 }));
     },
     [rf],
   );
@@ -412,7 +428,7 @@ function Editor({ transport }: { transport: Transport }) {
     (depth: number) => {
       setPath((p) => p.slice(0, depth));
       setSelected(new Set());
-      setTimeout(() => rf.fitView({ ...FIT, duration: 150 }), 30);
+      moveViewSoon(() => rf.fitView({ ...FIT, duration: 150 }));
     },
     [rf],
   );
@@ -560,7 +576,7 @@ function Editor({ transport }: { transport: Transport }) {
       setSelectedEdges(e.wire ? new Set([wireId(e.wire)]) : new Set());
       setTab('props');
       const pos = doc.editor?.layout?.[target];
-      if (pos) setTimeout(() => rf.setCenter(pos[0] + 105, pos[1] + 40, { zoom: rf.getZoom(), duration: 200 }), 30);
+      if (pos) moveViewSoon(() => rf.setCenter(pos[0] + 105, pos[1] + 40, { zoom: rf.getZoom(), duration: 200 }));
     },
     [doc, rf],
   );
@@ -648,7 +664,7 @@ function Editor({ transport }: { transport: Transport }) {
       } else if (!mod && k === 'l') {
         autoLayout();
       } else if (!mod && k === 'f') {
-        rf.fitView({ ...FIT, duration: 200 });
+        moveViewNow(() => rf.fitView({ ...FIT, duration: 200 }));
       }
     };
     window.addEventListener('keydown', onKey);

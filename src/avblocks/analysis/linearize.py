@@ -82,6 +82,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import threading
 from fractions import Fraction
 
 import numpy as np
@@ -94,6 +95,22 @@ from .model import LinearModel
 from .names import entry_names
 
 _KINDS = ("auto", "continuous", "sampled")
+#: one trace at a time: a trace binds traced parameter values to the blocks
+_LOCK = threading.RLock()
+
+
+def _jax():
+    """The ``jax`` module (the ``jax`` extra), or an AvError saying so."""
+    from ..core.compiled import require_jax
+    return require_jax()
+
+
+def _x64(jax):
+    """Scoped 64-bit types (the models are always float64)."""
+    if hasattr(jax, "enable_x64"):
+        return jax.enable_x64(True)
+    from jax import experimental
+    return experimental.enable_x64()
 
 
 # ---------------------------------------------------------------- resolving names
@@ -121,16 +138,23 @@ def _all_outputs(cd):
     return [f"{n}.{p}" for n, b in zip(cd.names, cd.blocks) for p in b.output_ports]
 
 
+def _handle(diagram, path):
+    """The block handle at the dotted ``path`` (through subsystems), or None."""
+    cur, handle = diagram, None
+    for part in path.split(".") if path else ():
+        if not isinstance(cur, Diagram) or part not in cur.blocks:
+            return None
+        handle = cur[part]
+        cur = handle.block
+    return handle
+
+
 def _leaf_inputs(cd, ref):
     """``[(block index, input name)]`` the input port ``ref`` reaches (a leaf
     block's input, or a subsystem's exported input: every leaf it feeds)."""
     path = _path_of(ref)
     bpath, _, name = path.rpartition(".")
-    if isinstance(ref, PortRef):
-        handle = ref.handle
-    else:
-        from ..core.diagram import _find_handle
-        handle = _find_handle(cd.diagram, bpath) if bpath else None
+    handle = ref.handle if isinstance(ref, PortRef) else _handle(cd.diagram, bpath)
     if handle is None:
         close = difflib.get_close_matches(path, _all_inputs(cd), n=3)
         raise WiringError("no such block for a linear model input", found=path,
@@ -233,9 +257,8 @@ class Linearizer:
 
     def __init__(self, diagram, *, inputs=(), outputs=(), kind="auto", dt=None,
                  solver="rk4", seed=0):
-        from ..core.compiled import _jax
         from ..core.solvers import make_solver
-        jax = _jax.jax()
+        jax = _jax()
         if isinstance(diagram, Diagram):
             cd = diagram.build()
         elif isinstance(diagram, CompiledDiagram):
@@ -336,7 +359,7 @@ class Linearizer:
         from . import _engine
         ports = [(i, inp) for _p, leaves, _s in self.ins for i, inp in leaves]
         self._port_of = [j for j, (_p, leaves, _s) in enumerate(self.ins) for _ in leaves]
-        with _jax.x64(True):
+        with _x64(jax):
             self.eng = _engine.PerturbedEngine(cd, dt, jax.numpy,
                                                jax.dtypes.canonicalize_dtype, ports)
         self._pos = {i: j for j, i in enumerate(self.eng.cont)}
@@ -464,13 +487,12 @@ class Linearizer:
     def _period(self, t, X, Y):
         """``steps`` major steps of the engine from ``(X, Y)`` at a step where
         every periodic block has a hit (see the module docstring)."""
-        from ..core.compiled import _jax
         eng, solver, dt = self.eng, self.solver, self.dt
         X = eng.update(t, X, Y, eng.hits(0))
         X = solver.step(eng, t, X, Y, dt)
         if self.steps == 1:
             return X
-        lax = _jax.jax().lax
+        lax = _jax().lax
 
         def body(carry, k):
             X, Y = carry
@@ -486,8 +508,7 @@ class Linearizer:
 
     def _compiled(self):
         if self._fn is None:
-            from ..core.compiled import _jax
-            jax = _jax.jax()
+            jax = _jax()
             self._fn = jax.jit(self._function)
             self._jac = jax.jit(jax.jacfwd(self._function, argnums=(0, 1)))
         return self._fn, self._jac
@@ -495,10 +516,8 @@ class Linearizer:
     def evaluate(self, x, u, X, theta, t, jacobian=True):
         """``(f, y)`` and, with ``jacobian``, ``((A, B), (C, D))`` at the state
         vector ``x`` and input perturbations ``u`` (float64 NumPy arrays)."""
-        from ..core.compiled import _jax
-        from ..core.compiled.program import _TRACE_LOCK
         fn, jac = self._compiled()
-        with _TRACE_LOCK, _jax.x64(True):
+        with _LOCK, _x64(_jax()):
             args = (np.asarray(x, np.float64), np.asarray(u, np.float64), X, theta,
                     np.float64(t))
             f, y = fn(*args)

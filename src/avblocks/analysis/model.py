@@ -59,15 +59,25 @@ class LinearModel:
         ev = np.linalg.eigvals(self.A) if self.A.size else np.zeros(0, complex)
         return ev[np.lexsort((ev.imag, ev.real))]
 
-    def index(self, name) -> int:
-        """Position of the state, input or output called ``name``."""
-        for names in (self.states, self.inputs, self.outputs):
-            if name in names:
-                return names.index(name)
-        close = difflib.get_close_matches(str(name), self.states + self.inputs
-                                          + self.outputs, n=3)
-        raise ParameterError("no such state, input or output in this model",
-                             found=name, hint=f"did you mean {close}?" if close else None)
+    def _find(self, names, name, what):
+        if name in names:
+            return names.index(name)
+        close = difflib.get_close_matches(str(name), names, n=3)
+        raise ParameterError(f"no such {what} in this model", found=name,
+                             hint=f"did you mean {close}?" if close else
+                             f"its {what}s: {names[:8]}...")
+
+    def state_index(self, name) -> int:
+        """Position of the state entry ``name`` (``"fleet.pose[1].theta"``)."""
+        return self._find(self.states, name, "state")
+
+    def input_index(self, name) -> int:
+        """Position of the input entry ``name`` (``"form.ref[1].l_ref"``)."""
+        return self._find(self.inputs, name, "input")
+
+    def output_index(self, name) -> int:
+        """Position of the output entry ``name`` (``"form.error[1].l"``)."""
+        return self._find(self.outputs, name, "output")
 
     def state(self, path) -> slice:
         """The rows of ``A`` of the state ``"block.state"`` (all its entries)."""

@@ -199,12 +199,16 @@ def test_a_sampled_controller_gives_the_sampled_map_of_the_simulator():
     d.connect(g.y, s.u0)
     d.connect(ctl.u, s.u1)
     d.connect(s.y, x.u)
-    m = av.linearize(d, outputs=["x.y"], dt=T / 20)
+    m = av.linearize(d, inputs=["s.u1"], outputs=["x.y"], dt=T / 20)
     assert m.dt == pytest.approx(T) and not m.continuous
-    # closed form (Franklin, Powell & Workman, ch. 4): zero-order-hold map
+    # closed form (Franklin, Powell & Workman, ch. 4): zero-order-hold map;
+    # a perturbation at s.u1 is held over the period like the controller's output
     ead = np.exp(-a * T)
     exact = ead - k * (1 - ead) / a
     assert abs(m.A[0, 0] - exact) < 1e-9          # RK4 with T/20: O(dt^4)
+    assert abs(m.B[0, 0] - (1 - ead) / a) < 1e-9
+    np.testing.assert_array_equal(m.C, [[1.0]])
+    np.testing.assert_array_equal(m.D, [[0.0]])
     # and the simulator's own run over one period, by central differences
     def run(x0):
         res = av.simulate(d, T, dt=T / 20, x0={"x.x": [[x0]]}, log=[x.y])
@@ -214,6 +218,20 @@ def test_a_sampled_controller_gives_the_sampled_map_of_the_simulator():
     # the continuous model asked for: the controller taken as transparent
     mc = av.linearize(d, outputs=["x.y"], kind="continuous")
     np.testing.assert_allclose(mc.A, [[-a - k]])
+
+
+def test_an_operating_point_from_a_run():
+    # a perturbed formation run to its steady state: linearising at the run's
+    # final state is linearising at {"fleet.pose": its last pose}
+    d = formation()
+    pose = d["fleet"].block.initial_state()["pose"]
+    pose[1:, :2] += 0.3
+    res = av.simulate(d, 12.0, dt=0.01, x0={"fleet.pose": pose}, log=["fleet.pose"])
+    lin = av.analysis.Linearizer(d)
+    m1 = lin(at=res)
+    m2 = lin(at={"fleet.pose": res["fleet.pose"][-1]})
+    np.testing.assert_array_equal(m1.A, m2.A)
+    np.testing.assert_array_equal(m1.x0, res["fleet.pose"][-1].ravel())
 
 
 def test_python_control_names_and_round_trip():

@@ -17,8 +17,6 @@ from avblocks.core.errors import AvError, ParameterError
 
 from ._read import need_readers, read, stamp_ns
 
-pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
-
 
 @pytest.fixture(autouse=True)
 def _readers():

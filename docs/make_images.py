@@ -226,6 +226,7 @@ PRODUCERS = {
     "lab5_swap": (_page("labs/lab5.md"), False),
     "lab5_flock": (_page("labs/lab5.md"), False),
     "lab6_watchdog": (_page("labs/lab6.md"), False),
+    "linear_formation_locus": (_page("linear-analysis.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),
     "uav3d": (draw_uav3d, False),

@@ -11,7 +11,8 @@ and the front end ``simulate``/``compile`` that picks one).
 >>> d = av.Diagram()
 """
 
-from . import blocks, controllers, core, environment, utility, vehicles
+from . import analysis, blocks, controllers, core, environment, utility, vehicles
+from .analysis import linearize, trim
 from .core import (
     Block,
     Continuous,
@@ -53,6 +54,7 @@ def __getattr__(name):
     raise AttributeError(f"module 'avblocks' has no attribute '{name}'")
 
 __all__ = [
+    "analysis", "linearize", "trim",
     "blocks", "controllers", "core", "environment", "utility", "vehicles", "viz",
     "scenarios", "sweep", "edit",
     "Block", "Continuous", "Periodic", "Diagram", "Port", "Results", "Simulator",

@@ -10,9 +10,10 @@
     avblocks cache clear
     avblocks lab check 1 my_unicycle.py
     avblocks edit formation
+    avblocks export avblocks-out/waypoints --mcap
     avblocks --version
 
-Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, cache, edit) and the
+Sub-commands: :mod:`avblocks.commands` (run, list, diagram, sweep, cache, edit, export) and the
 ROS 2 commands (:mod:`avblocks.interfaces.ros2.cli`).
 
 Scripts may rely on the exit statuses of :data:`EXIT_STATUSES` (also the
@@ -31,6 +32,7 @@ import sys
 from .commands import cache as _cache
 from .commands import diagram as _diagram
 from .commands import edit as _edit
+from .commands import export as _export
 from .commands import listing as _listing
 from .commands import run as _run
 from .commands import sweep as _sweep
@@ -75,6 +77,7 @@ def build_parser():
     _cache.add_parser(sub)                                   # `avblocks cache` (issue 32)
     _labs.add_parser(sub)                                    # `avblocks lab` (issue 34)
     _edit.add_parser(sub)                                    # `avblocks edit` (issue 31)
+    _export.add_parser(sub)                                  # `avblocks export` (issue 45)
     return ap
 
 

@@ -153,6 +153,15 @@ class Results:
         notebook; ``.save("run.gif")``)."""
         return get_backend().animate(self, **options)
 
+    def to_mcap(self, path, **options):
+        """Write the run as an MCAP file for Foxglove (and any MCAP reader):
+        each agent's pose as a frame transform and a 3-D body, the logged
+        signals as plottable messages, the outcome as a log line. Options
+        and format: :func:`avblocks.foxglove.write_results` (the
+        ``foxglove`` extra). Returns the path."""
+        from .writers import get_writer
+        return get_writer("mcap").write_results(self, path, **options)
+
     # --------------------------------------------------------------- xarray
     def to_xarray(self):
         """The results as an :class:`xarray.Dataset`.
@@ -190,6 +199,10 @@ class Results:
                                       "agents": int(p.agents)})
         ds = xr.Dataset(variables, coords=coords)
         ds.attrs["avblocks_meta"] = json.dumps(self.meta, default=_jsonable)
+        if self.aliases:
+            # the names the user logged by ("fleet.position" for a subsystem's
+            # "fleet.quad.position"), kept across save/load
+            ds.attrs["avblocks_aliases"] = json.dumps(self.aliases)
         return ds
 
     def save(self, path) -> Path:
@@ -267,7 +280,11 @@ class Results:
                             str(var.attrs.get("doc", "")),
                             bool(var.attrs.get("agents", 1)))
         meta = json.loads(ds.attrs.get("avblocks_meta", "{}"))
-        return cls(np.asarray(ds["time"].values), data, ports, meta, runs=runs)
+        aliases = json.loads(ds.attrs.get("avblocks_aliases", "{}"))
+        if not isinstance(aliases, dict):
+            aliases = {}
+        aliases = {str(k): str(v) for k, v in aliases.items() if str(v) in data}
+        return cls(np.asarray(ds["time"].values), data, ports, meta, aliases, runs=runs)
 
 
 def _save_zarr(ds, path):

@@ -151,8 +151,10 @@ class QuadrotorVelocityControl(Block):
         # velocity loop -> desired acceleration, tilt limited
         a = self.kv * (u["velocity"] - vel) + (self.drag / m) * vel
         axy = a[:, :2]
-        nxy = xp.sqrt(dot(axy, axy))
-        axy = axy * xp.minimum(1.0, g * xp.tan(self.tilt_max) / xp.maximum(nxy, 1e-300))[:, None]
+        # the floor inside the root: sqrt's derivative at 0 is infinite, and
+        # JAX would differentiate the hover (a_xy = 0) to NaN (av.linearize, av.grad)
+        nxy = xp.sqrt(xp.maximum(dot(axy, axy), 1e-300))
+        axy = axy * xp.minimum(1.0, g * xp.tan(self.tilt_max) / nxy)[:, None]
         az = xp.maximum(a[:, 2], -0.8 * g) + g
         F = m * xp.concatenate([axy, az[:, None]], axis=-1)
         R = quat_to_rotmat(q, xp)

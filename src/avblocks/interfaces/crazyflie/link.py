@@ -333,11 +333,13 @@ class CrazyflieLink(FleetLink):
             time.sleep(0.02)
 
     def _disarm_landed(self):
-        """Disarm the vehicles armed by us that report they are not flying
-        (never one in the air: disarming stops the motors)."""
+        """Disarm the vehicles armed by us that are down (on the floor and
+        still, by a fresh pose; or their status' flying bit clear): never one
+        in the air, where disarming stops the motors. (A brushless vehicle's
+        motors idle while armed; the firmware disarms it by itself 3 s after
+        its flying bit clears, 2 s after touch-down.)"""
         tm = self.telemetry.snapshot()
-        down = [i for i in self._armed_by_us
-                if self._status_seen[i] and not self._sup[i] & IS_FLYING and tm.landed[i]]
+        down = [i for i in self._armed_by_us if tm.landed[i] and tm.pose_age[i] < 1.0]
         if not down or self._link is None:
             return
         pend = [(i, self._arm[i].send(self.service_timeout, arm=False)) for i in down]

@@ -221,7 +221,7 @@ class CrazyflieEmulator:
         self.auto_arm = arming == "auto"
         self.armed = np.full(n, self.auto_arm)
         self.t_armed = np.zeros(n)             # when armed (pre-flight timeout)
-        self.t_landed = np.full(n, np.inf)     # when a landing ended (landing timeout)
+        self.t_landed = np.full(n, -np.inf)    # when the motors last stopped on landing
         self.flown = np.zeros(n, bool)         # took off since it was armed
         self.mocap = bool(mocap)
         self.x = {k: np.array(v, float) for k, v in self.quad.initial_state().items()}
@@ -536,8 +536,8 @@ class CrazyflieEmulator:
                         self.mode[i] = "locked" if mode == "falling" else "landed"
                         self.traj[i] = None
                         self.crtp[i] = False
-                        if mode != "falling":
-                            self.t_landed[i] = min(self.t_landed[i], t + h)
+                        if mode not in ("falling", "drop"):
+                            self.t_landed[i] = t + h    # (drop: when its landing ended)
                     # else: pressed against the floor (a takeoff starting, a streamed
                     # set-point pointing down): the floor holds it, the mode stays
             new["position"][below, 2] = 0.0

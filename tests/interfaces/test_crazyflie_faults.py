@@ -244,3 +244,37 @@ def test_a_second_commander_of_the_same_vehicles_is_refused_before_sending(route
     assert [x["service"] for x in events(recs, "service", "cf3")
             if t0 <= x["wall"] <= t1] == []
     assert all(s["vel"] == [0.1, 0.0, 0.0] for s in events(recs, "setpoint", "cf3"))
+
+
+def test_a_nan_command_lands_every_vehicle_and_logs_each_confirmation(router, tmp_path):
+    """A NaN in the commands: the fail-safe lands every vehicle (notify, then
+    land), every service call is answered in the flight log (one NaN run had
+    logged a notify as "no reply" that the emulator had received: two threads
+    read one reply channel) and each vehicle's landing is confirmed in it."""
+    from avblocks.interfaces.crazyflie import Crazyflies
+    from avblocks.interfaces.flight import FailsafeError
+    flight = tmp_path / "flight.jsonl"
+    with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0) as log:
+        d = av.Diagram()
+        f = d.add(Crazyflies(list(NAMES), router, takeoff_height=0.5, land_duration=1.5,
+                             log=str(flight)), name="fleet")
+        law = d.add(av.blocks.Function(
+            lambda t, p: np.where(t >= 1.0, np.nan, 0.1) * np.ones((3, 3)),
+            inputs={"p": (3, 3)}, outputs={"v": (3, 3)}), name="law")
+        d.connect(f.position, law.p)
+        d.connect(law.v, f.velocity)
+        with pytest.raises(FailsafeError) as e:
+            av.simulate(d, t_final=10.0, dt=0.05, realtime=1.0, progress=False)
+        recs = wait_for(log, _all_down(NAMES), timeout=15)
+    assert e.value.reason == "nan" and e.value.vehicles == list(NAMES)
+    fl = [json.loads(s) for s in flight.read_text().splitlines()]
+    t_fs = [r for r in fl if r["ev"] == "failsafe"][0]["wall"]
+    _landed_softly(recs, NAMES, after=t_fs - 0.5)
+    sent = [r for r in fl if r["ev"] == "land_sent"]
+    assert sent and all(r["unanswered"] == [] for r in sent), sent
+    assert sent[0]["order"] == ["notify_setpoints_stop", "land"]
+    landed = {r["vehicle"]: r for r in fl if r["ev"] == "landed"}
+    assert sorted(landed) == list(NAMES)
+    assert all(r["position"][2] < 0.05 and 1.0 < r["after_s"] < 4.0 for r in landed.values())
+    assert [r for r in fl if r["ev"] in ("land_timeout", "land_unconfirmed")] == []
+    assert fl[-1]["ev"] == "end"

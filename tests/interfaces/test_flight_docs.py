@@ -81,3 +81,15 @@ def test_a_documented_command_parses(cmd):
         from avblocks.interfaces.flight.cli import flight_options
         fence = argv[argv.index("--geofence") + 1]
         assert flight_options(args)["geofence"] == [float(v) for v in fence.split(",")]
+
+
+def test_the_help_names_the_extra_the_docs_name():
+    """``avblocks run --help`` and the page agree: the Crazyflie options come
+    with the ``[crazyflie]`` extra (it said ``[ros2]``)."""
+    from avblocks.cli import build_parser
+    ap = build_parser()
+    run = next(a for a in ap._subparsers._group_actions[0].choices.items()
+               if a[0] == "run")[1]
+    text = run.format_help()
+    assert "Crazyflies (--robots crazyflies; extra [crazyflie])" in text
+    assert "`[crazyflie]`" in PAGE.read_text()

@@ -101,7 +101,9 @@ class Guard:
         self.streaming = np.zeros(n, bool)      # set-points came since the last landing
         self.handled = np.zeros(n, bool)        # landed by the guard (until new set-points)
         self.owners = [set() for _ in range(n)]     # commander session ids
-        self.landing_by = [set() for _ in range(n)]  # sessions that announced landing
+        # its commander announced it lands the vehicle (kept until a new stream:
+        # the announcement's token goes with the commander's session)
+        self.announced = np.zeros(n, bool)
         #: What the guard did: ``(vehicle, reason, age of the last set-point [s])``.
         self.landed = []
         self.link = link = CfLink(router, domain=domain, node="avblocks_guard")
@@ -164,6 +166,8 @@ class Guard:
             first = not self.streaming[i]
             self.streaming[i] = True
             self.handled[i] = False
+            if first:
+                self.announced[i] = False
         if first:
             self.write({"ev": "stream", "vehicle": self.names[i]})
 
@@ -177,20 +181,17 @@ class Guard:
         import zenoh
         put = sample.kind == zenoh.SampleKind.PUT
         nm = self.names[i]
-        with self._lock:
-            if kind == "landing":
-                (self.landing_by[i].add if put else self.landing_by[i].discard)(zid)
-                announced = put
-            else:
-                (self.owners[i].add if put else self.owners[i].discard)(zid)
-                announced = bool(self.landing_by[i])
-                left = not self.owners[i]
         if kind == "landing":
-            if announced:
+            if put:
                 with self._lock:
+                    self.announced[i] = True
                     self.streaming[i] = False       # its commander lands it
                 self.write({"ev": "commander_lands", "vehicle": nm, "session": zid})
             return
+        with self._lock:
+            (self.owners[i].add if put else self.owners[i].discard)(zid)
+            announced = bool(self.announced[i])
+            left = not self.owners[i]
         if put:
             self.write({"ev": "commander", "vehicle": nm, "session": zid})
             return
@@ -210,7 +211,7 @@ class Guard:
             for i in range(len(self.names)):
                 with self._lock:
                     due = (self.streaming[i] and now - self.last_sp[i] > self.timeout
-                           and not self.landing_by[i])
+                           and not self.announced[i])
                 if due and self._flying(i):
                     self._trigger(i, f"no set-point for more than {self.timeout:g} s")
 

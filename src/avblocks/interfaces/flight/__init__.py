@@ -60,8 +60,9 @@ ends with :class:`FailsafeError` (a ``SimulationError``: the CLI saves
 the results), naming every vehicle concerned (those without a fresh
 pose too: links that die together die a few ms apart); ``on_stop`` then
 waits up to ``land_wait`` for the vehicles still heard to report landed
-and logs each (``landed``, ``land_unconfirmed``, ``land_timeout``). On SIGINT/SIGTERM the shared signal guard (``_guard``, also
-used by ``interfaces.ros2``) lands every registered fleet before the
+and logs each (``landed``, ``land_unconfirmed``, ``land_timeout``).
+On SIGINT/SIGTERM the shared signal guard (``_guard``, also used by
+``interfaces.ros2``) lands every registered fleet before the
 interrupt reaches the simulator; ``atexit`` does too; a watchdog thread
 lands the fleet if no command step came for ``stall_timeout``;
 ``on_stop`` commands the landing again whatever ended the run. A killed

@@ -39,6 +39,9 @@ def main(png):
             session.close()
         end = [json.loads(s) for s in log.read_text().splitlines()][-1]
         print(f"emulator: lost {end.get('lost_s', 0):.2f} s to late ticks")
+        num = json.loads((Path(tmp) / "out" / "summary.json").read_text())["numbers"]
+        print("outcome: " + ", ".join(f"{k} {v:.3f}" for k, v in num.items()
+                                      if isinstance(v, float)))
         shutil.copyfile(Path(tmp) / "out" / "paths.png", png)
 
 

@@ -137,6 +137,10 @@ INTENDED = {
     # issue 22: the default safety filter must not jam the Robotarium swap
     # (the joint QP, now traceable, is the default)
     "avblocks.controllers.CollisionAvoidance": ("mode='agent'", "mode='joint'"),
+    # issue 43: Crazyflies land to 0.03 m, as Crazyswarm2's examples do (was 0.0)
+    "avblocks.interfaces.crazyflie.CrazyflieLink": ("land_height=0.0", "land_height=0.03"),
+    "avblocks.interfaces.crazyflie.Crazyflies": ("land_height=0.0", "land_height=0.03"),
+    "avblocks.interfaces.crazyflie.Guard": ("land_height=0.0", "land_height=0.03"),
 }
 
 

@@ -12,6 +12,12 @@ from pathlib import Path
 
 from .conftest import env
 
+#: Touch-down speed of a soft landing [m/s]: the landing trajectory ends
+#: 0.03 m up (Crazyswarm2's examples' land height), where the motors stop and
+#: the vehicle drops the rest: sqrt(2 g 0.03) = 0.77 m/s, plus what it still
+#: carries from the trajectory's end (a fall from flight height: > 2 m/s).
+SOFT_TOUCHDOWN = (2 * 9.81 * 0.03) ** 0.5 + 0.2
+
 
 @contextlib.contextmanager
 def cf_emulator(router, names, tmp_path, *extra):

@@ -113,7 +113,8 @@ def main():
 
     def on_vel(m):
         write({"ev": "velocity", "vel": [m.vel.x, m.vel.y, m.vel.z],
-               "yaw_rate": float(m.yaw_rate)})
+               "yaw_rate": float(m.yaw_rate),
+               "stamp": m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec})
 
     full = "crazyflie_interfaces/msg/FullState"
     velw = "crazyflie_interfaces/msg/VelocityWorld"

@@ -15,7 +15,7 @@ import pytest
 
 import avblocks as av
 
-from ._cf import cf_emulator, events, read_log
+from ._cf import SOFT_TOUCHDOWN, cf_emulator, events, read_log
 from .conftest import env
 
 T_FINAL = 14.0          # the crown forms by 6 s, then flies 8 s of its circle
@@ -62,7 +62,7 @@ def test_drone_formation_on_emulated_crazyflies_passes_the_simulations_checks(
         assert len([s for s in events(recs, "setpoint", nm) if s["accepted"]]) >= 200
         assert not [s for s in events(recs, "setpoint", nm) if not s["accepted"]]
         (g,) = events(recs, "ground", nm)
-        assert g["mode"] in ("hl", "drop") and g["speed"] < 0.5
+        assert g["mode"] in ("hl", "drop") and g["speed"] < SOFT_TOUCHDOWN
         assert events(recs, "wdt_level_out", nm) == []
     flight = [json.loads(s) for s in (out / "flight-log.jsonl").read_text().splitlines()]
     phases = [r["phase"] for r in flight if r["ev"] == "phase"]

@@ -14,7 +14,7 @@ import time
 import numpy as np
 import pytest
 
-from ._cf import cf_emulator, events, read_log, wait_for
+from ._cf import SOFT_TOUCHDOWN, cf_emulator, events, read_log, wait_for
 
 
 def _client(router):
@@ -130,3 +130,131 @@ def test_setpoint_watchdog_levels_out_then_cuts_the_motors_and_the_vehicle_falls
     (g2,) = events(recs, "ground", "cf2")
     assert g2["mode"] in ("hl", "drop") and g2["speed"] < 0.5
     assert recs[-1]["ev"] == "end" and recs[-1]["modes"] == ["locked", "landed"]
+
+
+def _yaw_of(p):
+    qw, qx, qy, qz = p[3:7]
+    return math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+
+
+def test_a_setpoint_after_land_cancels_the_landing_the_reversed_order_drops_the_vehicle(
+        router, tmp_path):
+    """crazyflie-firmware commander.c: a streamed set-point (CRTP priority, above
+    the high-level commander's) stops the high-level planner, so the landing
+    planned by a ``land`` that overtook the last set-point is gone; the
+    notification then hands control to an idle planner, whose null set-point
+    stops the motors: the vehicle falls. Crazyswarm2's order (set-points,
+    notify, land) lands it. Truth: free fall from where the motors stopped."""
+    with cf_emulator(router, "cf1,cf2", tmp_path) as log:
+        link, poses, T = _client(router)
+        try:
+            time.sleep(0.5)
+            for nm in ("cf1", "cf2"):
+                assert link.client(f"/{nm}/takeoff", T.TAKEOFF).call(
+                    height=0.5, duration=1.5)[0]
+            time.sleep(2.0)
+            pubs = {nm: link.publisher(f"/{nm}/cmd_full_state", T.FULL_STATE)
+                    for nm in ("cf1", "cf2")}
+            time.sleep(0.3)
+            here = {nm: poses[nm][-1][1][:3] for nm in ("cf1", "cf2")}
+            for _ in range(30):                 # hover where they are; cf2 turns to 0.5 rad
+                for nm, pub in pubs.items():
+                    pub.put(T.encode_full_state(here[nm], (0, 0, 0), (0, 0, 0),
+                                                0.5 if nm == "cf2" else 0.0, time.time()))
+                time.sleep(0.05)
+            # cf1: land, then one more set-point, then the notification (reordered)
+            land1 = link.client("/cf1/land", T.LAND)
+            assert land1.call(height=0.03, duration=1.5)[0]
+            pubs["cf1"].put(T.encode_full_state(here["cf1"], (0, 0, 0), (0, 0, 0), 0.0,
+                                                time.time()))
+            time.sleep(0.05)
+            assert link.client("/cf1/notify_setpoints_stop", T.NOTIFY).call(
+                remain_valid_millisecs=100)[0]
+            # cf2: Crazyswarm2's order
+            assert link.client("/cf2/notify_setpoints_stop", T.NOTIFY).call(
+                remain_valid_millisecs=100)[0]
+            assert link.client("/cf2/land", T.LAND).call(height=0.03, duration=1.5)[0]
+            recs = wait_for(log, lambda r: len(events(r, "ground")) >= 2, timeout=15)
+        finally:
+            link.close()
+    # cf2 turned to the full-state set-point's yaw (crtp_commander_generic.c: the
+    # attitude quaternion in modeAbs) and kept it through its landing
+    assert _yaw_of(poses["cf2"][-1][1]) == pytest.approx(0.5, abs=0.03)
+    (cancel,) = events(recs, "landing_cancelled", "cf1")
+    notify = [e for e in events(recs, "service", "cf1")
+              if e["service"] == "notify_setpoints_stop"][0]
+    assert cancel["at"] < notify["at"]
+    (g1,) = events(recs, "ground", "cf1")
+    z = here["cf1"][2]
+    assert g1["mode"] == "hl" and 0.45 < z < 0.55
+    # motors stopped by the idle planner's null set-point at the notification:
+    # a free fall from z, t = sqrt(2 z / g), v = sqrt(2 g z)
+    assert g1["at"] - notify["at"] == pytest.approx(math.sqrt(2 * z / 9.81), abs=0.03)
+    assert g1["speed"] == pytest.approx(math.sqrt(2 * 9.81 * z), rel=0.05)
+    (g2,) = events(recs, "ground", "cf2")
+    assert g2["mode"] in ("hl", "drop") and g2["speed"] < SOFT_TOUCHDOWN
+    assert events(recs, "landing_cancelled", "cf2") == []
+
+
+def test_a_platform_that_needs_arming_flies_only_once_armed_and_disarms_after_landing(
+        router, tmp_path):
+    """crazyflie-firmware: a CONFIG_MOTORS_REQUIRE_ARMING platform (the
+    Crazyflie 2.1 Brushless, cf21bl_defconfig) reports no auto-arm bit; until an
+    arming request it cannot fly and the high-level commander is blocked
+    (stabilizer.c); the flying bit stays 2 s after the motors stop
+    (IS_FLYING_HYSTERESIS_THRESHOLD) and the landing timeout (3 s) then
+    disarms it; a disarm in flight stops the motors. The status bits are those
+    of supervisor.c's updateLogData."""
+    from avblocks.interfaces.crazyflie import _types as T
+    with cf_emulator(router, "cf1,cf2", tmp_path, "--arming", "required") as log:
+        link, poses, _ = _client(router)
+        bits = {"cf1": [], "cf2": []}
+
+        def on_status(nm):
+            def cb(data, now):
+                bits[nm].append((time.monotonic(), T.deserialize(data, T.STATUS)
+                                 .supervisor_info))
+            return cb
+        for nm in bits:
+            link.subscribe(f"/{nm}/status", T.STATUS, on_status(nm))
+        try:
+            time.sleep(1.2)
+            assert bits["cf1"][-1][1] == 1              # can be armed; nothing else
+            tk = {nm: link.client(f"/{nm}/takeoff", T.TAKEOFF) for nm in bits}
+            assert tk["cf1"].call(height=0.4, duration=1.0)[0]      # answered, ignored
+            time.sleep(0.3)
+            for nm in bits:
+                assert link.client(f"/{nm}/arm", T.ARM).call(arm=True)[0]
+            time.sleep(0.7)
+            assert bits["cf1"][-1][1] == 2 | 8          # armed, can fly
+            for nm in bits:
+                assert tk[nm].call(height=0.4, duration=1.0)[0]
+            time.sleep(1.5)
+            assert bits["cf1"][-1][1] == 2 | 8 | 16     # ... and flying
+            # cf2 disarmed in the air: its motors stop
+            assert link.client("/cf2/arm", T.ARM).call(arm=False)[0]
+            # cf1 landed by the broadcast service (crazyflie_server.cpp /all/land)
+            assert link.client("/all/land", T.LAND).call(height=0.03, duration=1.0)[0]
+            recs = wait_for(log, lambda r: len(events(r, "disarmed", "cf1")) == 1,
+                            timeout=15)
+            time.sleep(0.6)
+        finally:
+            link.close()
+    refused = [e for e in events(recs, "refused", "cf1") if e["service"] == "takeoff"]
+    assert len(refused) == 1 and "not armed" in refused[0]["reason"]
+    (plan,) = [e for e in events(recs, "plan", "cf1") if e["kind"] == "takeoff"]
+    assert plan["t"] > [e for e in events(recs, "armed", "cf1")][0]["t"]
+    (d2,) = events(recs, "disarmed", "cf2")
+    (g2,) = events(recs, "ground", "cf2")
+    assert d2["reason"] == "disarm request" and g2["mode"] == "drop"
+    assert g2["speed"] == pytest.approx(math.sqrt(2 * 9.81 * 0.4), rel=0.1)
+    (done,) = events(recs, "land_done", "cf1")
+    (d1,) = events(recs, "disarmed", "cf1")
+    assert d1["reason"].startswith("landing timeout")
+    assert d1["t"] - done["t"] == pytest.approx(2.0 + 3.0, abs=0.1)
+    # the flying bit: set until 2 s after the landing ended, then clear
+    fly = [(t, b & 16) for t, b in bits["cf1"]]
+    t_done = done["wall"] - time.time() + time.monotonic()
+    assert all(f for t, f in fly if t_done + 0.1 < t < t_done + 1.9)
+    assert not any(f for t, f in fly if t > t_done + 2.1)
+    assert bits["cf1"][-1][1] == 1                      # disarmed: can be armed again

@@ -59,33 +59,42 @@ def test_setpoints_and_services_decoded_by_zenoh_ros2_sdk(router, tmp_path, setp
     ev = {k: [g for g in got if g["ev"] == k] for k in
           ("takeoff", "land", "notify_setpoints_stop", "full_state", "velocity")}
     # services: one takeoff to start z + 0.5 m at the default mean climb of 0.3 m/s,
-    # one land to the floor in 1 s, one notification; group mask 0 (all)
+    # one notification, one land to 0.03 m (Crazyswarm2's examples; a float32 on
+    # the wire) in 1 s; group mask 0 (all)
     (tk,), (ld,), (nt,) = ev["takeoff"], ev["land"], ev["notify_setpoints_stop"]
     assert tk["height"] == 0.5 and tk["group_mask"] == 0
     assert tk["duration"] == pytest.approx(0.5 / 0.3, abs=1e-9)
-    assert ld["height"] == 0.0 and ld["duration"] == pytest.approx(1.0, abs=1e-9)
+    assert ld["height"] == float(np.float32(0.03))
+    assert ld["duration"] == pytest.approx(1.0, abs=1e-9)
     assert nt["remain_valid_millisecs"] == 100 and ld["group_mask"] == nt["group_mask"] == 0
     sp = ev[setpoint]
     other = ev["velocity" if setpoint == "full_state" else "full_state"]
     assert other == []
-    # order: takeoff, then set-points, then land, then the notification; none after
-    assert tk["wall"] < sp[0]["wall"] and sp[-1]["wall"] <= ld["wall"] <= nt["wall"]
-    # every set-point the diagram computed arrived, with its values
+    # order (Crazyswarm2's notifySetpointsStop contract): takeoff, the set-points,
+    # the notification, then land; no set-point after the notification
+    assert tk["wall"] < sp[0]["wall"] and sp[-1]["wall"] <= nt["wall"] <= ld["wall"]
+    # the diagram's commands, streamed by the sender at 50 Hz (its default): the
+    # values the flight log says were sent, at stamps 20 ms apart
     cmds = [json.loads(s) for s in flight.read_text().splitlines()]
     cmds = [c for c in cmds if c["ev"] == "cmd"]
-    assert len(sp) == len(cmds) == 21           # t = 0, 0.05, ..., 1.0
-    for s, c in zip(sp, cmds):
-        assert s["vel"] == list(V) == c["v"][0]
+    assert len(cmds) == 21                      # t = 0, 0.05, ..., 1.0
+    assert all(c["v"][0] == list(V) for c in cmds)
+    assert all(s["vel"] == list(V) for s in sp)
+    stamps = np.array([s["stamp"] for s in sp])
+    gaps = np.diff(stamps)
+    assert np.median(gaps) == pytest.approx(0.02, abs=0.002)
+    assert len(sp) == pytest.approx((stamps[-1] - stamps[0]) / 0.02 + 1, rel=0.1)
     if setpoint == "velocity":
         assert all(s["yaw_rate"] == 0.0 for s in sp)
     else:
         pos = np.array([s["pos"] for s in sp])
         # the reference starts at the pose the peer published after the takeoff ...
         assert pos[0] == pytest.approx([START[0], START[1], 0.5], abs=1e-12)
-        # ... and moves along V: each step is V times one (positive, bounded) interval
+        # ... and moves along V, each step V times the time since the last set-point
         steps = np.diff(pos, axis=0) / np.array(V)
         assert np.allclose(steps, steps[:, :1], rtol=1e-9, atol=1e-12)
-        assert (steps > 0).all() and (steps < 0.5).all()
+        assert np.abs(steps[:, 0] - gaps).max() < 0.002
+        # the yaw held: the vehicle's (the peer's pose has no rotation)
         assert all(s["acc"] == [0.0, 0.0, 0.0] and s["quat"] == [1.0, 0.0, 0.0, 0.0]
                    for s in sp)
     # the block's output: the pose the peer published

@@ -131,12 +131,14 @@ class ServiceClient:
         with self._lock:
             self._seq += 1
             seq = self._seq
-        replies = self.link.session.get(
-            self.key, target=z.QueryTarget.ALL_COMPLETE,
+        pending = Pending(self, seq)
+        self.link.session.get(
+            self.key, z.handlers.Callback(pending._on_reply, pending._on_end),
+            target=z.QueryTarget.ALL_COMPLETE,
             consolidation=z.ConsolidationMode.NONE, timeout=float(timeout),
             payload=_types.request(self.srvtype, **fields),
             attachment=attachment(seq, self.gid))
-        return Pending(self, seq, replies)
+        return pending
 
     def call(self, timeout=2.0, **fields):
         """Send a request and wait for the reply (see :meth:`Pending.wait`)."""
@@ -144,51 +146,58 @@ class ServiceClient:
 
 
 class Pending:
-    """A request on its way; :meth:`wait` gives ``(ok, why)``."""
+    """A request on its way; :meth:`wait` gives ``(ok, why)``.
 
-    def __init__(self, client, seq, replies):
-        self.client, self.seq, self._replies = client, seq, replies
+    Zenoh calls :meth:`_on_reply` for each reply and :meth:`_on_end` once
+    the query is over (every queryable answered, or its timeout); the first
+    decisive outcome is kept, so any number of threads may wait on one
+    request and all see the same answer (two threads reading one reply
+    channel, as before, left the loser reporting "no reply" for a request
+    the server had answered).
+    """
+
+    def __init__(self, client, seq):
+        self.client, self.seq = client, seq
         self.result = None
+        self._why = f"no reply from service '{client.name}' (nobody serves it?)"
+        self._done = threading.Event()
+        self._lock = threading.Lock()
+
+    def _set(self, result):
+        with self._lock:
+            if self.result is None:
+                self.result = result
+        self._done.set()
+
+    def _on_reply(self, reply):
+        try:
+            if reply.ok is None:
+                self._why = (f"service '{self.client.name}' answered an error: "
+                             f"{reply.err.payload.to_bytes().decode(errors='replace')}")
+                return
+            att = reply.ok.attachment
+            if att is None:                     # accept a bare reply, say so
+                return self._set((True, "reply without attachment"))
+            seq, _, gid = parse_attachment(att.to_bytes())
+        except Exception:  # noqa: BLE001 - a malformed reply: accept it, say so
+            return self._set((True, "reply without a valid attachment"))
+        if seq == self.seq and gid == self.client.gid:
+            self._set((True, None))
+        else:
+            self._why = f"reply of service '{self.client.name}' for another request"
+
+    def _on_end(self):
+        self._set((False, self._why))
+
+    def done(self):
+        """True once the outcome is known."""
+        return self._done.is_set()
 
     def wait(self, timeout=None):
         """``(True, None)`` once a reply with our sequence number and GID
         arrived; ``(False, reason)`` for an error reply or none before the
-        request's timeout (or ``timeout`` seconds from now, if given)."""
-        if self.result is not None:
+        request's timeout; ``(False, "... yet")`` if ``timeout`` seconds
+        from now passed first (the request goes on: wait again)."""
+        if self._done.wait(timeout):
             return self.result
-        self.result = self._wait(timeout)
-        if not self.result[0] and self.result[1] == "still waiting":
-            self.result = None
-            return False, f"no reply from service '{self.client.name}' yet"
-        return self.result
-
-    def _wait(self, timeout):
-        why = f"no reply from service '{self.client.name}' (nobody serves it?)"
-        end = None if timeout is None else time.monotonic() + timeout
-        try:
-            while True:
-                if end is None:
-                    reply = self._replies.recv()
-                else:
-                    reply = self._replies.try_recv()
-                    if reply is None:
-                        if time.monotonic() >= end:
-                            return False, "still waiting"
-                        time.sleep(0.002)
-                        continue
-                if reply.ok is None:
-                    why = (f"service '{self.client.name}' answered an error: "
-                           f"{reply.err.payload.to_bytes().decode(errors='replace')}")
-                    continue
-                att = reply.ok.attachment
-                try:
-                    seq, _, gid = parse_attachment(att.to_bytes())
-                except Exception:  # noqa: BLE001 - accept a bare reply, say so
-                    return True, "reply without attachment"
-                if seq == self.seq and gid == self.client.gid:
-                    return True, None
-                why = f"reply of service '{self.client.name}' for another request"
-        except Exception as e:  # noqa: BLE001 - the query ended (all replies in)
-            if "closed" not in str(e):          # or the session is closing
-                why = f"service '{self.client.name}': {e}"
-        return False, why
+        return False, f"no reply from service '{self.client.name}' yet"

@@ -7,7 +7,13 @@ The definitions in ``msg/`` and ``srv/`` are those of the
 ``9c722a9857617c68dba63c94a91e1cc2aef4601e``, MIT licence; unchanged up to
 commit ``f6154e2d51791a41e6f320c1ee166f782be02a20`` of 2026-07-20):
 messages FullState, Hover, Position, VelocityWorld, Status; services Takeoff,
-Land, GoTo, NotifySetpointsStop, Arm, Stop.
+Land, GoTo, NotifySetpointsStop, Arm, Stop. The motion-capture input
+``/poses`` (``motion_capture_tracking_interfaces/msg/NamedPoseArray`` and
+``NamedPose``) comes from ``mocap/``: the files of IMRCLab's
+motion_capture_tracking (commit ``35adc3e1b10ca879d8dbcc62d1dab93819705f1d``,
+MIT licence), which Crazyswarm2's server subscribes to. Each file is
+byte-identical to its upstream copy (``tests/interfaces/
+test_crazyflie_wire.py`` checks their SHA-256 against the upstream files').
 
 Type hashes (REP 2016, RIHS01) are computed by rosbags from the type
 descriptions. A service ``pkg/srv/Name`` is hashed as ROS 2 does: a type
@@ -49,8 +55,14 @@ NOTIFY = f"{PKG}/srv/NotifySetpointsStop"
 ARM = f"{PKG}/srv/Arm"
 STOP = f"{PKG}/srv/Stop"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+MOCAP_PKG = "motion_capture_tracking_interfaces"
+NAMED_POSE = f"{MOCAP_PKG}/msg/NamedPose"
+NAMED_POSE_ARRAY = f"{MOCAP_PKG}/msg/NamedPoseArray"
+#: Upstream of the ``mocap/`` definitions.
+MOCAP_UPSTREAM = ("motion_capture_tracking", "35adc3e1b10ca879d8dbcc62d1dab93819705f1d")
 
 MESSAGES = ("FullState", "Hover", "Position", "VelocityWorld", "Status")
+MOCAP_MESSAGES = ("NamedPose", "NamedPoseArray")
 SERVICES = ("Takeoff", "Land", "GoTo", "NotifySetpointsStop", "Arm", "Stop")
 _SEI = "service_msgs/msg/ServiceEventInfo"
 _SEI_DEF = ("uint8 event_type\nbuiltin_interfaces/Time stamp\nuint8[16] client_gid\n"
@@ -148,6 +160,13 @@ def definitions():
 
 
 @cache
+def mocap_definitions():
+    """``{type name: definition text}`` of the bundled motion-capture files."""
+    return {f"{MOCAP_PKG}/msg/{nm}": (HERE / "mocap" / f"{nm}.msg").read_text()
+            for nm in MOCAP_MESSAGES}
+
+
+@cache
 def typestore():
     """The private store holding every Crazyflie type (cached)."""
     extra = {}
@@ -156,6 +175,8 @@ def typestore():
             extra.update(parse(text, name))
         else:
             extra.update(service_types(name, *split_srv(text)))
+    for name, text in mocap_definitions().items():
+        extra.update(parse(text, name))
     return new_store(extra)
 
 
@@ -245,6 +266,30 @@ def decode_pose(data):
             m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
 
 
+def encode_named_poses(names, positions, quats_wxyz, t, frame="world") -> bytes:
+    """CDR of a NamedPoseArray (what motion_capture_tracking publishes on
+    ``/poses``): one ``NamedPose`` per name."""
+    poses = []
+    for nm, p, q in zip(names, positions, quats_wxyz):
+        w, x, y, z = (float(c) for c in q)
+        poses.append(_t(NAMED_POSE)(name=str(nm), pose=_t("geometry_msgs/msg/Pose")(
+            position=_t("geometry_msgs/msg/Point")(x=float(p[0]), y=float(p[1]),
+                                                   z=float(p[2])),
+            orientation=_t("geometry_msgs/msg/Quaternion")(x=x, y=y, z=z, w=w))))
+    return _ser(_t(NAMED_POSE_ARRAY)(header=_header(t, frame), poses=poses),
+                NAMED_POSE_ARRAY)
+
+
+def decode_named_poses(data):
+    """``(stamp, [(name, x, y, z, qw, qx, qy, qz)])`` of NamedPoseArray CDR."""
+    m = deserialize(data, NAMED_POSE_ARRAY)
+    out = []
+    for e in m.poses:
+        p, q = e.pose.position, e.pose.orientation
+        out.append((e.name, p.x, p.y, p.z, q.w, q.x, q.y, q.z))
+    return m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, out
+
+
 def encode_status(t, battery_voltage, supervisor_info=0, pm_state=0) -> bytes:
     """CDR of a Status (battery voltage [V], supervisor bits)."""
     return _ser(_t(STATUS)(header=_header(t), supervisor_info=int(supervisor_info),
@@ -266,6 +311,8 @@ def request(service, **fields) -> bytes:
     cls = _t(name)
     if "group_mask" in cls.__dataclass_fields__:
         fields.setdefault("group_mask", 0)      # 0: every group
+    if "arm" in fields:
+        fields["arm"] = bool(fields["arm"])
     return _ser(cls(**fields), name)
 
 

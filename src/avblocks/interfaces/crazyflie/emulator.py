@@ -4,9 +4,12 @@
 What it speaks (as Crazyswarm2's ``crazyflie_server`` does, per vehicle
 ``cfN``): subscriptions ``/cfN/cmd_full_state`` (FullState) and
 ``/cfN/cmd_velocity_world`` (VelocityWorld); services ``/cfN/takeoff``,
-``/cfN/land``, ``/cfN/notify_setpoints_stop``; publications ``/cfN/pose``
-(PoseStamped, world frame, like the server's ``default_topics.pose`` log
-block) and ``/cfN/status`` (Status: battery voltage, supervisor bits).
+``/cfN/land``, ``/cfN/notify_setpoints_stop``, ``/cfN/arm`` and their
+broadcast versions ``/all/...``; publications ``/cfN/pose`` (PoseStamped,
+world frame, like the server's ``default_topics.pose`` log block),
+``/cfN/status`` (Status: battery voltage, supervisor bits) and, with
+``mocap=True``, ``/poses`` (NamedPoseArray, as motion_capture_tracking
+publishes it).
 
 Each vehicle is the library's own model: a
 :class:`~avblocks.vehicles.Quadrotor` (Crazyflie 2.1 mass and inertia)
@@ -15,34 +18,69 @@ with RK4 at ``rate`` Hz (the controller's wrench held over a step, as a
 discrete controller's is); a position loop ``v_ref = v_d + a_d / kv +
 kp (p_d - p)`` (``kv`` the controller's velocity gain) turns position
 set-points with their velocity and acceleration into its velocity
-set-point.
+set-point; the controller's yaw set-point follows the commanded yaw.
 
-Firmware behaviour copied (crazyflie-firmware 2026.08, commit 2a18fc2:
-``commander.c``, ``supervisor.c``, ``supervisor_state_machine.c``,
-``crtp_commander_high_level.c``, ``planner.c``):
+Behaviours modelled, each from its source (crazyflie-firmware 2026.08,
+commit 2a18fc29; Crazyswarm2 commit f6154e2):
 
-* **high-level commander**: ``takeoff`` is accepted only while the
-  planner is idle (on the ground, or after a finished landing); takeoff
-  and land fly a 7th-order polynomial from the current position to
-  ``(x, y, height)`` in ``duration`` with zero velocity, acceleration and
-  jerk at both ends; when a landing trajectory ends the planner goes idle
-  and the motors stop. Takeoff heights are absolute (``z = height``).
-* **priorities**: a streamed set-point (full state, velocity) has the
-  CRTP priority and stops the high-level planner; high-level set-points
-  are ignored until ``notify_setpoints_stop`` relaxes the priority. An
-  idle planner at low priority outputs the null set-point (motors off):
-  after ``notify_setpoints_stop`` a ``land`` (or takeoff/go_to) must
-  follow at once.
-* **set-point watchdog** (supervisor): a streamed set-point older than
-  0.5 s puts the vehicle in *warning, level out* (roll and pitch zero, no
-  horizontal control, z kept as the last set-point had it); older than
-  2 s the supervisor cuts the motors (*exception: free fall*, then
-  *locked* until reboot): the vehicle falls. A Crazyflie whose commanding
-  process dies while streaming therefore falls after 2 s; it does not
-  land by itself.
+* **Crazyswarm2's server** (``crazyflie/src/crazyflie_server.cpp``): each
+  service handler hands the command to the radio and returns the empty
+  response at once (no word on whether the vehicle took it); ``/all/...``
+  services broadcast to every vehicle; ``arm`` calls
+  ``sendArmingRequest(arm)``.
+* **high-level commander** (``planner.c``, ``crtp_commander_high_level.c``):
+  ``plan_takeoff`` is refused unless the planner is idle (``state !=
+  TRAJECTORY_STATE_IDLE``); ``plan_land`` only while it is already landing;
+  both fly a 7th-order rest-to-rest polynomial (zero velocity,
+  acceleration and jerk at both ends) from the current position to
+  ``(x, y, height)`` in ``duration``, yaw held; when a landing trajectory
+  ends the planner is idle and outputs the null set-point: motors off.
+  Heights are absolute. While the supervisor cannot fly (not armed) the
+  commander is blocked (``stabilizer.c``, ``crtpCommanderBlock``): a
+  takeoff then does nothing.
+* **priorities** (``commander.c``, ``commanderSetSetpoint``,
+  ``commanderRelaxPriority``; ``crtp_commander.c``): a streamed set-point
+  (full state, velocity) has the CRTP priority, above the high-level
+  commander's, and **stops the high-level planner**: a set-point that
+  arrives after ``land`` cancels the landing. ``notify_setpoints_stop``
+  relaxes the priority (``remain_valid_millisecs`` is ignored, as the
+  firmware's decoder says); then the planner's output wins: an idle
+  planner's null set-point (motors off) until ``land``/``takeoff`` plans
+  again.
+* **set-point watchdog** (``supervisor.c``: ``COMMANDER_WDT_TIMEOUT_STABILIZE``
+  500 ms, ``COMMANDER_WDT_TIMEOUT_SHUTDOWN`` 2000 ms;
+  ``supervisor_state_machine.c``): a streamed set-point older than 0.5 s
+  puts the vehicle in *warning, level out* (roll and pitch zero, no
+  horizontal control, z kept, ``supervisorOverrideSetpoint``); older than
+  2 s the motors stop (*exception: free fall*, then *locked* until
+  reboot): the vehicle falls. Under the high-level commander the set-point
+  is refreshed every tick: no timeout. A relaxed priority (notify) leaves
+  *level out* for *flying* again.
+* **arming** (``supervisor.c`` ``supervisorRequestArming``, ``AUTO_ARMING``;
+  ``docs/functional-areas/supervisor/arming.md``; ``configs/cf21bl_defconfig``
+  ``CONFIG_MOTORS_REQUIRE_ARMING=y``; ``platform_defaults.h``
+  ``PREFLIGHT_TIMEOUT_MS`` 30000, ``LANDING_TIMEOUT_MS`` 3000):
+  ``arming="auto"`` (Crazyflie 2.x, the default) arms itself;
+  ``arming="required"`` (Crazyflie 2.1 Brushless, Bolt) can fly only
+  after an arming request, accepted only when pre-flight checks passed (on
+  the ground, not locked); armed but not flying for 30 s it disarms; 3 s
+  after a landing it disarms (the state machine goes Landed -> Reset); a
+  disarm request in flight stops the motors (Flying -> Reset).
+* **status bits** (``supervisor.c`` ``updateLogData``): can be armed (1),
+  armed (2), auto-arm (4), can fly (8), flying (16), locked (64); "flying"
+  stays set for 2 s after the motors stop at the end of a landing
+  (``IS_FLYING_HYSTERESIS_THRESHOLD``: the state machine leaves *flying*
+  for *landed* only then), and the landing timeout counts from there.
+* **yaw** (``crtp_commander_generic.c``: full state sets the attitude
+  quaternion in ``modeAbs``, velocity-world a yaw rate in deg/s): the
+  vehicle turns to the full-state set-point's yaw, or at the set yaw rate.
 * **refusing set-points before takeoff** (emulator rule, stricter than
   the firmware, which would fly on them once armed): a streamed set-point
   to a vehicle on the ground is logged as ``refused`` and ignored.
+
+Not modelled: the radio's latency and losses, the deprecated v1
+takeoff/land packets' turn to yaw 0, battery drain, ground effect,
+downwash, crash detection, tumbling.
 
 Faults: ``silent`` (``{name: t}``: from ``t`` s after the fleet's first
 streamed set-point the vehicle is gone: it publishes nothing, ignores
@@ -84,7 +122,16 @@ WDT_LEVEL_OUT, WDT_SHUTDOWN = 0.5, 2.0
 #: Physics steps one loop iteration may take to catch up with the clock.
 MAX_STEPS = 4
 #: Status.supervisor_info bits (crazyflie_interfaces/msg/Status).
-CAN_FLY, IS_FLYING, IS_LOCKED = 8, 16, 64
+CAN_BE_ARMED, IS_ARMED, AUTO_ARM, CAN_FLY, IS_FLYING, IS_LOCKED = 1, 2, 4, 8, 16, 64
+#: The supervisor's arming timeouts [s] (platform_defaults.h:
+#: PREFLIGHT_TIMEOUT_MS, LANDING_TIMEOUT_MS).
+PREFLIGHT_TIMEOUT, LANDING_TIMEOUT = 30.0, 3.0
+#: The supervisor calls a vehicle flying until its motors have been below
+#: idle thrust this long [s] (supervisor.c IS_FLYING_HYSTERESIS_THRESHOLD).
+FLYING_HYSTERESIS = 2.0
+ARMING = ("auto", "required")
+SERVICES = {"takeoff": _types.TAKEOFF, "land": _types.LAND,
+            "notify_setpoints_stop": _types.NOTIFY, "arm": _types.ARM}
 #: Vehicle modes of the emulator (``drop``: motors stopped at the end of a
 #: landing above the floor; it settles, then is ``landed``).
 MODES = ("landed", "hl", "stream", "level_out", "falling", "drop", "locked")
@@ -138,13 +185,20 @@ class CrazyflieEmulator:
         ``{name: volts}`` (default 4.0 V each).
     silent, stale : dict, optional
         Faults (see the module docstring).
+    yaw0 : float or (N,) [rad]
+        Start yaws.
+    arming : {"auto", "required"}
+        Auto-arming platform (Crazyflie 2.x) or one that needs an arming
+        request (Crazyflie 2.1 Brushless).
+    mocap : bool
+        Also publish ``/poses`` (NamedPoseArray) at ``pose_rate``.
     log : path, optional
     domain : int, optional
     """
 
     def __init__(self, names, position0=None, *, router="tcp/127.0.0.1:7447", rate=100.0,
-                 pose_rate=50.0, kp=2.5, battery=None, silent=None, stale=None, log=None,
-                 domain=None):
+                 pose_rate=50.0, kp=2.5, battery=None, silent=None, stale=None, yaw0=0.0,
+                 arming="auto", mocap=False, log=None, domain=None):
         self.names = _names(names)
         n = self.n = len(self.names)
         if position0 is None:
@@ -153,8 +207,23 @@ class CrazyflieEmulator:
         if p0.shape != (n, 3) or not np.isfinite(p0).all():
             raise ParameterError("position0 must be (N, 3) finite", param="position0",
                                  found=p0.shape)
-        self.quad = Quadrotor(p0, input="wrench", frame="crazyflie", **CF21)
-        self.ctrl = QuadrotorVelocityControl.for_quadrotor(self.quad, **GAINS)
+        yaw0 = np.broadcast_to(np.asarray(yaw0, float), (n,)).copy()
+        if not np.isfinite(yaw0).all():
+            raise ParameterError("yaw0 must be finite", param="yaw0", found=yaw0)
+        if arming not in ARMING:
+            raise ParameterError("unknown arming kind", param="arming",
+                                 expected=list(ARMING), found=arming)
+        att0 = np.column_stack([np.cos(yaw0 / 2), np.zeros(n), np.zeros(n),
+                                np.sin(yaw0 / 2)])
+        self.quad = Quadrotor(p0, attitude0=att0, input="wrench", frame="crazyflie", **CF21)
+        self.ctrl = QuadrotorVelocityControl.for_quadrotor(self.quad, yaw=yaw0, **GAINS)
+        self.yaw_sp = yaw0.copy()              # the controller's yaw set-point
+        self.auto_arm = arming == "auto"
+        self.armed = np.full(n, self.auto_arm)
+        self.t_armed = np.zeros(n)             # when armed (pre-flight timeout)
+        self.t_landed = np.full(n, -np.inf)    # when the motors last stopped on landing
+        self.flown = np.zeros(n, bool)         # took off since it was armed
+        self.mocap = bool(mocap)
         self.x = {k: np.array(v, float) for k, v in self.quad.initial_state().items()}
         self.h = 1.0 / float(rate)
         self.pose_period = 1.0 / float(pose_rate)
@@ -182,20 +251,25 @@ class CrazyflieEmulator:
                           for nm in self.names]
         self.status_pubs = [self.link.publisher(f"/{nm}/status", _types.STATUS)
                             for nm in self.names]
+        self.mocap_pub = (self.link.publisher("/poses", _types.NAMED_POSE_ARRAY)
+                          if self.mocap else None)
+        fns = {"takeoff": self._takeoff, "land": self._land,
+               "notify_setpoints_stop": self._notify, "arm": self._arm}
         for i, nm in enumerate(self.names):
             self.link.subscribe(f"/{nm}/cmd_full_state", _types.FULL_STATE,
                                 lambda d, now, i=i: self._on_setpoint(i, "full_state", d))
             self.link.subscribe(f"/{nm}/cmd_velocity_world", _types.VELOCITY_WORLD,
                                 lambda d, now, i=i: self._on_setpoint(i, "velocity", d))
-            for srv, fn in ((_types.TAKEOFF, self._takeoff), (_types.LAND, self._land),
-                            (_types.NOTIFY, self._notify)):
-                short = srv.rsplit("/", 1)[1]
-                topic = {"Takeoff": "takeoff", "Land": "land",
-                         "NotifySetpointsStop": "notify_setpoints_stop"}[short]
+            for topic, srv in SERVICES.items():
                 self.link.serve(f"/{nm}/{topic}", srv,
-                                lambda req, i=i, fn=fn, topic=topic: self._service(
-                                    i, topic, fn, req))
-        self.write({"ev": "start", "vehicles": self.names, "position": p0.tolist()})
+                                lambda req, i=i, topic=topic: self._service(
+                                    i, topic, fns[topic], req))
+        # crazyflie_server.cpp: the /all/... services broadcast to every vehicle
+        for topic, srv in SERVICES.items():
+            self.link.serve(f"/all/{topic}", srv,
+                            lambda req, topic=topic: self._broadcast(topic, fns[topic], req))
+        self.write({"ev": "start", "vehicles": self.names, "position": p0.tolist(),
+                    "yaw": yaw0.tolist(), "arming": arming})
 
     # ------------------------------------------------------------------ helpers
     def now(self):
@@ -219,11 +293,14 @@ class CrazyflieEmulator:
         m = _types.deserialize(data, _types.FULL_STATE if kind == "full_state"
                                else _types.VELOCITY_WORLD)
         if kind == "full_state":
-            p, v = m.pose.position, m.twist.linear
+            p, v, q = m.pose.position, m.twist.linear, m.pose.orientation
             sp = {"kind": kind, "pos": [p.x, p.y, p.z], "vel": [v.x, v.y, v.z],
-                  "acc": [m.acc.x, m.acc.y, m.acc.z]}
+                  "acc": [m.acc.x, m.acc.y, m.acc.z],
+                  "yaw": float(np.arctan2(2 * (q.w * q.z + q.x * q.y),
+                                          1 - 2 * (q.y * q.y + q.z * q.z)))}
         else:
-            sp = {"kind": kind, "vel": [m.vel.x, m.vel.y, m.vel.z], "yaw_rate": m.yaw_rate}
+            sp = {"kind": kind, "vel": [m.vel.x, m.vel.y, m.vel.z],
+                  "yaw_rate": float(m.yaw_rate)}
         t = self.now()
         with self._lock:
             mode = self.mode[i]
@@ -232,8 +309,14 @@ class CrazyflieEmulator:
                 sp["t"] = t
                 self.sp[i] = sp
                 self.crtp[i] = True
+                if self.traj[i] is not None and self.traj[i]["kind"] == "land":
+                    cancelled = True            # commander.c: the planner stops
+                else:
+                    cancelled = False
                 self.traj[i] = None            # the planner stops (CRTP priority)
                 self.mode[i] = "stream"
+                if sp["kind"] == "full_state":
+                    self.yaw_sp[i] = sp["yaw"]
                 if self.t_first_sp is None:
                     self.t_first_sp = t
         rec = {"ev": "setpoint", "vehicle": self.names[i], **{k: v for k, v in sp.items()
@@ -244,13 +327,24 @@ class CrazyflieEmulator:
         else:
             rec["reason"] = f"vehicle is {mode}"
         self.write(rec)
+        if ok and cancelled:
+            self.write({"ev": "landing_cancelled", "vehicle": self.names[i], "at": round(t, 6),
+                        "by": "a streamed set-point (CRTP priority stops the planner)"})
 
     def _service(self, i, topic, fn, req):
         if self._ignore(i):
             raise NoReply                       # a vehicle that is gone answers nothing
         self.write({"ev": "service", "vehicle": self.names[i], "service": topic,
-                    "request": req})
+                    "request": req, "at": round(self.now(), 6)})
         fn(i, req)
+        return None
+
+    def _broadcast(self, topic, fn, req):
+        self.write({"ev": "service", "vehicle": "all", "service": topic, "request": req,
+                    "at": round(self.now(), 6)})
+        for i in range(self.n):
+            if not self._ignore(i):
+                fn(i, req)
         return None
 
     def _plan(self, i, kind, height, duration):
@@ -263,6 +357,11 @@ class CrazyflieEmulator:
 
     def _takeoff(self, i, req):
         with self._lock:
+            if not self.armed[i] and self.mode[i] != "locked":
+                self.write({"ev": "refused", "vehicle": self.names[i], "service": "takeoff",
+                            "reason": "not armed: the supervisor cannot fly, the "
+                                      "high-level commander is blocked"})
+                return
             idle = self.traj[i] is None and self.mode[i] in ("landed",)
             if not idle:
                 self.write({"ev": "refused", "vehicle": self.names[i], "service": "takeoff",
@@ -271,6 +370,7 @@ class CrazyflieEmulator:
             self.crtp[i] = False
             self._plan(i, "takeoff", req["height"], req["duration"])
             self.mode[i] = "hl"
+            self.flown[i] = True
 
     def _land(self, i, req):
         with self._lock:
@@ -287,6 +387,37 @@ class CrazyflieEmulator:
             self.crtp[i] = False
             if self.mode[i] in ("stream", "level_out"):
                 self.mode[i] = "hl"
+
+    def _arm(self, i, req):
+        """supervisorRequestArming: arming only when pre-flight checks
+        passed (on the ground, not locked); disarming always (in flight:
+        Flying -> Reset, the motors stop)."""
+        with self._lock:
+            mode = self.mode[i]
+            if req["arm"]:
+                if self.armed[i]:
+                    return
+                if mode != "landed":
+                    self.write({"ev": "refused", "vehicle": self.names[i], "service": "arm",
+                                "reason": f"cannot arm: vehicle is {mode}"})
+                    return
+                self.armed[i], self.flown[i] = True, False
+                self.t_armed[i] = self.now()
+                self.write({"ev": "armed", "vehicle": self.names[i]})
+                return
+            if self.auto_arm or not self.armed[i]:
+                return                          # auto-arming platforms arm again at once
+            self._disarm(i, "disarm request")
+
+    def _disarm(self, i, why):
+        """Called with the lock held."""
+        self.armed[i] = False
+        mode = self.mode[i]
+        if mode not in ("landed", "locked", "falling", "drop"):
+            self.mode[i] = "drop"               # the motors stop: it falls, unlocked
+            self.traj[i], self.crtp[i] = None, False
+        self.write({"ev": "disarmed", "vehicle": self.names[i], "reason": why,
+                    "mode": mode})
 
     # ------------------------------------------------------------------ firmware
     def _references(self, t):
@@ -318,6 +449,8 @@ class CrazyflieEmulator:
                                   if sp["kind"] == "full_state" else sp["vel"][2])
                 else:
                     vref[i] = sp["vel"]
+                    if sp["kind"] == "velocity":         # deg/s (velocityDecoder)
+                        self.yaw_sp[i] += np.radians(sp["yaw_rate"]) * self.h
                     if sp["kind"] == "full_state":
                         vref[i] = vref[i] + (np.asarray(sp["acc"]) / self.kv
                                              + self.kp * (np.asarray(sp["pos"]) - p[i]))
@@ -335,6 +468,7 @@ class CrazyflieEmulator:
             if s >= 1.0 and tr["kind"] == "land":
                 self.traj[i] = None             # planner idle: null set-point
                 self.mode[i] = "drop" if p[i, 2] > 0.0 else "landed"
+                self.t_landed[i] = t
                 events.append({"ev": "land_done", "vehicle": self.names[i],
                                "position": p[i].tolist()})
                 continue
@@ -342,10 +476,24 @@ class CrazyflieEmulator:
             on[i] = True
         return vref, on, events
 
+    def _supervisor(self, t):
+        """The arming timeouts of a platform that needs arming (called with
+        the lock held)."""
+        if self.auto_arm:
+            return
+        for i in range(self.n):
+            if not self.armed[i] or self.mode[i] != "landed":
+                continue
+            if not self.flown[i] and t - self.t_armed[i] > PREFLIGHT_TIMEOUT:
+                self._disarm(i, "pre-flight timeout (30 s armed without flying)")
+            elif self.flown[i] and t - self.t_landed[i] > FLYING_HYSTERESIS + LANDING_TIMEOUT:
+                self._disarm(i, "landing timeout (3 s after landing)")
+
     def _rk4(self, vref, on, h):
         """RK4 of the vehicles over ``h`` with the controller's wrench held
         (the firmware's controller is discrete too: computed once a step)."""
         quad, x = self.quad, self.x
+        self.ctrl.set_parameter("yaw", self.yaw_sp)
         w = self.ctrl.output(0.0, {}, {"velocity": vref, "measured_velocity": x["velocity"],
                                        "attitude": x["attitude"], "rates": x["rates"]},
                              np)["wrench"] * on[:, None]
@@ -365,6 +513,7 @@ class CrazyflieEmulator:
         emulator time ``t``."""
         h = self.h if h is None else float(h)
         with self._lock:
+            self._supervisor(t)
             vref, on, events = self._references(t)
             modes = list(self.mode)
         new = self._rk4(vref, on, h)
@@ -387,6 +536,8 @@ class CrazyflieEmulator:
                         self.mode[i] = "locked" if mode == "falling" else "landed"
                         self.traj[i] = None
                         self.crtp[i] = False
+                        if mode not in ("falling", "drop"):
+                            self.t_landed[i] = t + h    # (drop: when its landing ended)
                     # else: pressed against the floor (a takeoff starting, a streamed
                     # set-point pointing down): the floor holds it, the mode stays
             new["position"][below, 2] = 0.0
@@ -420,10 +571,27 @@ class CrazyflieEmulator:
             if not self.no_pose[i]:
                 self.pose_pubs[i].put(_types.encode_pose(self.x["position"][i], q[i], t))
             if status:
-                mode = self.mode[i]
-                bits = (CAN_FLY if mode != "locked" else IS_LOCKED) | (
-                    IS_FLYING if mode not in ("landed", "locked") else 0)
-                self.status_pubs[i].put(_types.encode_status(t, self.volts[i], bits))
+                self.status_pubs[i].put(_types.encode_status(t, self.volts[i],
+                                                             self.status_bits(i)))
+        if self.mocap_pub is not None:
+            live = [i for i in range(self.n) if not self.gone[i] and not self.no_pose[i]]
+            self.mocap_pub.put(_types.encode_named_poses(
+                [self.names[i] for i in live], self.x["position"][live], q[live], t))
+
+    def status_bits(self, i):
+        """Status.supervisor_info of vehicle i (supervisor.c updateLogData)."""
+        mode = self.mode[i]
+        if mode == "locked":
+            return IS_LOCKED | (AUTO_ARM if self.auto_arm else 0)
+        bits = AUTO_ARM if self.auto_arm else 0
+        if self.armed[i]:
+            bits |= IS_ARMED | CAN_FLY
+        elif mode == "landed":
+            bits |= CAN_BE_ARMED
+        if mode not in ("landed", "falling", "drop") or (
+                self.armed[i] and self.now() - self.t_landed[i] < FLYING_HYSTERESIS):
+            bits |= IS_FLYING
+        return bits
 
     def run(self, duration=None):
         """Run until :meth:`stop` or ``duration`` seconds. The physics keeps
@@ -514,10 +682,12 @@ def main(args):
     names = _names(args.names)
     p0 = json.loads(args.position0) if args.position0 else [
         [0.0, -args.spacing * k, 0.0] for k in range(len(names))]
+    yaw0 = json.loads(args.yaw0) if args.yaw0 else 0.0
     em = CrazyflieEmulator(names, p0, router=args.router, rate=args.rate,
                            pose_rate=args.pose_rate, battery=_parse_eq(args.battery, "battery"),
                            silent=_parse_at(args.silent, "silent"),
-                           stale=_parse_at(args.stale, "stale"), log=args.log,
+                           stale=_parse_at(args.stale, "stale"), yaw0=yaw0,
+                           arming=args.arming, mocap=args.mocap, log=args.log,
                            domain=args.domain)
     banner = (f"emulating Crazyflies {','.join(em.names)} (Crazyswarm2 over rmw_zenoh) "
               f"via {args.router}")
@@ -534,6 +704,12 @@ def add_parser(sub):
     e.add_argument("--names", required=True, help="vehicle names, e.g. cf1,cf2,cf3")
     e.add_argument("--router", default="tcp/127.0.0.1:7447", help="Zenoh router endpoint")
     e.add_argument("--position0", help="JSON list of [x, y, z] per vehicle")
+    e.add_argument("--yaw0", help="start yaw [rad]: a number or a JSON list per vehicle")
+    e.add_argument("--arming", default="auto", choices=list(ARMING),
+                   help="auto: arms itself (Crazyflie 2.x); required: needs /cfN/arm "
+                        "(Crazyflie 2.1 Brushless)")
+    e.add_argument("--mocap", action="store_true",
+                   help="also publish /poses (NamedPoseArray, motion capture)")
     e.add_argument("--spacing", type=float, default=0.5,
                    help="without --position0: vehicles on a line this far apart [m]")
     e.add_argument("--rate", type=float, default=100.0, help="physics rate [Hz]")

@@ -39,20 +39,30 @@ ground robots have), discrete states updated once per major step.
 Phases (:data:`PHASES`, logged): ``preflight`` (``on_start``: every
 vehicle answers, reports a pose younger than ``stale_timeout``, battery
 at least ``battery_min`` where reported, inside the geofence, no two
-closer than ``min_separation``; else :class:`PreflightError` naming each
-vehicle and its reason, nothing commanded) -> ``takeoff``
-(``link.takeoff``) -> ``mission`` (the diagram runs; each major step the
-command is checked and shaped by :class:`FlightLimits`, then sent) ->
-``land`` (``on_stop`` at the normal end: ``link.land()`` and wait up to
-``land_wait`` for every vehicle to report landed) -> ``landed``.
+closer than ``min_separation``; with ``slots`` (the scenario's start
+positions) the vehicles are matched to them by where they stand
+(``scipy.optimize.linear_sum_assignment`` on the (x, y) distances), agent
+k flown by the vehicle on slot k, one further than ``slot_tolerance``
+refused; else :class:`PreflightError` naming each vehicle and its reason,
+nothing commanded) -> ``takeoff`` (``link.takeoff``) -> ``mission`` (the
+diagram runs; each major step the command is checked and shaped by
+:class:`FlightLimits`, then sent) -> ``land`` (``on_stop`` at the normal
+end: ``link.land()`` and wait up to ``land_wait`` for every vehicle to
+report landed, each confirmation logged) -> ``landed``. The link always
+sees its own vehicle order (``names``); :attr:`Fleet.order` maps agents
+to it.
 
 Fail-safe (``failsafe`` phase): on a NaN or infinite command, a pose older
 than ``stale_timeout``, a vehicle silent for ``link_timeout``, or a limit
 broken in flight (outside the geofence by ``fence_margin``, too close),
 :meth:`Fleet.land_all` calls ``link.land(failsafe)`` FIRST and the run
 ends with :class:`FailsafeError` (a ``SimulationError``: the CLI saves
-the results). On SIGINT/SIGTERM the shared signal guard (``_guard``, also
-used by ``interfaces.ros2``) lands every registered fleet before the
+the results), naming every vehicle concerned (those without a fresh
+pose too: links that die together die a few ms apart); ``on_stop`` then
+waits up to ``land_wait`` for the vehicles still heard to report landed
+and logs each (``landed``, ``land_unconfirmed``, ``land_timeout``).
+On SIGINT/SIGTERM the shared signal guard (``_guard``, also used by
+``interfaces.ros2``) lands every registered fleet before the
 interrupt reaches the simulator; ``atexit`` does too; a watchdog thread
 lands the fleet if no command step came for ``stall_timeout``;
 ``on_stop`` commands the landing again whatever ended the run. A killed

@@ -42,8 +42,18 @@ def _available():
     return out
 
 
+#: An argument that starts with a minus and a digit (or ".digit") is a
+#: value, not an option: Python 3.13's argparse rule, which 3.11 and 3.12
+#: lack (they take only a plain negative number), so that the documented
+#: ``--geofence -4,4,-3,5,0,3`` parses.
+NEGATIVE_VALUE = r"^-\.?\d"
+
+
 def add_run_options(r):
     """The shared flight options of ``avblocks run`` and each protocol's own."""
+    import re
+    if hasattr(r, "_negative_number_matcher"):
+        r._negative_number_matcher = re.compile(NEGATIVE_VALUE)
     g = r.add_argument_group("drones (--robots " + " | ".join(FLEETS) + ")")
     g.add_argument("--takeoff-height", type=float, default=None, dest="takeoff_height",
                    help="takeoff height [m] (default: the start height of the "
@@ -61,6 +71,10 @@ def add_run_options(r):
     g.add_argument("--flight-log", default=None, dest="flight_log",
                    help="JSON-lines flight log (default: flight-log.jsonl in --out)")
     g.add_argument("--failsafe", default="land", choices=["land", "rtl"])
+    g.add_argument("--slot-tolerance", type=float, default=0.5, dest="slot_tolerance",
+                   help="pre-flight: the vehicles are matched to the scenario's start "
+                        "positions by where they stand; refuse one further than this "
+                        "from its start [m] (default 0.5; inf: any placement)")
     for _, mod in _available():
         mod.add_run_options(r)
 
@@ -79,7 +93,12 @@ def flight_options(args, start_height=None):
         h = start_height if start_height is not None and start_height > 0.05 else 1.0
     fence = getattr(args, "geofence", None)
     if isinstance(fence, str):
-        fence = [float(s) for s in fence.split(",")]
+        from ...core.errors import ParameterError
+        try:
+            fence = [float(s) for s in fence.split(",")]
+        except ValueError:
+            raise ParameterError("--geofence is six numbers: xmin,xmax,ymin,ymax,zmin,zmax",
+                                 param="geofence", found=fence) from None
     log = getattr(args, "flight_log", None)
     if log is None and getattr(args, "out", None):
         Path(args.out).mkdir(parents=True, exist_ok=True)
@@ -135,6 +154,9 @@ def apply(args, diagram, sim):
     model = diagram[name].block
     p0 = model_start(model)
     flight = flight_options(args, None if p0 is None else float(np.median(p0[:, 2])))
+    if p0 is not None:          # fly the vehicles where they stand (pre-flight)
+        flight["slots"] = p0
+        flight["slot_tolerance"] = getattr(args, "slot_tolerance", 0.5)
     fleet = mod.make_fleet(args, model, flight)
     replace_block(diagram, name, fleet)
     return fleet

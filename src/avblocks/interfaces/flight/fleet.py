@@ -14,6 +14,7 @@ from ...core.errors import ParameterError
 from . import _guard
 from .errors import FailsafeError, LimitError, PreflightError
 from .limits import FlightLimits
+from .telemetry import Telemetry
 
 #: The phases a run goes through, in order (``failsafe`` can follow any).
 PHASES = ("idle", "preflight", "takeoff", "mission", "land", "landed", "failsafe")
@@ -131,6 +132,17 @@ class Fleet(Block):
         at most for every vehicle to report landed.
     failsafe : {"land", "rtl"}
         What the fail-safe commands (``"rtl"`` where the protocol has it).
+    slots : (N, 2) or (N, 3), optional
+        The scenario's start positions, in agent order [m, world frame].
+        Pre-flight matches the vehicles to them by their reported (x, y)
+        (heights are ignored: vehicles start on the floor), minimising the
+        summed distance (``scipy.optimize.linear_sum_assignment``): the
+        vehicle standing at slot k flies agent k, whatever its name's
+        place in ``names``. The mapping is logged (``slots`` event). None:
+        agent k is ``names[k]``.
+    slot_tolerance : float [m]
+        Pre-flight refuses a vehicle further than this from its slot
+        (inf: take any placement); only with ``slots``.
     log : path, optional
         JSON-lines flight log, written (and flushed) as things happen, so a
         killed process leaves it behind.
@@ -142,6 +154,10 @@ class Fleet(Block):
     Sent set-point ``v_i`` = the input shaped by the limits (speed scaled
     to ``speed_max``, change limited to ``accel_max dt``, cut at the
     geofence within ``lookahead``); no set-point after the fail-safe.
+    With ``slots`` ``s_k``: the permutation ``pi`` minimising
+    ``sum_k |p_pi(k) - s_k|`` over the vehicles' (x, y) positions ``p``;
+    agent k's command goes to vehicle ``pi(k)``, whose telemetry is agent
+    k's output.
 
     References
     ----------
@@ -157,7 +173,8 @@ class Fleet(Block):
                  geofence=None, min_separation=0.0, lookahead=1.0, fence_margin=0.2,
                  battery_min=0.2, timeout=0.5, stale_timeout=1.0, link_timeout=2.0,
                  stall_timeout=1.0, wait=10.0, takeoff_timeout=30.0, land_wait=20.0,
-                 failsafe="land", log=None, period=None, battery_wait=1.5):
+                 failsafe="land", log=None, period=None, battery_wait=1.5, slots=None,
+                 slot_tolerance=0.5):
         super().__init__()
         self.names = fleet_names(names)
         self.n = n = len(self.names)
@@ -181,6 +198,21 @@ class Fleet(Block):
             raise ParameterError("battery_min is a fraction in [0, 1)", block=blk,
                                  param="battery_min", found=battery_min)
         self.battery_min = float(battery_min)
+        if slots is not None:
+            sl = np.asarray(slots, float)
+            if sl.ndim != 2 or sl.shape[0] != n or sl.shape[1] not in (2, 3) \
+                    or not np.isfinite(sl).all():
+                raise ParameterError("slots are the N start positions (N, 2) or (N, 3)",
+                                     block=blk, param="slots", expected=(n, 3),
+                                     found=np.shape(sl))
+            slots = sl[:, :2].copy()
+        self.slots = slots
+        if not (slot_tolerance >= 0) or np.isnan(slot_tolerance):
+            raise ParameterError("must be a number >= 0 (inf: any placement)", block=blk,
+                                 param="slot_tolerance", found=slot_tolerance)
+        self.slot_tolerance = float(slot_tolerance)
+        #: Agent k is flown by vehicle ``names[order[k]]`` (set by pre-flight).
+        self.order = np.arange(n)
         self.log_path = log
         xyz = ("x", "y", "z")
         self.declare_input("velocity", (n, 3), unit="m/s", labels=xyz, feedthrough=False,
@@ -243,7 +275,27 @@ class Fleet(Block):
         # telemetry becomes the next state, once per major step.
         if self.link is None:
             return {k: x[k] for k in self._outs}
-        return self._state_from(self.link.telemetry.snapshot())
+        return self._state_from(self._snapshot())
+
+    # ---------------------------------------------------------------- agent order
+    @property
+    def agent_names(self):
+        """Vehicle names in agent order (after the pre-flight assignment)."""
+        return [self.names[i] for i in self.order]
+
+    def _snapshot(self):
+        """The link's telemetry in agent order."""
+        tm = self.link.telemetry.snapshot()
+        o = self.order
+        return Telemetry(tm.position[o], tm.velocity[o], tm.attitude[o], tm.pose_age[o],
+                         tm.heard_age[o], tm.poses[o], tm.battery[o], tm.armed[o],
+                         tm.landed[o], [tm.status[i] for i in o])
+
+    def _to_link(self, v):
+        """Agent-order rows -> the link's vehicle order."""
+        out = np.empty_like(v)
+        out[self.order] = v
+        return out
 
     def _state_from(self, tm):
         pos = np.nan_to_num(tm.position)
@@ -256,6 +308,7 @@ class Fleet(Block):
     def on_start(self):
         self.events, self.steps_sent, self.sent = [], 0, None
         self._landing = False
+        self.order = np.arange(self.n)
         self._v_prev, self._t_prev = None, None
         self._next_send = None
         if self.log_path is not None:
@@ -269,8 +322,9 @@ class Fleet(Block):
             self._preflight()
             self._set_phase("takeoff", height=self.takeoff_height)
             self.link.takeoff(self.takeoff_height, self.takeoff_timeout)
-            tm = self.link.telemetry.snapshot()
-            self._set_phase("mission", position=tm.position.tolist())
+            tm = self._snapshot()
+            self._set_phase("mission", position=tm.position.tolist(),
+                            agents=self.agent_names)
         except BaseException as e:
             self.record("abort", phase=self.phase, error=f"{type(e).__name__}: {e}")
             self.on_stop()
@@ -318,6 +372,8 @@ class Fleet(Block):
             sub = [self.names[i] for i in idx]
             why += self.limits.outside(sub, tm.position[idx])
             why += [f"too close: {s}" for s in self.limits.too_close(sub, tm.position[idx])]
+        if self.slots is not None and have.all():
+            why += self._assign(tm.position)
         if why:
             self.record("preflight_refused", reasons=why)
             raise PreflightError("pre-flight check failed, nothing was commanded: "
@@ -326,6 +382,37 @@ class Fleet(Block):
                                       "again")
         self.record("preflight_ok", position=tm.position.tolist(),
                     battery=[None if not np.isfinite(b) else float(b) for b in tm.battery])
+
+    def _assign(self, position):
+        """Match the vehicles to the start slots (see ``slots``); sets
+        :attr:`order`, logs the mapping; returns the refusals."""
+        from scipy.optimize import linear_sum_assignment
+        p = np.asarray(position, float)[:, :2]
+        cost = np.linalg.norm(p[:, None, :] - self.slots[None, :, :], axis=-1)
+        veh, slot = linear_sum_assignment(cost)          # vehicle veh[j] -> slot slot[j]
+        order = np.empty(self.n, int)
+        order[slot] = veh
+        dist = cost[order, np.arange(self.n)]            # agent k: vehicle order[k]
+        self.order = order
+        mapping = [{"agent": k, "vehicle": self.names[order[k]],
+                    "slot": self.slots[k].round(3).tolist(),
+                    "distance": round(float(dist[k]), 3)} for k in range(self.n)]
+        self.record("slots", mapping=mapping, tolerance=self.slot_tolerance,
+                    reordered=bool((order != np.arange(self.n)).any()))
+        why = []
+        for k in np.nonzero(dist > self.slot_tolerance)[0]:
+            i = order[k]
+            near = int(np.argmin(cost[i]))
+            far = cost[i, near] > self.slot_tolerance
+            why.append(f"{self.names[i]} at ({p[i, 0]:.2f}, {p[i, 1]:.2f}) is "
+                       + (f"{cost[i, near]:.2f} m from the nearest start slot "
+                          f"(agent {near}, at ({self.slots[near, 0]:.2f}, "
+                          f"{self.slots[near, 1]:.2f}))" if far else
+                          f"{dist[k]:.2f} m from the start slot left for it (agent {k}, "
+                          f"at ({self.slots[k, 0]:.2f}, {self.slots[k, 1]:.2f}); another "
+                          f"vehicle stands nearer its nearest one)")
+                       + f": more than slot_tolerance {self.slot_tolerance:g} m")
+        return why
 
     # ---------------------------------------------------------------- mission
     def on_major_step(self, t, x, u, y):
@@ -338,34 +425,42 @@ class Fleet(Block):
         now = time.monotonic()
         self._last_step = now
         v = np.array(u["velocity"], dtype=float)
+        names = self.agent_names
         bad = ~np.all(np.isfinite(v), axis=1)
         if bad.any():
-            who = [nm for nm, b in zip(self.names, bad) if b]
+            who = [nm for nm, b in zip(names, bad) if b]
             self._fail(t, "nan", who, f"the velocity command is NaN or infinite for {who}")
-        tm = self.link.telemetry.snapshot()
+        tm = self._snapshot()
+        # every test first, then one fail-safe naming every vehicle concerned:
+        # a router or emulator that dies takes all vehicles' poses at once, and
+        # the one whose last pose happens to be oldest must not be the only one
+        # named (the others are just behind it: list those without a fresh pose)
         silent = tm.heard_age > self.link_timeout
-        if silent.any():
-            who = [nm for nm, s in zip(self.names, silent) if s]
-            self._fail(t, "silent", who, f"nothing heard from {who} for more than "
-                                         f"link_timeout={self.link_timeout:g} s")
         stale = tm.pose_age > self.stale_timeout
-        mute = stale & (tm.heard_age > self.stale_timeout)     # nothing at all: silent
-        if mute.any():
-            who = [nm for nm, s in zip(self.names, mute) if s]
-            self._fail(t, "silent", who, f"nothing heard from {who} for more than "
-                                         f"{self.stale_timeout:g} s (stale_timeout)")
-        if stale.any():
-            who = [nm for nm, s in zip(self.names, stale) if s]
-            self._fail(t, "stale", who, f"no pose from {who} for more than "
-                                        f"stale_timeout={self.stale_timeout:g} s")
-        breach = self.limits.breaches(self.names, tm.position)
+        silent |= stale & (tm.heard_age > self.stale_timeout)   # nothing at all: silent
+        quiet = (tm.pose_age > self.timeout) | (tm.heard_age > self.timeout)
+        for reason, hit, what in (
+                ("silent", silent, lambda who: f"nothing heard from {who} for more than "
+                 f"{min(self.link_timeout, self.stale_timeout):g} s (link_timeout "
+                 f"{self.link_timeout:g} s, stale_timeout {self.stale_timeout:g} s)"),
+                ("stale", stale, lambda who: f"no pose from {who} for more than "
+                 f"stale_timeout={self.stale_timeout:g} s")):
+            if hit.any():
+                who = [nm for nm, s in zip(names, hit) if s]
+                also = [f"{nm} ({a:.2f} s)" for nm, s, q, a in
+                        zip(names, hit, quiet, tm.pose_age) if q and not s]
+                msg = what(who) + ("; no fresh pose either from " + ", ".join(also)
+                                   if also else "")
+                self._fail(t, reason, [nm for nm, s, q in zip(names, hit, quiet)
+                                       if s or q], msg)
+        breach = self.limits.breaches(names, tm.position)
         if breach:
-            who = [nm for nm, b in zip(self.names, self.limits.breaching(tm.position)) if b]
+            who = [nm for nm, b in zip(names, self.limits.breaching(tm.position)) if b]
             self._fail(t, "limit", who, "a flight limit was broken: " + "; ".join(breach),
                        LimitError)
         dt = 0.0 if self._t_prev is None else now - self._t_prev
         c = self.limits.shape(v, self._v_prev, dt, tm.position)
-        self.link.send_velocity(c)
+        self.link.send_velocity(self._to_link(c))
         self._v_prev, self._t_prev = c, now
         self.sent = c
         self.steps_sent += 1
@@ -423,8 +518,10 @@ class Fleet(Block):
                     self._wait_landed()
                 elif not self._landing and self.phase == "takeoff":
                     self.land_all(f"run ended during {self.phase}")
+                    self._wait_landed()
                 elif self._landing:
                     link.land(self.failsafe)     # once more, for lossy links
+                    self._wait_landed()
         finally:
             if self._watch is not None:
                 self._watch_stop.set()
@@ -443,13 +540,37 @@ class Fleet(Block):
                 self._log = None
 
     def _wait_landed(self):
-        deadline = time.monotonic() + self.land_wait
-        while time.monotonic() < deadline:
+        """Wait up to ``land_wait`` for every vehicle still heard to report
+        landed, logging a ``landed`` event per vehicle as it does; then
+        ``land_unconfirmed`` for those gone silent (nothing heard for
+        ``link_timeout``: no confirmation can come) and ``land_timeout`` for
+        those still flying. The phase becomes ``landed`` when all are."""
+        t0 = time.monotonic()
+        deadline = t0 + self.land_wait
+        done = np.zeros(self.n, bool)
+        while True:
             tm = self.link.telemetry.snapshot()
-            if tm.landed.all():
-                self._set_phase("landed", position=tm.position.tolist())
-                return
+            for i in np.nonzero(tm.landed & ~done)[0]:
+                done[i] = True
+                self.record("landed", vehicle=self.names[i],
+                            position=np.round(tm.position[i], 4).tolist(),
+                            after_s=round(time.monotonic() - t0, 3))
+            silent = ~done & (tm.heard_age > self.link_timeout)
+            if done.all() or not (~done & ~silent).any() or time.monotonic() > deadline:
+                break
             time.sleep(0.05)
-        tm = self.link.telemetry.snapshot()
-        self.record("land_timeout", flying=[nm for nm, ld in zip(self.names, tm.landed)
-                                            if not ld])
+        if done.all():
+            if self.phase == "land":
+                self._set_phase("landed", position=tm.position.tolist())
+            else:
+                self.record("all_landed", phase=self.phase)
+            return
+        if silent.any():
+            self.record("land_unconfirmed", vehicles=[nm for nm, s in zip(self.names, silent)
+                                                      if s],
+                        reason=f"silent (nothing heard for more than link_timeout "
+                               f"{self.link_timeout:g} s)")
+        flying = ~done & ~silent
+        if flying.any():
+            self.record("land_timeout", flying=[nm for nm, f in zip(self.names, flying) if f],
+                        land_wait=self.land_wait)

@@ -64,6 +64,12 @@ class FleetLink:
         streaming them if the protocol needs a rate)."""
         raise NotImplementedError
 
+    def preflight(self, telemetry):
+        """The protocol's own pre-flight checks (called after the shared ones,
+        before anything is commanded; may wait, bounded): a list of reasons,
+        each naming its vehicle, empty when all is well."""
+        return []
+
     def land(self, action="land"):
         """Command every vehicle to land now (``action="rtl"``: return to
         launch where the protocol has it), stop streaming set-points.
@@ -318,6 +324,7 @@ class Fleet(Block):
             sub = [self.names[i] for i in idx]
             why += self.limits.outside(sub, tm.position[idx])
             why += [f"too close: {s}" for s in self.limits.too_close(sub, tm.position[idx])]
+        why += self.link.preflight(tm)
         if why:
             self.record("preflight_refused", reasons=why)
             raise PreflightError("pre-flight check failed, nothing was commanded: "

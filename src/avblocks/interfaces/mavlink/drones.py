@@ -693,7 +693,7 @@ def connections_from(spec, n=None):
 def _check_connection(s):
     if s.startswith("/dev/") or s.startswith("COM"):
         return
-    if not s.startswith(PREFIXES):
+    if "://" in s or not s.startswith(PREFIXES):       # "udp://...": MAVSDK's syntax
         raise ParameterError(
             "not a MAVLink connection string this block knows", block="Drones",
             param="connections", found=s,

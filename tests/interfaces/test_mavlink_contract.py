@@ -235,3 +235,23 @@ def test_the_override_flies_a_vehicle_whose_loss_action_keeps_it_flying(tmp_path
     assert sorted(landed) == [1]
     allowed = [e for e in drones.events if e["ev"] == "unsafe_failsafe_allowed"]
     assert allowed and "COM_OBL_RC_ACT = 0" in allowed[0]["problems"][0]
+
+
+def test_ardupilot_indoors_flies_once_given_the_ekf_origin(tmp_path):
+    """Without GPS, ArduPilot has no local position until SET_GPS_GLOBAL_ORIGIN:
+    preflight says so; with ekf_origin the commander sends it first (decoded:
+    degrees x 1e7, millimetres) and the vehicle flies."""
+    need_pymavlink()
+    origin = (47.397742, 8.545594, 488.0)
+    with emulator(tmp_path, 1, "--flavor", "ardupilot", "--link", "udp", "--indoor",
+                  pose0=[[0.0, 0.0, 0.0]]) as (log, spec):
+        with pytest.raises(PreflightError, match=r"uav1: reports no pose.*uav1: does not "
+                                                 r"stream LOCAL_POSITION_NED \(position"):
+            _flight(Drones(spec, n=1, wait=3.0), np.zeros((1, 3)))
+        drones = Drones(spec, n=1, takeoff_height=1.0, ekf_origin=origin)
+        _flight(drones, [[0.5, 0.5, 1.0]], t_final=1.0)
+        landed = wait_landed(log, 1)
+    assert sorted(landed) == [1]
+    sgo = [m for _, m in received(log, 1, "SET_GPS_GLOBAL_ORIGIN")]
+    assert sgo and (sgo[0].latitude, sgo[0].longitude, sgo[0].altitude) == (
+        473977420, 85455940, 488000)

@@ -255,3 +255,23 @@ def test_ardupilot_indoors_flies_once_given_the_ekf_origin(tmp_path):
     sgo = [m for _, m in received(log, 1, "SET_GPS_GLOBAL_ORIGIN")]
     assert sgo and (sgo[0].latitude, sgo[0].longitude, sgo[0].altitude) == (
         473977420, 85455940, 488000)
+
+
+def test_a_second_commander_flies_ardupilot_after_the_first_left(tmp_path):
+    """Found on ArduCopter SITL: the first commander's end leaves the GCS
+    failsafe on (no heartbeat for FS_GCS_TIMEOUT); a new one arming at once
+    was refused ("Arm: GCS failsafe on"). It now beats for a second first."""
+    need_pymavlink()
+    with emulator(tmp_path, 1, "--flavor", "ardupilot", "--link", "udp",
+                  "--gcs-timeout", "2", pose0=[[0.0, 0.0, 0.0]]) as (log, spec):
+        _flight(Drones(spec, n=1, takeoff_height=1.0), [[0.5, 0.5, 1.0]], t_final=1.0)
+        wait_landed(log, 1)
+        import time
+        time.sleep(3.0)                                # the GCS failsafe comes on
+        drones = Drones(spec, n=1, takeoff_height=1.0)
+        _flight(drones, [[0.0, 0.0, 1.0]], t_final=1.0)
+        landed = wait_landed(log, 1)
+    assert [e for e in events(log, "gcs_loss", 1) if e["action"] is None]
+    assert sorted(landed) == [1]
+    arms = [e["result"] for e in events(log, "ack", 1) if e["command"] == CMD_ARM]
+    assert arms == [0, 0], arms                        # both armed at the first try

@@ -369,3 +369,21 @@ def test_ardupilot_gcs_failsafe_counts_only_sysid_mygcs(fleet):
         assert em.mode[0] in ("takeoff", "guided") and em.armed[0]
     finally:
         stop.set()
+
+
+def test_ardupilot_refuses_to_arm_while_its_gcs_failsafe_is_on(fleet):
+    """Found flying ArduCopter SITL: the GCS failsafe is checked at 3 Hz,
+    armed or not (events.cpp, three_hz_loop); after a ground station went
+    quiet it is on, and arming is refused ("GCS failsafe on",
+    AP_Arming_Copter.cpp) until a check after the next heartbeat clears it."""
+    em, cl = fleet(flavor="ardupilot", gcs_timeout=2.0)
+    assert cl.command(176, 1, 4) == 0                  # GUIDED; our heartbeat was seen
+    time.sleep(2.8)                                    # quiet for > FS_GCS_TIMEOUT
+    assert em.gcs_failsafe[0]
+    cl.c.mav.heartbeat_send(6, 8, 0, 0, 4)
+    assert cl.command(400, 1, timeout=1.0) == 4        # FAILED at once
+    assert any("GCS failsafe on" in m.text for _, m in cl.series("STATUSTEXT"))
+    time.sleep(0.5)                                    # the next 3 Hz check
+    cl.c.mav.heartbeat_send(6, 8, 0, 0, 4)
+    assert cl.command(400, 1) == 0 and em.armed[0]
+    assert [e for e in em.events if e["ev"] == "gcs_failsafe_cleared"]

@@ -122,6 +122,7 @@ class MavlinkLink(FleetLink):
         self.fallback = [[] for _ in range(n)]
         self.params = [dict() for _ in range(n)]
         self._t_quat = np.full(n, -np.inf)
+        self._t_reached = np.full(n, np.inf)   # our first heartbeat the vehicle can hear
         self._acks = [dict() for _ in range(n)]  # cmd -> (result, sequence)
         self._ack_seq = 0
         self._ack_cv = threading.Condition()
@@ -220,6 +221,8 @@ class MavlinkLink(FleetLink):
                 self.sysid[i], self.compid[i] = sid, cid
                 self.record("autopilot", vehicle=self.names[i], system=sid, component=cid,
                             autopilot=msg.autopilot, mav_type=msg.type)
+                self._heartbeat(i)        # udpin: now it can reach the vehicle
+                self._t_reached[i] = time.monotonic()
             if (sid, cid) != (self.sysid[i], self.compid[i]):
                 return
             self.autopilot_id[i] = msg.autopilot
@@ -594,6 +597,13 @@ class MavlinkLink(FleetLink):
             self.record("prestream", vehicles=[self.names[i] for i in px4],
                         seconds=self.prestream, rate=self.stream_rate)
             time.sleep(self.prestream)
+        apm = [i for i in range(self.n) if self.autopilot[i] == "ardupilot"]
+        if apm:
+            # ArduCopter clears a GCS failsafe left on by an earlier commander
+            # in its 3 Hz check after our heartbeat (events.cpp); until then
+            # it refuses to arm ("GCS failsafe on"): heartbeats for 1 s first
+            t_ok = max(self._t_reached[i] for i in apm) + 1.0
+            time.sleep(max(0.0, min(t_ok - time.monotonic(), 2.0)))
         for i in range(self.n):
             if self.autopilot[i] == "ardupilot":
                 self.set_mode(i, "guided")

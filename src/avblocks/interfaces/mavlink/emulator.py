@@ -302,6 +302,7 @@ class Emulator:
         self.t_first_vel = np.full(n, np.nan)
         self.t_gcs = np.full(n, -np.inf)          # last heartbeat of the GCS that counts
         self.gcs_failsafe = np.zeros(n, bool)
+        self._t_check = 0.0                       # ArduPilot's 3 Hz failsafe check
         self.target = p0.copy()                   # hold / takeoff / rtl target
         self.falling = np.zeros(n, bool)
         self._pending = []                        # (t_due, i, cmd, message)
@@ -589,6 +590,8 @@ class Emulator:
                     return self._ack(i, cmd, refused, "Arming denied: no position estimate")
                 if not px4 and self.mode[i] not in ("guided", "loiter", "stabilize"):
                     return self._ack(i, cmd, refused, "Arm: mode not armable")
+                if not px4 and self.gcs_failsafe[i]:
+                    return self._ack(i, cmd, refused, "Arm: GCS failsafe on")
                 self.armed[i] = True
                 self.falling[i] = False
                 self.event(i, "armed")
@@ -686,38 +689,51 @@ class Emulator:
         return None
 
     # ------------------------------------------------------------------ firmware
-    def _failsafes(self, i, t):
+    def _px4_failsafes(self, i, t):
+        """PX4's offboard loss and data link loss (failsafe.cpp), armed."""
         p = self.params[i]
         md = self.mode[i]
-        if self.flavor == "px4":
-            if md == "offboard" and t - self.t_sp[i] > p["COM_OF_LOSS_T"]:
-                to = PX4_OBL_MODE.get(int(p["COM_OBL_RC_ACT"]), "rtl")
-                self.event(i, "offboard_loss", last_setpoint=float(self.t_sp[i]),
-                           action=to)
-                if to == "motors_off":
-                    self._motors_off(i, "offboard loss (COM_OBL_RC_ACT)")
-                else:
-                    self.set_mode(i, to, "offboard loss")
-            dll = int(p["NAV_DLL_ACT"])
-            if dll and md not in ("land",) and np.isfinite(self.t_gcs[i]) \
-                    and t - self.t_gcs[i] > p["COM_DL_LOSS_T"] and not self.gcs_failsafe[i]:
-                self.gcs_failsafe[i] = True
-                to = PX4_DLL_MODE.get(dll, "hold")
-                self.event(i, "gcs_loss", last_heartbeat=float(self.t_gcs[i]), action=to)
-                if to == "motors_off":
-                    self._motors_off(i, "data link loss (NAV_DLL_ACT)")
-                else:
-                    self.set_mode(i, to, "data link loss")
-            return
-        fs = int(p["FS_GCS_ENABLE"])
-        lost = np.isfinite(self.t_gcs[i]) and t - self.t_gcs[i] > p["FS_GCS_TIMEOUT"]
+        if md == "offboard" and t - self.t_sp[i] > p["COM_OF_LOSS_T"]:
+            to = PX4_OBL_MODE.get(int(p["COM_OBL_RC_ACT"]), "rtl")
+            self.event(i, "offboard_loss", last_setpoint=float(self.t_sp[i]), action=to)
+            if to == "motors_off":
+                self._motors_off(i, "offboard loss (COM_OBL_RC_ACT)")
+            else:
+                self.set_mode(i, to, "offboard loss")
+        dll = int(p["NAV_DLL_ACT"])
+        lost = np.isfinite(self.t_gcs[i]) and t - self.t_gcs[i] > p["COM_DL_LOSS_T"]
         if not lost:
             self.gcs_failsafe[i] = False
-        elif fs and not self.gcs_failsafe[i]:
+        elif dll and md != "land" and not self.gcs_failsafe[i]:
             self.gcs_failsafe[i] = True
-            to = APM_GCS_MODE.get(fs, "rtl")
+            to = PX4_DLL_MODE.get(dll, "hold")
             self.event(i, "gcs_loss", last_heartbeat=float(self.t_gcs[i]), action=to)
-            if md != "land":
+            if to == "motors_off":
+                self._motors_off(i, "data link loss (NAV_DLL_ACT)")
+            else:
+                self.set_mode(i, to, "data link loss")
+
+    def _apm_gcs_check(self, i, t):
+        """ArduCopter's failsafe_gcs_check (events.cpp), run at 3 Hz armed or
+        not (three_hz_loop): once a heartbeat of SYSID_MYGCS was seen, none
+        for FS_GCS_TIMEOUT sets the failsafe (which refuses arming, "GCS
+        failsafe on", AP_Arming_Copter.cpp) and, armed, starts its action;
+        the next check after a heartbeat clears it."""
+        p = self.params[i]
+        fs = int(p["FS_GCS_ENABLE"])
+        if not fs or not np.isfinite(self.t_gcs[i]):
+            return
+        lost = t - self.t_gcs[i] > p["FS_GCS_TIMEOUT"]
+        if not lost and self.gcs_failsafe[i]:
+            self.gcs_failsafe[i] = False
+            self._statustext(i, "GCS Failsafe Cleared", 6)
+            self.event(i, "gcs_failsafe_cleared")
+        elif lost and not self.gcs_failsafe[i]:
+            self.gcs_failsafe[i] = True
+            to = APM_GCS_MODE.get(fs, "rtl") if self.armed[i] else None
+            self._statustext(i, "Failsafe: GCS", 2)
+            self.event(i, "gcs_loss", last_heartbeat=float(self.t_gcs[i]), action=to)
+            if to is not None and self.mode[i] != "land":
                 self.set_mode(i, to, "GCS heartbeat loss")
 
     def _vref(self, t):
@@ -727,7 +743,8 @@ class Emulator:
         for i in range(self.n):
             if not self.armed[i]:
                 continue
-            self._failsafes(i, t)
+            if self.flavor == "px4":
+                self._px4_failsafes(i, t)
             md = self.mode[i]
             if not self.armed[i]:
                 continue
@@ -891,6 +908,10 @@ class Emulator:
                 self._receive(i)
             self._run_pending()
             t = self.now()
+            if self.flavor == "ardupilot" and t >= self._t_check:
+                self._t_check = t + 1.0 / 3.0
+                for i in range(self.n):
+                    self._apm_gcs_check(i, t)
             el = min(t - t_prev, 5 * self.dt)
             self.lost += max(t - t_prev - el, 0.0)
             t_prev = t

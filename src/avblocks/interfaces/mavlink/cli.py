@@ -134,9 +134,23 @@ def emulator_kwargs(args):
                 no_interval=_ids(args.no_interval), indoor=args.indoor)
 
 
+def main(args):
+    """``avblocks mavlink emulate``: run the emulator in the foreground."""
+    from .._emulator import run_emulator
+    from .emulator import Emulator
+    em = Emulator(**emulator_kwargs(args))
+    where = (f"udp {em.host}:{em.ports[0]}..{em.ports[-1]} (connect udpin:{em.host}:"
+             f"{em.ports[0]}+; the vehicles send from {em.vehicle_ports[0]}.."
+             f"{em.vehicle_ports[-1]})" if em.link_kind == "udp" else
+             f"tcp {em.host}:{em.ports[0]}..{em.ports[-1]} (connect tcp:{em.host}:"
+             f"{em.ports[0]}+10)")
+    return run_emulator(em, f"emulating {em.n} {em.flavor} vehicle(s) on {where}",
+                        args.duration)
+
+
 def add_emulate_parser(sub):
     """``avblocks mavlink emulate`` on the ``avblocks`` sub-parsers."""
-    from .emulator import ACTIONS, FLAVORS, LINKS, main
+    from .emulator import ACTIONS, FLAVORS, LINKS
     r = sub.add_parser("mavlink", help="MAVLink drone tools (emulate PX4/ArduPilot)")
     rs = r.add_subparsers(dest="mavlink_command", required=True)
     e = rs.add_parser(

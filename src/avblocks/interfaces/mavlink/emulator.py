@@ -952,23 +952,3 @@ def read_log(path):
     """The emulator's JSON-lines log as a list of dicts."""
     with open(path) as f:
         return [json.loads(line) for line in f if line.strip()]
-
-
-def main(args):
-    """``avblocks mavlink emulate`` (options in :mod:`.cli`)."""
-    from .._emulator import run_emulator
-    from .cli import emulator_kwargs
-    em = Emulator(**emulator_kwargs(args))
-    where = (f"udp {em.host}:{em.ports[0]}..{em.ports[-1]} (connect udpin:{em.host}:"
-             f"{em.ports[0]}+; the vehicles send from {em.vehicle_ports[0]}.."
-             f"{em.vehicle_ports[-1]})" if em.link_kind == "udp" else
-             f"tcp {em.host}:{em.ports[0]}..{em.ports[-1]} (connect tcp:{em.host}:"
-             f"{em.ports[0]}+10)")
-    return run_emulator(em, f"emulating {em.n} {em.flavor} vehicle(s) on {where}",
-                        args.duration)
-
-
-def add_parser(sub):
-    """``avblocks mavlink emulate`` on the ``avblocks`` sub-parsers."""
-    from .cli import add_emulate_parser
-    return add_emulate_parser(sub)

@@ -121,6 +121,7 @@ class MavlinkLink(FleetLink):
         self.interval_results = [dict() for _ in range(n)]
         self.fallback = [[] for _ in range(n)]
         self.params = [dict() for _ in range(n)]
+        self._asked = set()                     # parameter names asked for
         self._t_quat = np.full(n, -np.inf)
         self._t_reached = np.full(n, np.inf)   # our first heartbeat the vehicle can hear
         self._acks = [dict() for _ in range(n)]  # cmd -> (result, sequence)
@@ -279,6 +280,8 @@ class MavlinkLink(FleetLink):
             name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode(
                 errors="replace")
             name = name.split("\x00")[0]
+            if name not in self._asked:
+                return                      # only what was asked for is kept
             value = ap.decode_param(msg.param_value, msg.param_type, self.autopilot[i])
             with self._param_cv:
                 self.params[i][name] = value
@@ -460,6 +463,7 @@ class MavlinkLink(FleetLink):
                 break
             for g in todo:
                 for nm in g:
+                    self._asked.add(nm)
                     self._send(i, "param_request_read_send", self.sysid[i],
                                self.compid[i], nm.encode(), -1)
             deadline = time.monotonic() + timeout

@@ -31,36 +31,50 @@ def need_pymavlink():
         pytest.skip("pymavlink not installed (extra [mavlink])")
 
 
-def free_base_port(n):
-    """A port p such that p .. p+n-1 are free for UDP on 127.0.0.1."""
+def free_base_port(n, step=1, kind=socket.SOCK_DGRAM):
+    """A port p such that p, p+step, ... (n of them) are free on 127.0.0.1
+    (UDP, or TCP with ``kind=socket.SOCK_STREAM``)."""
     for _ in range(200):
-        p = random.randint(20000, 60000 - n)
+        p = random.randint(20000, 60000 - n * step)
         socks = []
         try:
             for k in range(n):
-                s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+                s = socket.socket(socket.AF_INET, kind)
                 socks.append(s)
-                s.bind(("127.0.0.1", p + k))
+                s.bind(("127.0.0.1", p + k * step))
             return p
         except OSError:
             continue
         finally:
             for s in socks:
                 s.close()
-    raise RuntimeError("no free UDP ports")
+    raise RuntimeError("no free ports")
 
 
 @contextlib.contextmanager
 def emulator(tmp_path, n, *extra, pose0=None):
-    """``avblocks mavlink emulate`` as a subprocess; yields (log, base_port)."""
+    """``avblocks mavlink emulate`` as a subprocess; yields (log, connections):
+    the emulator's log and the commander's connection spec, reached as the
+    real SITL is (PX4 / ``--link udp``: ``udpin:127.0.0.1:BASE+``;
+    ArduPilot's TCP: ``tcp:127.0.0.1:BASE+10``)."""
     need_pymavlink()
-    base = free_base_port(n)
+    extra = list(map(str, extra))
+    tcp = ("--flavor" in extra and extra[extra.index("--flavor") + 1] == "ardupilot"
+           and "--link" not in extra) or ("--link" in extra
+                                         and extra[extra.index("--link") + 1] == "tcp")
+    if tcp:
+        base = free_base_port(n, 10, socket.SOCK_STREAM)
+        ports = ["--base-port", str(base)]
+        spec = f"tcp:127.0.0.1:{base}+10"
+    else:
+        base, vport = free_base_port(n), free_base_port(n)
+        ports = ["--base-port", str(base), "--vehicle-port", str(vport)]
+        spec = f"udpin:127.0.0.1:{base}+"
     log = Path(tmp_path) / f"mav-emulator-{time.monotonic_ns()}.jsonl"
     if pose0 is None:
         pose0 = [[2.0 * k, 0.0, 0.0] for k in range(n)]
     cmd = [sys.executable, "-m", "avblocks", "mavlink", "emulate", "--n", str(n),
-           "--base-port", str(base), "--pose0", json.dumps(pose0), "--log", str(log),
-           *map(str, extra)]
+           *ports, "--pose0", json.dumps(pose0), "--log", str(log), *extra]
     p = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                          text=True)
     try:
@@ -69,7 +83,7 @@ def emulator(tmp_path, n, *extra, pose0=None):
             if p.poll() is not None:
                 raise RuntimeError(f"emulator exited: {p.stdout.read()}")
             time.sleep(0.05)
-        yield log, base
+        yield log, spec
     finally:
         p.terminate()
         try:
@@ -103,6 +117,11 @@ def received(log, sysid=None, mtype=None):
             continue
         out.append((r, decode(r)))
     return out
+
+
+def sent_commands(log, sysid, command):
+    """The COMMAND_LONGs with ``command`` the emulator received, decoded."""
+    return [m for _, m in received(log, sysid, "COMMAND_LONG") if m.command == command]
 
 
 def events(log, ev, sysid=None):

@@ -51,11 +51,13 @@ def _sigterm_ends_it(cmd, log, banner, end_record):
 
 def test_mavlink_emulate_stops_on_sigterm(tmp_path):
     need_pymavlink()
-    base = free_base_port(2)
-    _sigterm_ends_it(["mavlink", "emulate", "--n", "2", "--base-port", str(base)],
+    base, vport = free_base_port(2), free_base_port(2)
+    _sigterm_ends_it(["mavlink", "emulate", "--n", "2", "--base-port", str(base),
+                      "--vehicle-port", str(vport)],
                      tmp_path / "mav.jsonl",
-                     f"emulating 2 px4 vehicle(s) on udp 127.0.0.1:{base}..{base + 1}",
-                     end_record=True)
+                     f"emulating 2 px4 vehicle(s) on udp 127.0.0.1:{base}..{base + 1} "
+                     f"(connect udpin:127.0.0.1:{base}+; the vehicles send from "
+                     f"{vport}..{vport + 1})", end_record=True)
 
 
 def test_robots_emulate_stops_on_sigterm(router, tmp_path):

@@ -53,9 +53,8 @@ def test_case_study_in_simulation_and_on_the_mavlink_emulator(tmp_path):
     sim = _run([], tmp_path / "sim")
     _check(sim["numbers"])
     pose0 = df.start_positions(5, 0.0).tolist()          # on the ground
-    with emulator(tmp_path, 5, pose0=pose0) as (log, port):
-        fly = _run(["--robots", "mavlink", "--mavlink-connect",
-                    f"udpout:127.0.0.1:{port}+"], tmp_path / "fly")
+    with emulator(tmp_path, 5, pose0=pose0) as (log, spec):
+        fly = _run(["--robots", "mavlink", "--mavlink-connect", spec], tmp_path / "fly")
         landed = wait_landed(log, 5)
     assert fly["status"] == "complete"
     _check(fly["numbers"])

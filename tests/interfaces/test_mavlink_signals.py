@@ -28,11 +28,11 @@ def _flight_log(path):
                          ids=["SIGINT", "SIGTERM", "SIGKILL"])
 def test_signal_to_the_commander_lands_every_vehicle_and_keeps_the_log(tmp_path, sig):
     n = 3
-    with emulator(tmp_path, n, pose0=start_positions(n, 0.0).tolist()) as (log, port):
+    with emulator(tmp_path, n, pose0=start_positions(n, 0.0).tolist()) as (log, spec):
         out = tmp_path / "out"
         cmd = [sys.executable, "-m", "avblocks", "run", "drone_formation", "--set",
                f"agents={n}", "--set", "t_final=60", "--robots", "mavlink",
-               "--mavlink-connect", f"udpout:127.0.0.1:{port}+", "--out", str(out),
+               "--mavlink-connect", spec, "--out", str(out),
                "--quiet"]
         p = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE,
                              stderr=subprocess.STDOUT, text=True)

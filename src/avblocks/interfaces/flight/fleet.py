@@ -65,6 +65,12 @@ class FleetLink:
         streaming them if the protocol needs a rate)."""
         raise NotImplementedError
 
+    def preflight(self, telemetry):
+        """The protocol's own pre-flight checks (called after the shared ones,
+        before anything is commanded; may wait, bounded): a list of reasons,
+        each naming its vehicle, empty when all is well."""
+        return []
+
     def land(self, action="land"):
         """Command every vehicle to land now (``action="rtl"``: return to
         launch where the protocol has it), stop streaming set-points.
@@ -374,6 +380,7 @@ class Fleet(Block):
             why += [f"too close: {s}" for s in self.limits.too_close(sub, tm.position[idx])]
         if self.slots is not None and have.all():
             why += self._assign(tm.position)
+        why += self.link.preflight(tm)
         if why:
             self.record("preflight_refused", reasons=why)
             raise PreflightError("pre-flight check failed, nothing was commanded: "

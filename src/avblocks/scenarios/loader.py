@@ -43,6 +43,7 @@ executed.
 from __future__ import annotations
 
 import inspect
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,9 +54,11 @@ from ._numeric import resolve, split_overrides
 from .files import _read
 from .generators import GENERATORS
 from .limits import (  # noqa: F401  (as before)
+    MAX_DEPTH,
     MAX_FILE_BYTES,
     MAX_WIRES,
     MAX_YAML_VALUES,
+    check_values,
     max_blocks,
     memory_limit,
     too_many_blocks,
@@ -381,6 +384,8 @@ class Scenario:
         if not isinstance(self.data, dict) or not isinstance(
                 self.data.get("parameters") or {}, dict):
             self.validate()                 # raises, naming what is wrong
+        self._check_values()                # before deepcopy walks it
+        check_values(dict(overrides or {}), self.source)
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
         plain, numeric = split_overrides(overrides)
@@ -432,11 +437,17 @@ class Scenario:
         return self._value(self.movie_options(), "movie")       # generators too
 
     # ------------------------------------------------------------- build
+    def _check_values(self):
+        """The data within the limits of :func:`~avblocks.scenarios.limits.check_values`
+        (nesting, sizes): checked before anything recursive walks it."""
+        check_values(self.data, self.source)
+
     def validate(self):
         d = self.data
         if not isinstance(d, dict):
             raise ScenarioError("a scenario must be a mapping with sections "
                                 f"{sorted(_SECTIONS)}", file=self.source)
+        self._check_values()
         unknown = set(d) - _SECTIONS
         if unknown:
             raise ScenarioError(f"unknown section(s) {sorted(unknown)}", file=self.source,
@@ -650,6 +661,8 @@ def load_scenario(name_or_path) -> Scenario:
         b = builtin_scenarios()
         if str(name_or_path) in b and b[str(name_or_path)].suffix != ".py":
             p = b[str(name_or_path)]
+        elif os.path.lexists(p) and not p.is_dir():
+            pass                # a FIFO, a device, a link loop: refused by _read, named
         elif p.is_dir():
             raise ScenarioError("is a folder, not a scenario file", file=str(name_or_path),
                                 hint=f"built-in scenarios: {sorted(b)}")

@@ -18,6 +18,8 @@ def parse_grid(items) -> dict:
     """``["k=0.5,1,2", "n=2:8:4"]`` -> ``{"k": [0.5, 1, 2], "n": [2., 4., 6., 8.]}``.
     Values are read as YAML scalars; ``lo:hi:n`` is ``n`` evenly spaced values."""
     import yaml
+
+    from ..scenarios.files import yaml_value
     grid = {}
     for it in items or []:
         if "=" not in it:
@@ -41,7 +43,7 @@ def parse_grid(items) -> dict:
             if not s:
                 raise SweepError(f"--grid {k}={v} has an empty value")
             try:
-                vals.append(yaml.safe_load(s))
+                vals.append(yaml_value(s, f"--grid {k}"))
             except yaml.YAMLError:
                 vals.append(s)
         grid[k] = vals

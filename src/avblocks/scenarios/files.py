@@ -341,8 +341,21 @@ def _read(path: Path):
     return read_scenario(path)[1]
 
 
-def _parse(raw: bytes, path: Path):
-    source = str(path)
+def parse_text(text, source, suffix):
+    """A scenario's values from its text (``str`` or bytes) as if read from
+    a ``suffix`` file named ``source`` (a sweep store keeps a YAML/TOML
+    scenario's text): the same size limit, parsers and limits as a file."""
+    raw = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f"the scenario text is {len(raw) / 1e6:.1f} MB; scenario files "
+                            f"are at most {MAX_FILE_BYTES / 1e6:.0f} MB", file=str(source))
+    data = _parse(raw, Path("scenario" + str(suffix)), str(source))
+    check_values(data, str(source))
+    return data
+
+
+def _parse(raw: bytes, path: Path, source=None):
+    source = str(path) if source is None else source
     if path.suffix not in (".yaml", ".yml", ".toml"):
         raise ScenarioError("unknown scenario file type", file=source,
                             hint="use .yaml, .yml or .toml (or a .py file)")

@@ -255,6 +255,29 @@ def block_registry(code_blocks=False, modules=(), interfaces=False) -> dict:
     return reg
 
 
+def _no_folder() -> Path:
+    """An empty folder of this process that nothing is ever written to: the
+    folder of a scenario that may read no file (every name it gives is
+    outside it or not a file in it)."""
+    global _EMPTY
+    if _EMPTY is None or not _EMPTY.is_dir():
+        import atexit
+        import tempfile
+        _EMPTY = Path(tempfile.mkdtemp(prefix="avblocks-no-files-"))
+        _EMPTY.chmod(0o500)
+        atexit.register(_remove_quietly, _EMPTY)
+    return _EMPTY
+
+
+def _remove_quietly(folder):
+    import contextlib
+    with contextlib.suppress(OSError):
+        folder.rmdir()
+
+
+_EMPTY = None
+
+
 @dataclass
 class Scenario:
     """A parsed scenario: its data, with parameters substituted on build."""
@@ -268,6 +291,11 @@ class Scenario:
     #: (``with_overrides(..., user=True)``): a policy path among them is
     #: theirs to name, anywhere; a policy path the file names is confined
     user_values: frozenset = frozenset()
+    #: the folder the scenario may read files from when it is not the
+    #: source file's own (a sweep store's scenario: its file's folder when
+    #: that file is unchanged); ``""``: no folder, every file it names is
+    #: refused
+    read_folder: str | None = None
 
     @property
     def name(self) -> str:
@@ -276,6 +304,8 @@ class Scenario:
     @property
     def folder(self) -> Path:
         """The folder a scenario file may read from (its own)."""
+        if self.read_folder is not None:
+            return Path(self.read_folder) if self.read_folder else _no_folder()
         if self.source.startswith("<"):
             return Path.cwd()
         return Path(self.source).resolve().parent
@@ -415,7 +445,7 @@ class Scenario:
         mine = frozenset(str(v) for v in plain.values() if isinstance(v, str)) if user \
             else frozenset()
         return Scenario(data, self.source, modules=self.modules,
-                        user_values=self.user_values | mine)
+                        user_values=self.user_values | mine, read_folder=self.read_folder)
 
     def hooks(self, diagram, sim):
         """The ``outcome``/``figures`` of this scenario built as ``diagram``

@@ -184,6 +184,11 @@ def hooks_from_report(name, params, base=None, logged=None, source=None) -> Hook
     ``logged`` (the names the run will log), a signal the case study reads
     and the file does not log is refused now, naming it."""
     import importlib
+
+    from .loader import REPORTS
+    if not isinstance(name, str) or name not in REPORTS:     # a module of ours, by name
+        raise ScenarioError(f"unknown report {str(name)!r:.60}", file=source, entry="report",
+                            hint=f"reports: {list(REPORTS)}")
     missing = [s for s in REPORT_SIGNALS.get(name, ()) if logged is not None
                and s not in logged]
     if missing:

@@ -547,3 +547,12 @@ def test_fuzz_hostile_shapes(shape, size, section):
         except av.AvError:
             return                       # a value a block refuses: clean too
         assert not (shape in ("list", "mapping", "block style") and size > 100)
+
+
+def test_a_report_name_is_one_of_ours_where_its_module_is_imported():
+    """``report:`` picks a case study's module by name: checked when the file
+    is validated, and again where ``avblocks.scenarios.<name>`` is imported."""
+    from avblocks.scenarios.report import hooks_from_report
+    for name in ("loader", "targets", "../x", "nest.yaml", 5):
+        with pytest.raises(ScenarioError, match="unknown report"):
+            hooks_from_report(name, {}, source="s.yaml")

@@ -28,7 +28,8 @@ import re
 
 from ..core.errors import ScenarioError
 from ..scenarios.limits import check_values
-from ..scenarios.loader import _FUNCTION_REF, _REF
+from ..scenarios.loader import FUNCTION_REF as _FUNCTION_REF
+from ..scenarios.loader import PARAM_REF as _REF
 
 _SIM_ORDER = ("t_final", "dt", "solver", "log", "log_every", "seed", "realtime")
 _ASCII_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")

@@ -63,15 +63,13 @@ from .limits import (  # noqa: F401  (as before)
     memory_limit,
     too_many_blocks,
 )
+from .report import REPORTS  # noqa: F401  (loader.REPORTS, as before)
 from .worlds import _parse_world
 
-_REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
+#: a ``$parameter`` (or ``${parameter}``) reference: a whole text value
+PARAM_REF = _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
              "movie", "params", "outcome", "figures", "report", "editor"}
-#: Case studies whose outcome and figures a scenario file can ask for by name
-#: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
-REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "pursuit", "spread",
-           "navigation", "drone_formation", "uav_tracking")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -146,7 +144,7 @@ def check_editor(section, source="<scenario>"):
         point(section["viewport"], "editor.viewport", 3)
 
 
-_FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
+FUNCTION_REF = _FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
                            r":([A-Za-z][A-Za-z0-9_]*)$")
 
 

@@ -17,7 +17,8 @@ exception escaped, or a traceback was printed), ``timeout``, ``killed``
 (a signal, e.g. out of memory).
 
 Run: ``python benchmarks/scenario_fuzz.py [--random N] [--skip-hand]``;
-prints a markdown table per set and the cases that were not clean.
+prints a markdown table per set and the cases that were not clean. The
+avblocks measured is the one on ``PYTHONPATH`` (default: this checkout's).
 """
 
 from __future__ import annotations
@@ -70,7 +71,8 @@ def run_hand(mod):
         with tempfile.TemporaryDirectory() as tmp:
             p = mod.make_hostile(tmp, case)
             t0 = time.perf_counter()
-            env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "MPLBACKEND": "Agg"}
+            env = {**os.environ, "MPLBACKEND": "Agg",
+                   "PYTHONPATH": os.environ.get("PYTHONPATH") or str(ROOT / "src")}
             try:
                 r = subprocess.run([sys.executable, "-m", "avblocks", "run", str(p),
                                     "--quiet", "--out", str(Path(tmp) / "out"),

@@ -3,10 +3,15 @@ only under their own folder, and every malformed file gets one clear line."""
 
 import json
 import os
+import re
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import avblocks as av
 from avblocks.cli import main
@@ -254,3 +259,300 @@ def test_cli_estimates_the_run_memory_before_simulating(tmp_path, capsys, monkey
                       capsys)
     assert rc == 2 and f"about {need / 1e9:.3g} GB" in err
     assert not (tmp_path / "o" / "results.nc").exists()
+
+
+# ------------------------------------------------------------ hostile shapes
+# Files shaped to hurt a parser or a walker rather than to be wrong: deep
+# nesting (flow, block style, through anchors), alias bombs, huge numbers,
+# huge strings, huge files, files that are not regular files. Each must end
+# in a ScenarioError naming the file (and, for a limit, the limit), never a
+# traceback, a hang or a crash. `benchmarks/scenario_fuzz.py` counts how
+# `avblocks run` answers the same cases.
+
+def _with_block(value):
+    return BASE.replace("wires:", f"  k: {{type: blocks.Constant, value: {value}}}\nwires:")
+
+
+def _deep_list(d):
+    return "[" * d + "1" + "]" * d
+
+
+def _deep_map(d):
+    return "{a: " * d + "1" + "}" * d
+
+
+def _block_style(d):
+    """A list nested ``d`` deep in YAML's block style (``- - - 1``)."""
+    return BASE.replace("wires:", "  k:\n    type: blocks.Constant\n    value:\n      "
+                        + "- " * d + "1\nwires:")
+
+
+def _anchor_chain(d):
+    """Depth made of aliases: each anchor wraps the one before."""
+    items = ["&a0 [1]"] + [f"&a{i} [*a{i - 1}]" for i in range(1, d)]
+    return BASE.replace("parameters: {n: 2}", "parameters: {n: 2, chain: ["
+                        + ", ".join(items) + "]}")
+
+
+def _bomb_lists():
+    lines = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
+    lines += [f"a{i}: &a{i} [{', '.join([f'*a{i - 1}'] * 10)}]" for i in range(1, 10)]
+    return "\n".join(lines) + "\n" + BASE
+
+
+def _bomb_maps():
+    lines = ["a0: &a0 {" + ", ".join(f"k{j}: x" for j in range(10)) + "}"]
+    for i in range(1, 10):
+        refs = ", ".join(f"k{j}: *a{i - 1}" for j in range(10))
+        lines.append(f"a{i}: &a{i} {{{refs}}}")
+    return "\n".join(lines) + "\n" + BASE
+
+
+def _in_section(section, value):
+    """``value`` placed in one section of the tiny scenario."""
+    if section == "parameters":
+        return BASE.replace("parameters: {n: 2}", f"parameters: {{n: 2, x: {value}}}")
+    if section == "simulation":
+        return BASE.replace("dt: 0.1}", f"dt: 0.1, log: {value}}}")
+    if section == "wires":
+        return BASE.replace("  - [c.y, fleet.cmd]", f"  - [c.y, fleet.cmd]\n  - {value}")
+    if section == "whole file":
+        return value
+    return BASE + f"{section}: {value}\n"
+
+
+SECTIONS = ["parameters", "simulation", "wires", "params", "movie", "outcome", "figures",
+            "editor", "name", "description", "report", "whole file"]
+BIG = 5_000_000          # characters of the huge strings (half the file limit)
+
+
+def hostile_cases():
+    """``[(id, suffix, build)]``: ``build()`` returns the file's bytes, or a
+    string naming a special file (``"fifo"``, ``"/dev/zero"``)."""
+    cases = []
+
+    def add(name, build, suffix=".yaml"):
+        cases.append((name, suffix, build))
+
+    for d in (50, 200, 500, 1000, 5000, 100_000):
+        add(f"deep list {d}", lambda d=d: _with_block(_deep_list(d)))
+    for d in (500, 5000):
+        add(f"deep mapping {d}", lambda d=d: _with_block(_deep_map(d)))
+    for d in (300, 1500):
+        add(f"deep block style {d}", lambda d=d: _block_style(d))
+    for s in SECTIONS:
+        add(f"deep {s}", lambda s=s: _in_section(s, _deep_list(700)))
+    add("deep anchor chain 150", lambda: _anchor_chain(150))
+    add("deep anchor chain 2000", lambda: _anchor_chain(2000))
+    add("alias bomb (lists)", _bomb_lists)
+    add("alias bomb (mappings)", _bomb_maps)
+    add("self-referencing alias", lambda: BASE.replace("parameters: {n: 2}",
+                                                       "parameters: &p {n: 2, me: *p}"))
+    for digits in (400, 4000, 5000):
+        big = "9" * digits
+        add(f"{digits}-digit agent count",
+            lambda big=big: BASE.replace("parameters: {n: 2}", f"parameters: {{n: {big}}}"))
+        add(f"{digits}-digit t_final",
+            lambda big=big: BASE.replace("t_final: 0.5", f"t_final: {big}"))
+    add("1e400 dt", lambda: BASE.replace("dt: 0.1", "dt: 1e400"))
+    add("-1e400 t_final", lambda: BASE.replace("t_final: 0.5", "t_final: -1.0e+400"))
+    add("2^64 seed", lambda: BASE.replace("dt: 0.1}", f"dt: 0.1, seed: {2**64}}}"))
+    huge = "x" * BIG
+    for where, text in [
+        ("name", lambda: BASE.replace("name: tiny", f"name: {huge}")),
+        ("description", lambda: BASE + f"description: {huge}\n"),
+        ("block name", lambda: BASE.replace("  c: {", f"  {huge[:1_000_000]}: {{")),
+        ("block type", lambda: BASE.replace("blocks.Constant", huge)),
+        ("parameter", lambda: BASE.replace("parameters: {n: 2}",
+                                           f"parameters: {{n: 2, s: {huge}}}")),
+        ("wire end", lambda: BASE.replace("[c.y, fleet.cmd]", f"[c.{huge}, fleet.cmd]")),
+        ("section key", lambda: BASE + f"{huge[:1_000_000]}: 1\n"),
+        ("solver", lambda: BASE.replace("dt: 0.1}", f"dt: 0.1, solver: {huge}}}")),
+        ("report", lambda: BASE + f"report: {huge}\n"),
+        ("generator key", lambda: _with_block(f"{{{huge[:1_000_000]}: {{n: 2}}}}")),
+    ]:
+        add(f"huge string: {where}", text)
+    add("file over the size limit", lambda: BASE + "#" * (11 * 1024**2) + "\n")
+    add("a million values", lambda: BASE.replace(
+        "parameters: {n: 2}", "parameters: {n: 2, v: [" + ",".join(["1"] * 1_100_000)
+        + "]}"))
+    add("100,000 parameters", lambda: BASE.replace(
+        "parameters: {n: 2}", "parameters: {n: 2, "
+        + ", ".join(f"p{i}: {i}" for i in range(100_000)) + "}"))
+    add("3,000 blocks", lambda: BASE.replace("blocks:", "blocks:\n" + "".join(
+        f"  b{i}: {{type: blocks.Constant, value: 1.0}}\n" for i in range(3000))))
+    toml = ('name = "tiny"\n[parameters]\nn = 2\n[blocks.fleet]\ntype = "vehicles.Unicycle"'
+            '\npose0 = {zeros = {shape = [2, 3]}}\n[blocks.c]\ntype = "blocks.Constant"\n'
+            'value = [[1.0, 0.0], [1.0, 0.0]]\nVALUE\n[simulation]\nt_final = 0.5\n'
+            'dt = 0.1\n')
+    wires = 'wires = [["c.y", "fleet.cmd"]]'
+    for d in (500, 5000, 100_000):
+        add(f"TOML deep array {d}", lambda d=d: toml.replace("VALUE", "deep = " + _deep_list(d))
+            .replace("[simulation]", wires + "\n[simulation]"), ".toml")
+    add("TOML deep inline table 5000", lambda: toml.replace(
+        "VALUE", "deep = " + "{a = " * 5000 + "1" + "}" * 5000), ".toml")
+    add("TOML deep dotted key 5000", lambda: toml.replace(
+        "VALUE", ".".join(["a"] * 5000) + " = 1"), ".toml")
+    add("TOML 5000-digit integer", lambda: toml.replace("n = 2", "n = " + "9" * 5000),
+        ".toml")
+    add("special: FIFO", lambda: "fifo")
+    add("special: /dev/zero", lambda: "/dev/zero")
+    add("special: /dev/urandom", lambda: "/dev/urandom")
+    add("special: symlink loop", lambda: "loop")
+    return cases
+
+
+def make_hostile(folder, case):
+    """Write one of :func:`hostile_cases` into ``folder``; its path."""
+    name, suffix, build = case
+    p = Path(folder) / f"hostile{suffix}"
+    content = build()
+    if content == "fifo":
+        os.mkfifo(p)
+    elif content == "loop":
+        p.symlink_to(p)
+    elif isinstance(content, str) and content.startswith("/dev/"):
+        p.symlink_to(content)
+    else:
+        p.write_bytes(content.encode() if isinstance(content, str) else content)
+    return p
+
+
+#: what each hostile case must be answered with (a regular expression of
+#: the error line), or None: the file is valid and runs
+DEEP = "values nest deeper than 100 levels"
+EXPECTED = {
+    "deep list 50": None, "-1e400 t_final": None, "100,000 parameters": None,
+    "deep anchor chain 2000": "expand to more than 1,000,000 values",
+    "alias bomb (lists)": "expand to more than", "alias bomb (mappings)": "expand to more than",
+    "self-referencing alias": "recursive structure",
+    "1e400 dt": r"'dt'.*found inf", "2^64 seed": r"'seed'.*out of range",
+    "huge string: block name": "cannot parse", "huge string: section key": "cannot parse",
+    "huge string: generator key": r"1,000,000 characters.*more than 100,000",
+    "file over the size limit": "at most 10 MB",
+    "a million values": "more than 1,000,000 values",
+    "3,000 blocks": "more than 2,000 blocks",
+    "special: symlink loop": "cannot read: Too many levels of symbolic links",
+}
+for _name, *_ in hostile_cases():
+    if _name.startswith(("deep", "TOML deep")):
+        EXPECTED.setdefault(_name, DEEP)
+    elif "digit" in _name:
+        EXPECTED.setdefault(_name, r"whole number of .*digits.*more than 100")
+    elif _name.startswith("huge string"):
+        EXPECTED.setdefault(_name, r"a text of 5,000,0\d\d characters.*more than 100,000")
+    elif _name.startswith("special"):
+        EXPECTED.setdefault(_name, "is not a regular file")
+SLOW_CASES = {"a million values", "100,000 parameters"}
+
+
+@pytest.mark.parametrize("case", [
+    pytest.param(c, id=c[0], marks=[pytest.mark.slow] if c[0] in SLOW_CASES else [])
+    for c in hostile_cases()])
+def test_hostile_shapes_get_one_clean_line(tmp_path, capsys, case):
+    """`avblocks run` on each hostile shape: exit status 2 and one error line
+    naming the file and the limit (or a run, for the valid ones), never a
+    traceback; the file's shape is refused before anything recursive walks
+    it, so none takes long."""
+    p = make_hostile(tmp_path, case)
+    t0 = time.perf_counter()
+    rc, _o, err = run([str(p), "--out", str(tmp_path / "o"), "--t-final", "0.2"], capsys)
+    took = time.perf_counter() - t0
+    want = EXPECTED[case[0]]
+    assert "Traceback" not in err
+    if want is None:
+        assert rc == 0, err
+        return
+    assert rc == 2, err
+    assert err.startswith("avblocks: error: ") and err.count("\n") == 1, err[:300]
+    assert re.search(want, err), err[:300]
+    if not want.startswith("'"):                 # a file's problem names the file
+        assert str(p) in err
+    if case[0] not in SLOW_CASES:
+        assert took < 20
+
+
+def test_deep_values_from_outside_a_file_are_refused_by_the_loader(tmp_path, capsys):
+    """A scenario mapping (the editor's document, a sweep's) and a --set
+    value are checked like a file before anything walks them."""
+    from avblocks.scenarios import Scenario
+    data = {"name": "x", "blocks": {"k": {"type": "blocks.Constant", "value": 1.0}}}
+    v = 1.0
+    for _ in range(5000):
+        v = [v]
+    deep = {**data, "blocks": {"k": {"type": "blocks.Constant", "value": v}}}
+    for call in (lambda: Scenario(deep, "doc.yaml").build(),
+                 lambda: Scenario(deep, "doc.yaml").with_overrides({}),
+                 lambda: Scenario(data, "doc.yaml").with_overrides({"x": v})):
+        with pytest.raises(ScenarioError, match=f"doc.yaml.*{DEEP}"):
+            call()
+    for bad, what in ((["x" * 100_001], "a text of 100,001 characters"),
+                      ({"k" * 1001: 1}, "a key of 1,001 characters"),
+                      (10 ** 200, "whole number of about 200 digits")):
+        with pytest.raises(ScenarioError, match=what):
+            Scenario({**data, "description": bad}, "doc.yaml").validate()
+    p = write(tmp_path, BASE)
+    rc, _o, err = run([str(p), "--set", "n=" + "[" * 3000 + "]" * 3000], capsys)
+    assert rc == 2 and "Traceback" not in err and DEEP in err
+
+
+def test_limits_leave_ordinary_files_alone(tmp_path):
+    """Every built-in scenario file loads and builds under the limits, and
+    nesting up to the limit itself is accepted."""
+    from avblocks.scenarios.limits import MAX_DEPTH, check_values
+    from avblocks.scenarios.loader import builtin_scenarios
+    for name, path in builtin_scenarios().items():
+        if path.suffix == ".yaml":
+            load_scenario(name).with_overrides({})
+    v = 1
+    for _ in range(MAX_DEPTH):
+        v = [v]
+    check_values(v)                      # MAX_DEPTH lists inside each other
+    with pytest.raises(ScenarioError, match=DEEP):
+        check_values([v])
+
+
+# the fuzz: a random hostile shape in a random section
+SHAPES = st.sampled_from(["list", "mapping", "block style", "anchor chain", "digits",
+                          "text"])
+
+
+def _hostile_text(shape, size, section):
+    if shape == "block style":
+        return _block_style(size)
+    if shape == "anchor chain":
+        return _anchor_chain(size)
+    value = {"list": _deep_list, "mapping": _deep_map}.get(shape)
+    value = value(size) if value else ("9" * size if shape == "digits" else "x" * size * 50)
+    return _with_block(value) if section == "block value" else _in_section(section, value)
+
+
+@settings(max_examples=60, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(shape=SHAPES, size=st.integers(1, 3000),
+       section=st.sampled_from(SECTIONS + ["block value"]))
+def test_fuzz_hostile_shapes(shape, size, section):
+    """Load, override and build: a result or a one-line ScenarioError naming
+    the file; a list or mapping nested past the limit always names it."""
+    with tempfile.TemporaryDirectory() as tmp:
+        p = Path(tmp) / "s.yaml"
+        p.write_text(_hostile_text(shape, size, section))
+        try:
+            load_scenario(p).with_overrides({}).build(output_dir=Path(tmp) / "o")
+        except ScenarioError as e:
+            assert str(p) in str(e) and "\n" not in str(e)
+            if shape in ("list", "mapping") and size > 100 and section != "whole file":
+                assert DEEP in str(e) or "expand to" in str(e), str(e)
+            return
+        except av.AvError:
+            return                       # a value a block refuses: clean too
+        assert not (shape in ("list", "mapping", "block style") and size > 100)
+
+
+def test_a_report_name_is_one_of_ours_where_its_module_is_imported():
+    """``report:`` picks a case study's module by name: checked when the file
+    is validated, and again where ``avblocks.scenarios.<name>`` is imported."""
+    from avblocks.scenarios.report import hooks_from_report
+    for name in ("loader", "targets", "../x", "nest.yaml", 5):
+        with pytest.raises(ScenarioError, match="unknown report"):
+            hooks_from_report(name, {}, source="s.yaml")

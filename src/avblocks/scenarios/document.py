@@ -20,7 +20,7 @@ import io
 from pathlib import Path
 
 from ..core.errors import ScenarioError
-from .files import _read
+from .files import read_scenario
 from .limits import MAX_FILE_BYTES, MAX_WIRES, max_blocks, too_many_blocks
 from .paths import inside
 
@@ -116,8 +116,7 @@ def load_document(name_or_path, root=None) -> dict:
         only as Python code; a file that is not a mapping.
     """
     p, builtin = _resolve(name_or_path, root)
-    raw = p.read_bytes()
-    data = _read(p)                   # size, encoding, YAML safety: as `avblocks run`
+    raw, data = read_scenario(p)      # read once: size, encoding, YAML safety, limits
     data = {} if data is None else data
     if not isinstance(data, dict):    # a draft may be invalid, but it is a mapping
         raise ScenarioError("a scenario file is a mapping of sections (name, blocks, "

@@ -1,17 +1,25 @@
-"""Reading a scenario file safely: size limit, UTF-8, YAML without aliases
-bombs or duplicate keys, TOML; every failure a :class:`ScenarioError` naming
-the file and the position."""
+"""Reading a scenario file safely: a regular file (checked on the opened
+descriptor: never a FIFO or a device), size limit, UTF-8, YAML without
+alias bombs, deep nesting or duplicate keys, TOML; the values within the
+limits of :mod:`avblocks.scenarios.limits`; every failure a
+:class:`ScenarioError` naming the file and the position or the limit."""
 
 from __future__ import annotations
 
+import os
 import re
+import stat
 from pathlib import Path
 
 from ..core.errors import ScenarioError
 from .limits import (
+    MAX_DEPTH,
+    MAX_DIGITS,
     MAX_FILE_BYTES,
+    MAX_TEXT,
     MAX_YAML_NODES,
     MAX_YAML_VALUES,
+    check_values,
     max_blocks,
     too_many_blocks,
 )
@@ -29,12 +37,14 @@ def _yaml_error(e):
     return " ".join(str(e).split())
 
 
-def _expanded_size(node, limit):
+def _expanded_size(node, limit, depth_out=None):
     """Number of values ``node`` expands to (aliases counted every time they
     are used), computed on the graph without expanding it; ``limit + 1`` as
-    soon as it passes ``limit``; -1 for a recursive structure."""
+    soon as it passes ``limit``; -1 for a recursive structure. With
+    ``depth_out`` (a list), the nesting depth of the expanded value
+    (aliases followed) is appended to it."""
     import yaml
-    size, state = {}, {}
+    size, state, depth = {}, {}, {}
     stack = [(node, False)]
     while stack:
         n, done = stack.pop()
@@ -42,6 +52,8 @@ def _expanded_size(node, limit):
         if done:
             kids = _children(n, yaml)
             size[key] = min(limit + 1, 1 + sum(size[id(c)] for c in kids))
+            depth[key] = (1 + max((depth[id(c)] for c in kids), default=0)
+                          if isinstance(n, yaml.CollectionNode) else 0)
             state[key] = 2
             continue
         if state.get(key) == 2:
@@ -55,6 +67,8 @@ def _expanded_size(node, limit):
                 return -1
             if state.get(id(c)) != 2:
                 stack.append((c, False))
+    if depth_out is not None:
+        depth_out.append(depth[id(node)])
     return size[id(node)]
 
 
@@ -90,7 +104,16 @@ def _prescan(text, source):
                 stack, blocks_next = [], False
             if not isinstance(ev, node_events):
                 continue
+            if len(stack) >= MAX_DEPTH and isinstance(
+                    ev, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+                raise ScenarioError(
+                    f"values nest deeper than {MAX_DEPTH} levels (lists and mappings "
+                    f"inside each other) at line {ev.start_mark.line + 1}", file=source,
+                    hint="a scenario's values are numbers, text and lists or arrays "
+                         "of them")
             nodes += 1
+            if isinstance(ev, yaml.ScalarEvent):
+                _check_scalar(ev, source)
             if nodes > MAX_YAML_NODES:
                 raise ScenarioError(f"the file holds more than {MAX_YAML_NODES:,} values",
                                     file=source, hint="generate large data (generators) "
@@ -107,10 +130,34 @@ def _prescan(text, source):
                     blocks_next = True
             if isinstance(ev, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
                 stack.append([isinstance(ev, yaml.MappingStartEvent), 0, is_blocks])
-    except yaml.YAMLError:
+    except yaml.YAMLError as e:
+        if "nesting depth" in str(e):     # libyaml's own limit (1,000), met scanning ahead
+            m = getattr(e, "problem_mark", None)
+            raise ScenarioError(f"values nest deeper than {MAX_DEPTH} levels (lists and "
+                                "mappings inside each other)"
+                                + (f" at line {m.line + 1}" if m else ""), file=source,
+                                hint="a scenario's values are numbers, text and lists or "
+                                     "arrays of them") from None
         return
     finally:
         parser.dispose()
+
+
+_YAML_INT = re.compile(r"[-+]?(?:0x[0-9a-fA-F_]+|0o?[0-7_]+|0b[01_]+|[0-9][0-9_]*)")
+
+
+def _check_scalar(ev, source):
+    """A scalar as written: not longer than :data:`MAX_TEXT`, and a plain
+    whole number not longer than :data:`MAX_DIGITS` digits (refused before
+    Python converts it)."""
+    v = ev.value
+    line = f" at line {ev.start_mark.line + 1}"
+    if len(v) > MAX_TEXT:
+        raise ScenarioError(f"a text of {len(v):,} characters{line}, more than "
+                            f"{MAX_TEXT:,}", file=source, hint=f"starts {v[:40]!r}")
+    if not ev.style and len(v) > MAX_DIGITS and _YAML_INT.fullmatch(v):
+        raise ScenarioError(f"a whole number of {len(v.replace('_', '')):,} digits{line}, "
+                            f"more than {MAX_DIGITS}", file=source)
 
 
 _TOML_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]*?)\s*\]")
@@ -138,10 +185,41 @@ def _toml_prescan(text, source):
                 continue
             key = m.group(1).replace(" ", "").replace('"', "").replace("'", "")
             full = (table + "." + key if table else key).split(".")
+            _toml_depth(len(full), source)
             if len(full) >= 2 and full[0] == "blocks":
                 names.add(full[1])
         if len(names) > limit:
             raise too_many_blocks(None, source)
+
+
+def _too_deep(source):
+    """The error for a file whose nesting exhausted a recursive parser."""
+    return ScenarioError(f"cannot parse: values nest deeper than {MAX_DEPTH} levels (lists "
+                         "and mappings inside each other)", file=source,
+                         hint="a scenario's values are numbers, text and lists or arrays "
+                              "of them")
+
+
+def yaml_value(text, source):
+    """One YAML value given as text (a ``--set`` or ``--grid`` value), read
+    as safely as a file: the limits of :mod:`avblocks.scenarios.limits`
+    (a :class:`ScenarioError` naming ``source``); ``yaml.YAMLError`` when it
+    is not YAML."""
+    import yaml
+    try:
+        v = _safe_yaml(text, source)
+    except RecursionError:
+        raise _too_deep(source) from None
+    except (ValueError, TypeError) as e:           # odd scalars: not YAML here
+        raise yaml.YAMLError(str(e)) from None
+    check_values(v, source)
+    return v
+
+
+def _toml_depth(depth, source):
+    if depth >= MAX_DEPTH:
+        raise ScenarioError(f"values nest deeper than {MAX_DEPTH} levels (a dotted key "
+                            f"or table of {depth} parts)", file=source)
 
 
 def _safe_yaml(text, source):
@@ -195,7 +273,8 @@ def _compose_checked(text, source, base, prescan=True):
         node = loader.get_single_node()
         if node is None:
             return None
-        n = _expanded_size(node, MAX_YAML_VALUES)
+        depth = []
+        n = _expanded_size(node, MAX_YAML_VALUES, depth)
         if n < 0:
             raise ScenarioError("anchors/aliases make a recursive structure",
                                 file=source)
@@ -203,23 +282,83 @@ def _compose_checked(text, source, base, prescan=True):
             raise ScenarioError(f"anchors/aliases expand to more than {MAX_YAML_VALUES:,} "
                                 "values", file=source,
                                 hint="write the data out or use a generator")
+        if depth and depth[0] > MAX_DEPTH:
+            raise ScenarioError(f"values nest deeper than {MAX_DEPTH} levels (lists and "
+                                "mappings inside each other, anchors/aliases followed)",
+                                file=source)
         return loader.construct_document(node)
     finally:
         loader.dispose()
 
 
-def _read(path: Path):
+def read_bytes(path: Path, limit=MAX_FILE_BYTES) -> bytes:
+    """The bytes of the scenario file ``path``: opened once, checked on the
+    opened descriptor (a regular file, never a folder, FIFO or device, at
+    most ``limit`` bytes) and read from it, never more than ``limit``.
+    A :class:`ScenarioError` naming the file otherwise."""
     source = str(path)
-    if path.is_dir():
-        raise ScenarioError("is a folder, not a scenario file", file=source)
     try:
-        size = path.stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ScenarioError(f"the file is {size / 1e6:.1f} MB; scenario files are "
-                                f"at most {MAX_FILE_BYTES / 1e6:.0f} MB", file=source)
-        raw = path.read_bytes()
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except IsADirectoryError:
+        raise ScenarioError("is a folder, not a scenario file", file=source) from None
     except OSError as e:
         raise ScenarioError(f"cannot read: {e.strerror or e}", file=source) from None
+    try:
+        st = os.fstat(fd)
+        if stat.S_ISDIR(st.st_mode):
+            raise ScenarioError("is a folder, not a scenario file", file=source)
+        if not stat.S_ISREG(st.st_mode):
+            raise ScenarioError("is not a regular file (a FIFO, a socket or a device)",
+                                file=source, hint="a scenario is a YAML or TOML file")
+        if st.st_size > limit:
+            raise ScenarioError(f"the file is {st.st_size / 1e6:.1f} MB; scenario files "
+                                f"are at most {limit / 1e6:.0f} MB", file=source)
+        os.set_blocking(fd, True)
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            raw = f.read(limit + 1)
+    except OSError as e:
+        raise ScenarioError(f"cannot read: {e.strerror or e}", file=source) from None
+    finally:
+        os.close(fd)
+    if len(raw) > limit:                          # it grew while it was read
+        raise ScenarioError(f"the file is over {limit / 1e6:.0f} MB; scenario files are "
+                            f"at most {limit / 1e6:.0f} MB", file=source)
+    return raw
+
+
+def read_scenario(path: Path):
+    """``(bytes, values)`` of the scenario file ``path``: read once
+    (:func:`read_bytes`), parsed as YAML or TOML by its suffix, the values
+    within :func:`~avblocks.scenarios.limits.check_values`' limits."""
+    path = Path(path)
+    raw = read_bytes(path)
+    data = _parse(raw, path)
+    check_values(data, str(path))
+    return raw, data
+
+
+def _read(path: Path):
+    return read_scenario(path)[1]
+
+
+def parse_text(text, source, suffix):
+    """A scenario's values from its text (``str`` or bytes) as if read from
+    a ``suffix`` file named ``source`` (a sweep store keeps a YAML/TOML
+    scenario's text): the same size limit, parsers and limits as a file."""
+    raw = text.encode("utf-8") if isinstance(text, str) else bytes(text)
+    if len(raw) > MAX_FILE_BYTES:
+        raise ScenarioError(f"the scenario text is {len(raw) / 1e6:.1f} MB; scenario files "
+                            f"are at most {MAX_FILE_BYTES / 1e6:.0f} MB", file=str(source))
+    data = _parse(raw, Path("scenario" + str(suffix)), str(source))
+    check_values(data, str(source))
+    return data
+
+
+def _parse(raw: bytes, path: Path, source=None):
+    source = str(path) if source is None else source
+    if path.suffix not in (".yaml", ".yml", ".toml"):
+        raise ScenarioError("unknown scenario file type", file=source,
+                            hint="use .yaml, .yml or .toml (or a .py file)")
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:
@@ -235,8 +374,7 @@ def _read(path: Path):
         except yaml.YAMLError as e:
             raise ScenarioError(f"cannot parse: {_yaml_error(e)}", file=source) from None
         except RecursionError:
-            raise ScenarioError("cannot parse: the file nests values too deeply",
-                                file=source) from None
+            raise _too_deep(source) from None
         except Exception as e:  # noqa: BLE001 - constructors of odd YAML scalars
             raise ScenarioError(f"cannot parse: {type(e).__name__}: {e}",
                                 file=source) from None
@@ -246,10 +384,13 @@ def _read(path: Path):
         try:
             return tomllib.loads(text)
         except RecursionError:
-            raise ScenarioError("cannot parse: the file nests values too deeply",
+            raise _too_deep(source) from None
+        except ValueError as e:
+            if "integer string conversion" in str(e):     # Python's 4,300-digit limit
+                raise ScenarioError(f"a whole number of more than 4,300 digits, more than "
+                                    f"{MAX_DIGITS}", file=source) from None
+            raise ScenarioError(f"cannot parse: {' '.join(str(e).split())}",
                                 file=source) from None
         except Exception as e:  # noqa: BLE001 - tomllib errors
             raise ScenarioError(f"cannot parse: {' '.join(str(e).split())}",
                                 file=source) from None
-    raise ScenarioError("unknown scenario file type", file=source,
-                        hint="use .yaml, .yml or .toml (or a .py file)")

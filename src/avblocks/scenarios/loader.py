@@ -43,6 +43,7 @@ executed.
 from __future__ import annotations
 
 import inspect
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,22 +54,22 @@ from ._numeric import resolve, split_overrides
 from .files import _read
 from .generators import GENERATORS
 from .limits import (  # noqa: F401  (as before)
+    MAX_DEPTH,
     MAX_FILE_BYTES,
     MAX_WIRES,
     MAX_YAML_VALUES,
+    check_values,
     max_blocks,
     memory_limit,
     too_many_blocks,
 )
+from .report import REPORTS  # noqa: F401  (loader.REPORTS, as before)
 from .worlds import _parse_world
 
-_REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
+#: a ``$parameter`` (or ``${parameter}``) reference: a whole text value
+PARAM_REF = _REF = re.compile(r"^\$\{?([A-Za-z_][A-Za-z0-9_]*)\}?$")
 _SECTIONS = {"name", "description", "parameters", "blocks", "wires", "simulation",
              "movie", "params", "outcome", "figures", "report", "editor"}
-#: Case studies whose outcome and figures a scenario file can ask for by name
-#: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
-REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "pursuit", "spread",
-           "navigation", "drone_formation", "uav_tracking")
 _SIM_KEYS = {"t_final", "dt", "solver", "log", "log_every", "seed", "realtime"}
 #: ``--set`` names that go to the simulation settings when the scenario has
 #: no parameter of that name (the same names as the Python scenarios').
@@ -143,7 +144,7 @@ def check_editor(section, source="<scenario>"):
         point(section["viewport"], "editor.viewport", 3)
 
 
-_FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
+FUNCTION_REF = _FUNCTION_REF = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
                            r":([A-Za-z][A-Za-z0-9_]*)$")
 
 
@@ -252,6 +253,29 @@ def block_registry(code_blocks=False, modules=(), interfaces=False) -> dict:
     return reg
 
 
+def _no_folder() -> Path:
+    """An empty folder of this process that nothing is ever written to: the
+    folder of a scenario that may read no file (every name it gives is
+    outside it or not a file in it)."""
+    global _EMPTY
+    if _EMPTY is None or not _EMPTY.is_dir():
+        import atexit
+        import tempfile
+        _EMPTY = Path(tempfile.mkdtemp(prefix="avblocks-no-files-"))
+        _EMPTY.chmod(0o500)
+        atexit.register(_remove_quietly, _EMPTY)
+    return _EMPTY
+
+
+def _remove_quietly(folder):
+    import contextlib
+    with contextlib.suppress(OSError):
+        folder.rmdir()
+
+
+_EMPTY = None
+
+
 @dataclass
 class Scenario:
     """A parsed scenario: its data, with parameters substituted on build."""
@@ -265,6 +289,11 @@ class Scenario:
     #: (``with_overrides(..., user=True)``): a policy path among them is
     #: theirs to name, anywhere; a policy path the file names is confined
     user_values: frozenset = frozenset()
+    #: the folder the scenario may read files from when it is not the
+    #: source file's own (a sweep store's scenario: its file's folder when
+    #: that file is unchanged); ``""``: no folder, every file it names is
+    #: refused
+    read_folder: str | None = None
 
     @property
     def name(self) -> str:
@@ -273,6 +302,8 @@ class Scenario:
     @property
     def folder(self) -> Path:
         """The folder a scenario file may read from (its own)."""
+        if self.read_folder is not None:
+            return Path(self.read_folder) if self.read_folder else _no_folder()
         if self.source.startswith("<"):
             return Path.cwd()
         return Path(self.source).resolve().parent
@@ -381,6 +412,8 @@ class Scenario:
         if not isinstance(self.data, dict) or not isinstance(
                 self.data.get("parameters") or {}, dict):
             self.validate()                 # raises, naming what is wrong
+        self._check_values()                # before deepcopy walks it
+        check_values(dict(overrides or {}), self.source)
         data = copy.deepcopy(self.data)
         params = dict(data.get("parameters") or {})
         plain, numeric = split_overrides(overrides)
@@ -410,7 +443,7 @@ class Scenario:
         mine = frozenset(str(v) for v in plain.values() if isinstance(v, str)) if user \
             else frozenset()
         return Scenario(data, self.source, modules=self.modules,
-                        user_values=self.user_values | mine)
+                        user_values=self.user_values | mine, read_folder=self.read_folder)
 
     def hooks(self, diagram, sim):
         """The ``outcome``/``figures`` of this scenario built as ``diagram``
@@ -432,11 +465,17 @@ class Scenario:
         return self._value(self.movie_options(), "movie")       # generators too
 
     # ------------------------------------------------------------- build
+    def _check_values(self):
+        """The data within the limits of :func:`~avblocks.scenarios.limits.check_values`
+        (nesting, sizes): checked before anything recursive walks it."""
+        check_values(self.data, self.source)
+
     def validate(self):
         d = self.data
         if not isinstance(d, dict):
             raise ScenarioError("a scenario must be a mapping with sections "
                                 f"{sorted(_SECTIONS)}", file=self.source)
+        self._check_values()
         unknown = set(d) - _SECTIONS
         if unknown:
             raise ScenarioError(f"unknown section(s) {sorted(unknown)}", file=self.source,
@@ -650,6 +689,8 @@ def load_scenario(name_or_path) -> Scenario:
         b = builtin_scenarios()
         if str(name_or_path) in b and b[str(name_or_path)].suffix != ".py":
             p = b[str(name_or_path)]
+        elif os.path.lexists(p) and not p.is_dir():
+            pass                # a FIFO, a device, a link loop: refused by _read, named
         elif p.is_dir():
             raise ScenarioError("is a folder, not a scenario file", file=str(name_or_path),
                                 hint=f"built-in scenarios: {sorted(b)}")

@@ -161,6 +161,11 @@ def hooks_from_namespace(ns, overrides=None) -> Hooks:
 
 #: Signals each case study's ``outcome``/``figures`` read (``report: nest``
 #: in a scenario file): the file must log them.
+#: Case studies whose outcome and figures a scenario file can ask for by name
+#: (``report: nest``): the ``outcome``/``figures`` of that built-in module.
+REPORTS = ("nest", "formation", "flocking", "swap", "honeybee", "pursuit", "spread",
+           "navigation", "drone_formation", "uav_tracking")
+
 REPORT_SIGNALS = {
     "nest": ("bees.pose", "gossip.informed"),
     "formation": ("fleet.pose", "lf.error", "supervisor.mode", "collision.hit_obstacle",
@@ -184,6 +189,10 @@ def hooks_from_report(name, params, base=None, logged=None, source=None) -> Hook
     ``logged`` (the names the run will log), a signal the case study reads
     and the file does not log is refused now, naming it."""
     import importlib
+
+    if not isinstance(name, str) or name not in REPORTS:     # a module of ours, by name
+        raise ScenarioError(f"unknown report {str(name)!r:.60}", file=source, entry="report",
+                            hint=f"reports: {list(REPORTS)}")
     missing = [s for s in REPORT_SIGNALS.get(name, ()) if logged is not None
                and s not in logged]
     if missing:

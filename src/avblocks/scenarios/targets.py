@@ -29,15 +29,18 @@ from ._numeric import resolve, split_overrides
 
 def parse_overrides(items):
     """``{key: value}`` from ``--set key=value`` items (values read as YAML,
-    so ``3`` is an int and ``[1, 2]`` a list)."""
+    so ``3`` is an int and ``[1, 2]`` a list; within the limits a scenario
+    file's values have, see :mod:`avblocks.scenarios.limits`)."""
     import yaml
+
+    from .files import yaml_value
     out = {}
     for it in items or []:
         if "=" not in it:
             raise ScenarioError(f"--set needs key=value, found '{it}'", entry="--set")
         k, v = it.split("=", 1)
         try:
-            out[k.strip()] = yaml.safe_load(v)
+            out[k.strip()] = yaml_value(v, f"--set {k.strip()}")
         except yaml.YAMLError:
             out[k.strip()] = v
     return out

@@ -17,6 +17,7 @@ import hashlib
 import json
 import sys
 import types
+import uuid
 from collections.abc import Callable
 
 from .metrics import DEFAULTS, FALLBACK, METRICS, MetricError
@@ -67,11 +68,12 @@ def _metrics_spec(metrics, scenario_name):
     return names, custom
 
 
-def _check_first_case(spec: Spec):
-    """Build case 0 on the client so misspelt names fail before any task."""
+def _check_first_case(spec: Spec, case_id=0):
+    """Build case ``case_id`` on the client so misspelt names (or a store's
+    scenario that cannot be built here) fail before any task."""
     from ..core.errors import AvError
     try:
-        d, sim = spec.build(0)
+        d, sim = spec.build(case_id)
         params = sim.get("params") or {}
         compiled = d.build()
         for path in params:
@@ -79,8 +81,10 @@ def _check_first_case(spec: Spec):
         if spec.data.get("ensemble"):
             from .ensemble import check_traceable
             check_traceable(d)
+    except SweepError:
+        raise
     except AvError as e:
-        raise SweepError(f"the first case ({spec.label(0)}) cannot be built: {e}") \
+        raise SweepError(f"the first case ({spec.label(case_id)}) cannot be built: {e}") \
             from None
 
 
@@ -109,15 +113,29 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
             "seeds": normalise_seeds(seeds), "fixed": fx, "metrics": names,
             "log": log, "log_every": int(log_every), "ensemble": bool(ensemble)}
     data["metric_refs"] = {n: metric_reference(fn) for n, fn in custom.items()}
-    data["token"] = hashlib.sha1(json.dumps(data, sort_keys=True).encode()).hexdigest()[:12]
+    from .store import stored_definition
+    data["token"] = hashlib.sha1(json.dumps(stored_definition(data), sort_keys=True)
+                                 .encode()).hexdigest()[:12]
     data["_callables"] = dict(custom)          # this process's functions, never stored
+    data["_run"] = uuid.uuid4().hex            # a worker's cached spec is this run's
     return Spec(data), custom
 
 
+def _scenario_key(src):
+    """What makes two stored scenarios the same: a built-in's name, a
+    file's kind and content hash."""
+    src = src or {}
+    if src.get("kind") == "builtin":
+        return ("builtin", src.get("name"))
+    return (src.get("kind"), src.get("sha256"))
+
+
 def _same_cases(a: dict, b: dict):
-    keys = ("scenario", "grid", "seeds", "fixed", "metrics", "log", "log_every", "ensemble")
+    keys = ("grid", "seeds", "fixed", "metrics", "log", "log_every", "ensemble")
     diff = [k for k in keys if json.dumps(a.get(k), sort_keys=True) !=
             json.dumps(b.get(k), sort_keys=True)]
+    if _scenario_key(a.get("scenario")) != _scenario_key(b.get("scenario")):
+        diff.insert(0, "scenario")
     return diff
 
 
@@ -194,31 +212,51 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
                              hint="resume with the same arguments, or "
                                   "avblocks.sweep.resume(out) to use the stored ones")
         return resume_sweep(out, scheduler=scheduler, workers=workers, progress=progress,
-                            plot=plot, summary=summary, dashboard=dashboard)
+                            plot=plot, summary=summary, dashboard=dashboard,
+                            metrics=_custom or None, modules=_metric_modules(_custom))
     if exists and not overwrite:
         raise SweepError(f"'{out}' already exists",
                          hint="pass resume=True to finish it, overwrite=True to "
                               "replace it, or another out=")
     _check_first_case(spec)
-    store.create_store(out, {k: v for k, v in spec.data.items() if not k.startswith("_")},
-                       overwrite=overwrite)
+    store.create_store(out, spec.data, overwrite=overwrite)       # stored: no "_" keys
     with client_for(scheduler, workers, dashboard) as client:
         counts = execute(spec, range(spec.n_cases), out, client, progress)
     return _finish(out, counts, plot, summary)
 
 
+def _metric_modules(custom):
+    """The modules of the metric functions handed to this call."""
+    return tuple(sorted({getattr(fn, "__module__", "") for fn in (custom or {}).values()
+                         if getattr(fn, "__module__", "")}))
+
+
 def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progress=None,
-                 plot=True, summary=True, dashboard=False, metrics=None) -> Study:
+                 plot=True, summary=True, dashboard=False, metrics=None,
+                 modules=()) -> Study:
     """Run the cases of the sweep stored at ``out`` that are missing (and
     the failed ones with ``retry_failed=True``), with the stored definition.
 
-    The store holds no code: custom metrics come back by their stored
-    reference (``"package.module:function"``, imported by name), or from
-    ``metrics={name: fn}`` for functions that cannot be imported by name."""
+    The store holds no code and nothing in it is executed. Its definition
+    is checked entry by entry first (:func:`avblocks.sweep.store.check_definition`).
+    A ``.py`` scenario is stored by path and SHA-256: it is run only when
+    the file at that path has that hash (the bytes checked are the bytes
+    run), else a :class:`SweepError` names the file and both hashes.
+    Custom metrics come back by their stored reference
+    (``"package.module:function"``), imported by name only from
+    ``avblocks`` or one of ``modules`` (module names you trust, CLI
+    ``--metrics-module``), or from ``metrics={name: fn}``."""
     from . import store
     from .runner import client_for, execute
+    from .spec import checked_python
     root = store.open_store(out)
     data, _ = store.read_spec(root)
+    if isinstance(modules, str):
+        modules = (modules,)
+    if not all(isinstance(m, str) and m for m in modules or ()):
+        raise SweepError("resume's modules= is a list of module names",
+                         found=repr(modules)[:80])
+    data = {**data, "_run": uuid.uuid4().hex, "_modules": tuple(modules or ())}
     if metrics:
         if not isinstance(metrics, dict) or not all(callable(f) for f in metrics.values()):
             raise SweepError("resume's metrics= is a dict {name: fn(results)}",
@@ -227,11 +265,19 @@ def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progr
         if unknown:
             raise SweepError(f"metrics {unknown} are not in this sweep",
                              hint=f"its metrics: {data['metrics']}")
-        data = {**data, "_callables": dict(metrics)}
+        data["_callables"] = dict(metrics)
     spec = Spec(data)
     todo = Study(out).missing(retry_failed)
     if len(todo):
+        src = data["scenario"]
+        if src["kind"] == "py":                    # the file, checked: never the store's
+            data["scenario"] = checked_python(src)
+        elif src["kind"] in ("yaml", "toml"):
+            from .spec import _stored_folder
+            data["scenario"] = {**src, "_folder": _stored_folder(src) or ""}
+        spec = Spec(data)
         spec.metric_fns()               # every metric found before any case runs
+        _check_first_case(spec, todo[0])
     with client_for(scheduler, workers, dashboard) as client:
         counts = execute(spec, todo, out, client, progress)
     return _finish(out, counts, plot, summary)

@@ -18,6 +18,8 @@ def parse_grid(items) -> dict:
     """``["k=0.5,1,2", "n=2:8:4"]`` -> ``{"k": [0.5, 1, 2], "n": [2., 4., 6., 8.]}``.
     Values are read as YAML scalars; ``lo:hi:n`` is ``n`` evenly spaced values."""
     import yaml
+
+    from ..scenarios.files import yaml_value
     grid = {}
     for it in items or []:
         if "=" not in it:
@@ -41,7 +43,7 @@ def parse_grid(items) -> dict:
             if not s:
                 raise SweepError(f"--grid {k}={v} has an empty value")
             try:
-                vals.append(yaml.safe_load(s))
+                vals.append(yaml_value(s, f"--grid {k}"))
             except yaml.YAMLError:
                 vals.append(s)
         grid[k] = vals
@@ -78,6 +80,10 @@ def add_parser(sub):
     sw.add_argument("--resume", metavar="STORE", help="finish the sweep in STORE")
     sw.add_argument("--retry-failed", action="store_true", dest="retry_failed",
                     help="with --resume: also rerun the failed cases")
+    sw.add_argument("--metrics-module", action="append", metavar="MODULE",
+                    dest="metrics_module",
+                    help="with --resume: a module the stored metric references may be "
+                         "imported from (repeatable; avblocks' own always may)")
     sw.add_argument("--overwrite", action="store_true", help="replace an existing store")
     sw.add_argument("--no-plot", action="store_true", dest="no_plot",
                     help="do not write the metric plots")
@@ -100,9 +106,13 @@ def cmd_sweep(args):
             if args.target or args.grid or args.set or args.metric or args.log:
                 raise SweepError("--resume takes the sweep's definition from the store",
                                  hint="give only --resume STORE (and --scheduler, "
-                                      "--workers, --retry-failed)")
-            study = resume_sweep(args.resume, retry_failed=args.retry_failed, **common)
+                                      "--workers, --retry-failed, --metrics-module)")
+            study = resume_sweep(args.resume, retry_failed=args.retry_failed,
+                                 modules=tuple(args.metrics_module or ()), **common)
         else:
+            if args.metrics_module:
+                raise SweepError("--metrics-module goes with --resume (a new sweep is "
+                                 "given its metric functions)")
             if not args.target:
                 raise SweepError("name a scenario (or --resume STORE)",
                                  hint="e.g. avblocks sweep formation --grid gain=0.5,1,2")

@@ -13,10 +13,20 @@ STATUS_MISSING, STATUS_DONE, STATUS_FAILED = "missing", "done", "failed"
 
 
 def _coord(values):
-    """Grid values as a coordinate: numbers stay numbers, anything else text."""
+    """Grid values as a coordinate: numbers stay numbers, anything else text
+    (variable-length strings, see :func:`_text_array`)."""
     if all(isinstance(v, bool | int | float) and not isinstance(v, bool) for v in values):
         return np.asarray(values)
-    return np.asarray([str(v) for v in values])
+    return _text_array([str(v) for v in values])
+
+
+def _text_array(values):
+    """Texts as an object array of ``str``: written to Zarr as variable-length
+    strings, so a dataset written again (a resume) never meets a fixed width
+    it does not fit (``<U4`` 'done' against ``<U6`` 'failed')."""
+    out = np.empty(len(values), dtype=object)
+    out[:] = [str(v) for v in values]
+    return out
 
 
 class Study:
@@ -36,7 +46,7 @@ class Study:
     def __init__(self, out, last_run=None):
         self.out = str(out)
         root = store.open_store(out)
-        data, _pickle = store.read_spec(root)
+        data, _pickle = store.read_spec(root)        # checked entry by entry
         self.spec = Spec(data)
         self._root = root
         self.last_run = dict(last_run or {})
@@ -49,7 +59,7 @@ class Study:
     # ------------------------------------------------------------ index
     def records(self) -> dict:
         """``{case_id: record}`` of every finished case (done or failed)."""
-        return store.scan_cases(self._root)
+        return store.scan_cases(self._root, self.spec.n_cases)
 
     def status(self) -> np.ndarray:
         """Status of each case, shaped like the grid + seed."""
@@ -117,8 +127,8 @@ class Study:
             if rec["status"] == STATUS_DONE:
                 for name, v in store.read_metrics(self._root, cid).items():
                     vals.setdefault(name, {})[cid] = v
-        variables = {"status": (dims, status.astype(str).reshape(sp.shape)),
-                     "error": (dims, error.astype(str).reshape(sp.shape)),
+        variables = {"status": (dims, _text_array(status).reshape(sp.shape)),
+                     "error": (dims, _text_array(error).reshape(sp.shape)),
                      "wall_s": (dims, wall.reshape(sp.shape), {"unit": "s"})}
         for name in sp.data["metrics"]:
             per = vals.get(name, {})
@@ -148,8 +158,14 @@ class Study:
         resume finishes; missing cases are NaN and ``status`` says so."""
         ds = self.to_xarray(logs=bool(self.spec.data.get("log")) and self._has_logs())
         ds.attrs["store"] = "."                 # the dataset is the store itself
-        keep = dict(self._root.attrs)           # xarray replaces the group's attributes
-        ds.to_zarr(self.out, mode="a", consolidated=False)
+        root = store.open_group(self.out, mode="r+")
+        keep = dict(root.attrs)                 # xarray replaces the group's attributes
+        # the dataset is derived from the cases: the one written before (by a
+        # run, a resume, or an older avblocks with fixed-width texts) goes
+        # first, so a new one never has to match its data types or shapes
+        for name in list(root.array_keys()):
+            del root[name]
+        ds.to_zarr(self.out, mode="a", consolidated=False, zarr_format=3)
         root = store.open_group(self.out, mode="r+")
         root.attrs.update(keep)
         self._root = store.open_store(self.out)

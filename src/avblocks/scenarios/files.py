@@ -220,6 +220,13 @@ def _read(path: Path):
         raw = path.read_bytes()
     except OSError as e:
         raise ScenarioError(f"cannot read: {e.strerror or e}", file=source) from None
+    return _parse(raw, path)
+
+
+def _parse(raw: bytes, path: Path):
+    """The values of a scenario file's bytes ``raw`` (YAML or TOML by
+    ``path``'s suffix), as :func:`_read` parses them."""
+    source = str(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as e:

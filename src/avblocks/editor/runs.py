@@ -64,18 +64,42 @@ class RunFolder:
         self.parts = tuple(parts)
         self.handle = confined.open_folder(self.parts, create=True)
         self.path = Path(confined.path_of(self.handle, self.parts))
+        self.removed = False
+        self._writer_done = False
+        self._lock = threading.Lock()
 
     def read(self, parts, limit) -> bytes:
         """The bytes of a file in this folder (no link followed)."""
+        if self.removed:
+            raise FolderError("the run's folder was removed", kind="NotFound")
         return self.confined.read_bytes(parts, limit, at=self.handle)
 
-    def remove(self):
-        """Let the descriptor go and remove the folder with what is in it."""
-        if self.handle is not None:
-            self.confined.close_folder(self.handle)
-            self.handle = None
+    def remove(self, writer_alive=False):
+        """Remove the folder with what is in it, and let the descriptor go,
+        unless a writer (the run's thread) may still use :attr:`path`: then
+        it goes when the writer says it is done (:meth:`writer_done`; its
+        number must not be reused under a writer's feet)."""
+        with self._lock:
+            self.removed = True
+            close = not writer_alive or self._writer_done
         with contextlib.suppress(FolderError, OSError):
             self.confined.remove_tree(self.parts)
+        if close:
+            self._close()
+
+    def writer_done(self):
+        """The run's thread writes no more."""
+        with self._lock:
+            self._writer_done = True
+            close = self.removed
+        if close:
+            self._close()
+
+    def _close(self):
+        with self._lock:
+            h, self.handle = self.handle, None
+        if h is not None:
+            self.confined.close_folder(h)
 
 
 class Runs:
@@ -129,7 +153,7 @@ class Runs:
         try:
             yield place
         finally:
-            place.remove()
+            place.remove()         # the caller's thread is the writer: done
 
     def _prune(self):
         done = [k for k, r in self._runs.items() if r.status != "running"]
@@ -218,6 +242,8 @@ class Run:
             self.status = "failed"
         finally:
             self._settle()
+            if self.place is not None:
+                self.place.writer_done()
 
     def _settle(self):
         """The run has ended: keep each signal as the wire plot gets it and
@@ -343,7 +369,8 @@ class Run:
         self.kept = None
         self.results = None
         if self.place is not None:
-            self.place.remove()
+            alive = self.thread is not None and self.thread.is_alive()
+            self.place.remove(writer_alive=alive)
 
 
 def _decimated(res, name, budget):

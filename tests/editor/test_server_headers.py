@@ -198,7 +198,7 @@ def test_the_page_runs_under_its_csp_in_a_real_browser(editor_server):
         b = pw.chromium.launch(executable_path=CHROMIUM,
                                args=["--headless", "--no-sandbox", "--disable-gpu"])
         try:
-            pg = b.new_page(viewport={"width": 1280, "height": 800})
+            pg = b.new_page(viewport={"width": 1440, "height": 880}, accept_downloads=True)
             pg.add_init_script("window.__csp = []; document.addEventListener("
                                "'securitypolicyviolation', e => window.__csp.push("
                                "e.violatedDirective + ' ' + e.blockedURI));")
@@ -212,11 +212,25 @@ def test_the_page_runs_under_its_csp_in_a_real_browser(editor_server):
             pg.wait_for_selector(".react-flow__node", timeout=60_000)
             pg.wait_for_selector(".react-flow__edge", timeout=60_000)
             nodes = pg.locator(".react-flow__node").count()
-            pg.wait_for_timeout(500)
+            # a run: its figures are images from the server, its signals a plot
+            pg.get_by_label("t_final").fill("2")
+            pg.get_by_test_id("run").click()
+            pg.locator(".run-state.done").wait_for(timeout=120_000)
+            pg.locator('.av-wire-label[data-wire="fleet.pose->drive.pose"]').click(force=True)
+            pg.get_by_test_id("signal-plot").wait_for(timeout=30_000)
+            shown = pg.locator("img").evaluate_all(
+                "imgs => imgs.filter(i => i.complete && i.naturalWidth > 0).length")
+            # an export is a download of a data: URL
+            with pg.expect_download() as dl:
+                pg.get_by_label("Export").select_option("svg")
+            exported = Path(dl.value.path()).read_bytes()
+            pg.wait_for_timeout(300)
             violations = pg.evaluate("window.__csp")
         finally:
             b.close()
     assert nodes >= 3                        # formation's blocks are drawn
+    assert shown >= 1                        # the run's figure was shown
+    assert b"<svg" in exported
     assert violations == [], violations
     assert not [c for c in console if "Content Security Policy" in c], console
 

@@ -56,7 +56,7 @@ STATUSES = {200, 400, 404, 405, 409, 413, 415}
 EDITOR_KINDS = {"BadRequest", "BadDocument", "BadPath", "OutsideFolder", "NotFound",
                 "NotEditable", "InvalidDiagram", "MissingExtra", "Busy", "Conflict",
                 "Exists", "TooLarge", "UnsupportedMediaType", "MethodNotAllowed",
-                "ScenarioError", "FileError"}
+                "ScenarioError", "FileError", "FileTooLarge", "BadHost", "CrossOrigin"}
 
 
 def _library_kinds():

@@ -41,9 +41,10 @@ _STATUS = {"NotFound": 404, "Exists": 409, "IOError": 409}
 
 def folder_error(e: FolderError) -> EditorError:
     """The editor's answer to a refusal of :mod:`avblocks.core.confined`:
-    ``OutsideFolder``/``BadPath``/``TooLarge`` 400, ``NotFound`` 404,
-    ``Exists`` 409, a file the system would not write (``FileError``) 409."""
-    kind = "FileError" if e.kind == "IOError" else e.kind
+    ``OutsideFolder``/``BadPath`` 400, a file over the limit
+    (``FileTooLarge``) 400, ``NotFound`` 404, ``Exists`` 409, a file the
+    system would not write (``FileError``) 409."""
+    kind = {"IOError": "FileError", "TooLarge": "FileTooLarge"}.get(e.kind, e.kind)
     return EditorError(str(e), status=_STATUS.get(e.kind, 400), kind=kind)
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import weakref
 from pathlib import Path
 from typing import NamedTuple
 
@@ -125,6 +126,16 @@ def checked_args(op, args) -> dict:
     return out
 
 
+def _close(runs, lives, folder):
+    """Cancel the runs and remove their folders, stop the live views, let
+    the folder go (when the service is closed, let go of, or Python exits)."""
+    try:
+        runs.close()
+        lives.close()
+    finally:
+        folder.close()
+
+
 class EditorService:
     """The editor's operations on the scenario files under ``root``.
 
@@ -148,6 +159,7 @@ class EditorService:
         self._palette = None
         self._runs = Runs(self.folder.confined)
         self._lives = LiveViews()
+        self._closer = weakref.finalize(self, _close, self._runs, self._lives, self.folder)
         self._checker = Checker(self._out_for, self.extra_modules)
         #: What the page opens first: ``{"path": ...}``, ``{"builtin": ...}``
         #: or None (a new, empty diagram); ``avblocks edit NAME|FILE`` sets it.
@@ -163,9 +175,10 @@ class EditorService:
         if len(self._runs):
             raise EditorError("the folder cannot change while runs are kept",
                               kind="BadRequest")
-        self.folder.close()
+        self._closer()
         self.folder = Folder(root)
         self._runs = Runs(self.folder.confined)
+        self._closer = weakref.finalize(self, _close, self._runs, self._lives, self.folder)
 
     # ------------------------------------------------------------ paths
     def _path(self, path, *, save=False) -> Path:
@@ -339,11 +352,7 @@ class EditorService:
     def close(self):
         """Cancel the runs, stop live views, remove the runs' folders and any
         temporary file still being written."""
-        try:
-            self._runs.close()
-            self._lives.close()
-        finally:
-            self.folder.close()
+        self._closer()
 
     # ------------------------------------------------------------ dispatch
     def call(self, op, args) -> dict:

@@ -210,8 +210,11 @@ def test_two_large_cancelled_runs_give_their_memory_back(editor):
         assert status == 200
     ends = [_wait(editor, rid, lambda s: s["status"] != "running") for rid in runs]
     assert [s["status"] for s in ends] == ["cancelled", "cancelled"], ends
-    time.sleep(0.5)
-    after = editor.memory()
+    for _ in range(12):                    # (a busy machine: give it 3 s)
+        time.sleep(0.25)
+        after = editor.memory()
+        if after["VmRSS"] - before["VmRSS"] < 100 * MB:
+            break
     held = after["VmHWM"] - before["VmRSS"]
     kept = after["VmRSS"] - before["VmRSS"]
     simulated = sum(s["t"] for s in ends)

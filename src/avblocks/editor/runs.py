@@ -49,6 +49,7 @@ MAX_FIGURE_BYTES = 64 * 1024**2
 RUNS_FOLDER = "avblocks-out"
 #: Matplotlib's pyplot state is one per process: figures are drawn one at a time.
 MPL_LOCK = threading.Lock()
+_COLLECT = threading.Lock()
 
 
 class RunFolder:
@@ -259,8 +260,13 @@ class Run:
             self.kept = {}
             self.error = self.error or f"the run's signals could not be kept: {e}"
         del res
-        gc.collect()
-        trim_memory()
+        # the engine's log may sit in a reference cycle (an interrupt's
+        # traceback and the frame that holds the log): a full collection
+        # frees it. One at a time: CPython skips a collection asked for
+        # while another thread's is under way
+        with _COLLECT:
+            gc.collect()
+            trim_memory()
 
     def _simulate(self):
         from ..core.errors import SimulationError

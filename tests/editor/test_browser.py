@@ -62,7 +62,11 @@ def browser():
 
 @pytest.fixture
 def page(browser, editor_server):
-    ctx = browser.new_context(viewport={"width": 1440, "height": 880}, accept_downloads=True)
+    # bypass_csp: Playwright's string predicates (wait_for_function) are eval'd
+    # in the page, which the server's CSP forbids; test_server_headers.py
+    # checks the page under its CSP
+    ctx = browser.new_context(viewport={"width": 1440, "height": 880}, accept_downloads=True,
+                              bypass_csp=True)
     pg = ctx.new_page()
     errors = []
     pg.on("pageerror", lambda e: errors.append(str(e)))

@@ -475,13 +475,20 @@ def test_bad_requests_get_4xx_with_a_reason(editor_server):
     status, body = srv.get("run/nope")
     assert status == 404 and body["error"]["kind"] == "NotFound"
     req = urllib.request.Request(srv.url + "api/validate", data=b"{not json",
-                                 method="POST")
+                                 method="POST", headers={"content-type": "application/json"})
     try:
         urllib.request.urlopen(req, timeout=30)
     except urllib.error.HTTPError as e:
         assert e.code == 400 and b"not JSON" in e.read()
     else:
         raise AssertionError("accepted a body that is not JSON")
+    # a POST that is not declared JSON (a form, text/plain) is refused unread
+    req = urllib.request.Request(srv.url + "api/validate", data=b'{"document": {}}',
+                                 method="POST")
+    with pytest.raises(urllib.error.HTTPError) as e:
+        urllib.request.urlopen(req, timeout=30)
+    assert e.value.code == 415
+    assert json.loads(e.value.read())["error"]["kind"] == "UnsupportedMediaType"
     # a body announced over 8 MB is refused before it is read
     import http.client
     port = int(srv.base.rsplit(":", 1)[1].strip("/"))

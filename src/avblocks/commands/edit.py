@@ -34,24 +34,42 @@ def add_parser(sub):
 
 
 def cmd_edit(args):
-    import time
-
     from ..editor.server import EditorServer
     from ..editor.service import EditorError, EditorService
     service = EditorService(Path.cwd(), extra_modules=args.blocks)
-    if args.target:
-        from ..scenarios.loader import builtin_scenarios
-        p = Path(args.target)
-        if p.is_file():
-            rel = service._path(str(p.resolve()))      # refused outside this folder
-            service.initial = {"path": service._rel(rel)}
-        elif args.target in builtin_scenarios():
-            service.load(builtin=args.target)           # a Python-only one is refused
-            service.initial = {"builtin": args.target}
-        else:
-            raise EditorError(f"no scenario file or built-in case study '{args.target}'",
-                              hint=f"built-in: {sorted(builtin_scenarios())}")
-    server = EditorServer(service, port=args.port).start()
+    server = None
+    with _StopSignals() as signals:
+        try:
+            if args.target:
+                from ..scenarios.loader import builtin_scenarios
+                p = Path(args.target)
+                if p.is_file():
+                    rel = service._path(str(p.resolve()))      # refused outside the folder
+                    service.initial = {"path": service._rel(rel)}
+                elif args.target in builtin_scenarios():
+                    service.load(builtin=args.target)          # a Python-only one is refused
+                    service.initial = {"builtin": args.target}
+                else:
+                    raise EditorError(f"no scenario file or built-in case study "
+                                      f"'{args.target}'",
+                                      hint=f"built-in: {sorted(builtin_scenarios())}")
+            server = EditorServer(service, port=args.port).start()
+            _serve(server, args)
+        finally:
+            # runs cancelled, live views stopped, the runs' folders and any
+            # temporary file still being written removed (after SIGTERM too);
+            # a signal from here on is ignored so that this runs to its end
+            signals.hold()
+            if server is not None:
+                server.stop()
+            else:
+                service.close()
+    print("avblocks editor: stopped", file=sys.stderr)
+    return 0
+
+
+def _serve(server, args):
+    import time
     print(f"avblocks editor: {server.url}", flush=True)
     print("(Ctrl-C to stop)", flush=True)
     if not args.no_browser:
@@ -65,7 +83,43 @@ def cmd_edit(args):
             time.sleep(0.5)
     except KeyboardInterrupt:
         pass
-    finally:
-        server.stop()
-    print("avblocks editor: stopped", file=sys.stderr)
-    return 0
+
+
+class _StopSignals:
+    """``with _StopSignals() as s``: SIGINT (Ctrl-C), SIGTERM and SIGHUP
+    (those this system has: :func:`avblocks.core.confined.stop_signals`)
+    raise ``KeyboardInterrupt`` in the main thread, so the editor stops
+    through its ``finally``; after :meth:`hold` they are ignored (the
+    clean-up runs to its end). The previous handlers come back on exit."""
+
+    def __enter__(self):
+        import signal
+
+        from ..core.confined import stop_signals
+        self._old = {}
+        self._held = False
+
+        def stop(signum, frame):
+            if not self._held:
+                self._held = True
+                raise KeyboardInterrupt
+
+        for sig in stop_signals():
+            try:
+                self._old[sig] = signal.signal(sig, stop)
+            except (OSError, ValueError):     # not the main thread
+                pass
+        return self
+
+    def hold(self):
+        """From now on a stop signal is ignored."""
+        self._held = True
+
+    def __exit__(self, *exc):
+        import signal
+        for sig, old in self._old.items():
+            try:
+                signal.signal(sig, old if old is not None else signal.SIG_DFL)
+            except (OSError, ValueError, TypeError):
+                pass
+        return False

@@ -1,27 +1,47 @@
 """The editor's HTTP server: a small Starlette app on 127.0.0.1 behind a token.
 
 The page is served at ``http://127.0.0.1:PORT/<token>/`` (the token is a
-random URL-safe string, as the live view's): every request whose first path
-segment is not the token gets ``403`` before anything else looks at it. Under
-the token:
+random URL-safe string, as the live view's). Every request passes, in
+this order:
+
+1. :class:`Guard` (in front of everything): the ``Host`` header must name
+   a loopback address (``127.0.0.1``, ``localhost``, ``[::1]``) with the
+   served port (400 ``BadHost`` otherwise: a DNS-rebinding page), and an
+   ``Origin`` header, when sent, must be this server's own origin (403
+   ``CrossOrigin``: another web page the user visits); every response,
+   errors and the token's 403 included, carries the
+   :data:`SECURITY_HEADERS` (Content-Security-Policy, ``Referrer-Policy:
+   no-referrer``, ``X-Content-Type-Options: nosniff``, ...);
+2. :class:`TokenGate`: a request whose first path segment is not the token
+   gets ``403`` before anything else looks at it;
+3. the routes: a POST must be ``Content-Type: application/json`` (415
+   ``UnsupportedMediaType``: a cross-origin form or ``text/plain`` POST
+   is not one), its body is read chunk by chunk and refused past
+   :data:`MAX_BODY` bytes without reading on (413 ``TooLarge``, chunked
+   bodies too), and scanned for nesting deeper than
+   :data:`MAX_JSON_DEPTH` and more than :data:`MAX_JSON_VALUES` values
+   before it is parsed (400 ``BadRequest``).
+
+Under the token:
 
 * ``/`` and ``/assets/...``: the built front end (``editor/static/``);
-* ``GET api/palette``, ``GET api/files``: the catalogue and the files;
+* ``GET api/palette``, ``GET api/files``, ``GET api/new``;
 * ``POST api/<op>`` with a JSON body: ``load``, ``validate``, ``save``,
-  ``run``, ``live``, ``export``;
+  ``run``, ``live``, ``export``; ``POST api/live/stop``;
 * ``GET api/run/<run>``, ``POST api/run/<run>/cancel``,
   ``GET api/run/<run>/signal?name=...``, ``GET api/run/<run>/file/<name>``.
 
 The operations are those of :class:`~avblocks.editor.service.EditorService`
-(see ``API.md``); errors come back as ``{"error": {"message", "kind"}}``
-with a 4xx status. :class:`EditorServer` runs uvicorn in a background
-thread.
+(see ``API.md``); every error, unknown routes included, comes back as
+``{"error": {"message", "kind"}}`` with a 4xx status. :class:`EditorServer`
+runs uvicorn in a background thread.
 """
 
 from __future__ import annotations
 
 import asyncio
 import json
+import re
 import socket
 import threading
 from pathlib import Path
@@ -32,8 +52,31 @@ from .service import EditorError, EditorService, error_json
 
 #: Where the built front end lies (``index.html``, ``assets/``, ``widget.js``).
 STATIC = Path(__file__).parent / "static"
-#: Request bodies larger than this are refused (413).
+#: Request bodies larger than this are refused (413), read no further.
 MAX_BODY = 8 * 1024 * 1024
+#: Deepest nesting of a request's JSON (objects and arrays inside each
+#: other; a scenario's values nest at most 100 levels).
+MAX_JSON_DEPTH = 100
+#: Most values (numbers, texts, arrays, objects) in a request's JSON.
+MAX_JSON_VALUES = 1_000_000
+#: The host names the server answers to, with its port: loopback only.
+LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
+#: The page's Content-Security-Policy: scripts, styles, fetches only from
+#: the server itself, no inline script, never framed. ``img-src`` takes
+#: ``data:`` (the favicon, exported pictures).
+CSP = ("default-src 'self'; script-src 'self'; style-src 'self'; "
+       "img-src 'self' data: blob:; font-src 'self' data:; connect-src 'self'; "
+       "worker-src 'self' blob:; object-src 'none'; base-uri 'none'; form-action 'none'; "
+       "frame-ancestors 'none'")
+#: Headers every response carries (errors and the token's 403 included).
+SECURITY_HEADERS = (
+    (b"content-security-policy", CSP.encode()),
+    (b"referrer-policy", b"no-referrer"),
+    (b"x-content-type-options", b"nosniff"),
+    (b"x-frame-options", b"DENY"),
+    (b"cross-origin-resource-policy", b"same-origin"),
+    (b"cache-control", b"no-store"),
+)
 
 
 class EditorServerError(AvError):
@@ -49,7 +92,91 @@ def _imports():
                                 hint='pip install "avblocks[editor]"') from None
 
 
-class _TokenGate:
+async def _answer(send, status, body: bytes, ctype=b"application/json", extra=()):
+    await send({"type": "http.response.start", "status": status,
+                "headers": [(b"content-type", ctype),
+                            (b"content-length", str(len(body)).encode()), *extra]})
+    await send({"type": "http.response.body", "body": body})
+
+
+def _json_error(message, kind) -> bytes:
+    return json.dumps({"error": {"message": message, "kind": kind}}).encode()
+
+
+class Guard:
+    """ASGI middleware in front of every handler (Starlette's
+    ``TrustedHostMiddleware`` is the model): ``Host`` must be a loopback
+    name with the served ``port`` (None: any port), ``Origin`` when sent
+    must be ``http://`` + such a host, a cross-site request that is not a
+    navigation is refused; every response gets :data:`SECURITY_HEADERS`.
+
+    Parameters
+    ----------
+    app : ASGI app
+    port : int or None
+    names : sequence of str
+        Host names besides :data:`LOOPBACK_NAMES` (the address the server
+        was bound to when it is another one).
+    """
+
+    def __init__(self, app, port=None, names=()):
+        self.app = app
+        self.port = port
+        names = {n.lower() for n in (*LOOPBACK_NAMES, *names)}
+        self.hosts = names
+        self.origins = {f"http://{n}" for n in names}
+        if port is not None:
+            self.hosts = {f"{n}:{port}" for n in names}
+            self.origins = {f"http://{n}:{port}" for n in names}
+            if int(port) == 80:
+                self.hosts |= names
+                self.origins |= {f"http://{n}" for n in names}
+
+    def _host_ok(self, host: str) -> bool:
+        host = host.strip().lower()
+        if self.port is None:
+            name = host.rsplit(":", 1)[0] if not host.endswith("]") else host
+            return name in self.hosts
+        return host in self.hosts
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] not in ("http", "websocket"):
+            return await self.app(scope, receive, send)
+        headers = {}
+        for k, v in scope.get("headers") or ():
+            headers.setdefault(k.decode("latin-1").lower(), []).append(v.decode("latin-1"))
+
+        async def secured(message):
+            if message["type"] == "http.response.start":
+                have = {k.lower() for k, _v in message.get("headers") or ()}
+                message = dict(message)
+                message["headers"] = [*(message.get("headers") or ()),
+                                      *(h for h in SECURITY_HEADERS if h[0] not in have)]
+            await send(message)
+
+        host = headers.get("host", [])
+        origin = headers.get("origin", [])
+        why = None
+        if len(host) != 1 or not self._host_ok(host[0]):
+            why = (400, "BadHost", "the editor answers only to 127.0.0.1, localhost or "
+                                   "[::1] with its port in the Host header")
+        elif len(origin) > 1 or (origin and origin[0].strip().lower() not in self.origins):
+            why = (403, "CrossOrigin", "a request from another web page (Origin "
+                                       f"{origin[0][:80]!r}) is refused" if origin else
+                   "several Origin headers")
+        elif headers.get("sec-fetch-site", [""])[0] == "cross-site" and \
+                headers.get("sec-fetch-mode", [""])[0] not in ("navigate", ""):
+            why = (403, "CrossOrigin", "a cross-site request is refused")
+        if why is not None:
+            if scope["type"] == "websocket":
+                await send({"type": "websocket.close", "code": 1008})
+                return
+            await _answer(secured, why[0], _json_error(why[2], why[1]))
+            return
+        return await self.app(scope, receive, secured)
+
+
+class TokenGate:
     """ASGI wrapper: 403 unless the first path segment is the token; the
     token segment is removed before the app sees the path."""
 
@@ -67,17 +194,11 @@ class _TokenGate:
             if scope["type"] == "websocket":
                 await send({"type": "websocket.close", "code": 1008})
                 return
-            body = b"avblocks editor: wrong or missing token\n"
-            await send({"type": "http.response.start", "status": 403,
-                        "headers": [(b"content-type", b"text/plain; charset=utf-8"),
-                                    (b"content-length", str(len(body)).encode())]})
-            await send({"type": "http.response.body", "body": body})
+            await _answer(send, 403, b"avblocks editor: wrong or missing token\n",
+                          b"text/plain; charset=utf-8")
             return
         if after == b"":          # /<token> -> /<token>/ so relative URLs work
-            loc = self.prefix + b"/"
-            await send({"type": "http.response.start", "status": 307,
-                        "headers": [(b"location", loc), (b"content-length", b"0")]})
-            await send({"type": "http.response.body", "body": b""})
+            await _answer(send, 307, b"", b"text/plain", [(b"location", self.prefix + b"/")])
             return
         scope = dict(scope)
         scope["path"] = scope["path"][len(self.prefix):]
@@ -86,39 +207,113 @@ class _TokenGate:
         return await self.app(scope, receive, send)
 
 
-def make_app(service: EditorService, token: str):
-    """The ASGI app (token gate included) serving ``service``."""
+_Guard = Guard          # the names before issue 42
+_TokenGate = TokenGate
+
+# a JSON string (escapes included), matched without backtracking
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.S)
+
+
+def json_shape(raw: bytes) -> tuple[int, int]:
+    """``(depth, values)`` of JSON text, counted on its brackets and commas
+    outside strings, without parsing it (so that a body nested 100,000
+    levels never reaches a recursive parser)."""
+    import numpy as np
+    if not raw:
+        return 0, 0
+    bare = _JSON_STRING.sub(b'""', raw)
+    a = np.frombuffer(bare, dtype=np.uint8)
+    opens = (a == 0x5B) | (a == 0x7B)
+    closes = (a == 0x5D) | (a == 0x7D)
+    depth = int(np.cumsum(opens.astype(np.int64) - closes).max(initial=0))
+    values = int(opens.sum()) + int((a == 0x2C).sum()) + 1
+    return depth, values
+
+
+def parse_body(raw: bytes) -> dict:
+    """The JSON object of a request body, within :data:`MAX_JSON_DEPTH` and
+    :data:`MAX_JSON_VALUES` (checked before parsing); an
+    :class:`EditorError` (400 ``BadRequest``) otherwise. Empty: ``{}``."""
+    if not raw.strip():
+        return {}
+    depth, values = json_shape(raw)
+    if depth > MAX_JSON_DEPTH:
+        raise EditorError(f"the body nests deeper than {MAX_JSON_DEPTH} levels",
+                          kind="BadRequest")
+    if values > MAX_JSON_VALUES:
+        raise EditorError(f"the body holds more than {MAX_JSON_VALUES:,} values",
+                          kind="BadRequest")
+
+    def constant(name):
+        raise ValueError(f"{name} is not JSON")
+
+    try:
+        data = json.loads(raw, parse_constant=constant)
+    except (ValueError, RecursionError) as e:
+        raise EditorError(f"the body is not JSON: {str(e)[:200]}", kind="BadRequest"
+                          ) from None
+    if not isinstance(data, dict):
+        raise EditorError("the body is a JSON object of arguments", kind="BadRequest")
+    return data
+
+
+async def read_body(request) -> bytes:
+    """The body of ``request``, read chunk by chunk and refused (413
+    ``TooLarge``) as soon as it passes :data:`MAX_BODY`: an announced
+    ``Content-Length`` over it is refused before anything is read, a
+    chunked one when the cap is reached (the rest is never read)."""
+    announced = request.headers.get("content-length")
+    if announced is not None:
+        try:
+            n = int(announced)
+        except ValueError:
+            raise EditorError("Content-Length is not a number", kind="BadRequest") from None
+        if n > MAX_BODY:
+            raise EditorError(f"request too large: {n:,} bytes, more than {MAX_BODY:,}",
+                              status=413, kind="TooLarge")
+    buf = bytearray()
+    async for chunk in request.stream():
+        buf += chunk
+        if len(buf) > MAX_BODY:
+            raise EditorError(f"request too large: more than {MAX_BODY:,} bytes",
+                              status=413, kind="TooLarge")
+    return bytes(buf)
+
+
+def _is_json(request) -> bool:
+    ctype = request.headers.get("content-type", "")
+    return ctype.split(";", 1)[0].strip().lower() == "application/json"
+
+
+def make_app(service: EditorService, token: str, port=None, names=()):
+    """The ASGI app (guard and token gate included) serving ``service``
+    on ``port`` (None: any port of a loopback name)."""
     _imports()
     from starlette.applications import Starlette
+    from starlette.exceptions import HTTPException
     from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
+
+    def failed(e: BaseException):
+        status, body = error_json(e)
+        headers = {"connection": "close"} if status == 413 else None
+        return JSONResponse(body, status_code=status, headers=headers)
 
     async def call(fn, *a, **kw):
         try:
             result = await asyncio.to_thread(fn, *a, **kw)
         except (AvError, Exception) as e:  # noqa: BLE001 - every failure as JSON
-            status, body = error_json(e)
-            return JSONResponse(body, status_code=status)
-        if isinstance(result, Path):
-            return FileResponse(result)
+            return failed(e)
+        if isinstance(result, bytes):
+            return Response(result, media_type="image/png")
         return JSONResponse(result)
 
-    async def body_of(request):
-        if int(request.headers.get("content-length") or 0) > MAX_BODY:
-            raise EditorError("request too large", status=413, kind="TooLarge")
-        raw = await request.body()
-        if len(raw) > MAX_BODY:
-            raise EditorError("request too large", status=413, kind="TooLarge")
-        if not raw:
-            return {}
-        try:
-            data = json.loads(raw)
-        except ValueError as e:
-            raise EditorError(f"the body is not JSON: {e}", kind="BadRequest") from None
-        if not isinstance(data, dict):
-            raise EditorError("the body is a JSON object of arguments", kind="BadRequest")
-        return data
+    async def body_of(request) -> dict:
+        if not _is_json(request):
+            raise EditorError("a POST's body is JSON: send it with Content-Type: "
+                              "application/json", status=415, kind="UnsupportedMediaType")
+        return parse_body(await read_body(request))
 
     async def index(request):
         page = STATIC / "index.html"
@@ -132,27 +327,43 @@ def make_app(service: EditorService, token: str):
     async def get_op(request):
         op = request.path_params["op"]
         if op not in ("palette", "files", "new"):
-            return JSONResponse({"error": {"message": f"GET {op}: use POST",
-                                           "kind": "BadRequest"}}, status_code=405)
+            return failed(EditorError(f"GET {op[:80]}: use POST", status=405,
+                                      kind="MethodNotAllowed"))
         return await call(service.call, op, {})
 
-    async def post_op(request):
+    async def post(request, op, extra=None):
         try:
             args = await body_of(request)
         except EditorError as e:
-            status, body = error_json(e)
-            return JSONResponse(body, status_code=status)
-        return await call(service.call, request.path_params["op"], args)
+            return failed(e)
+        if extra:
+            for k, v in extra.items():
+                if k in args and args[k] != v:
+                    return failed(EditorError(f"'{k}' is given by the URL",
+                                              kind="BadRequest"))
+                args[k] = v
+        return await call(service.call, op, args)
+
+    async def post_op(request):
+        op = request.path_params["op"]
+        if op in ("palette", "files", "new"):
+            return failed(EditorError(f"POST {op}: use GET", status=405,
+                                      kind="MethodNotAllowed"))
+        return await post(request, op)
+
+    async def live_stop(request):
+        return await post(request, "live_stop")
 
     async def run_status(request):
-        return await call(service.status, request.path_params["run"])
+        return await call(service.call, "status", {"run": request.path_params["run"]})
 
     async def run_cancel(request):
-        return await call(service.cancel, request.path_params["run"])
+        return await post(request, "cancel", {"run": request.path_params["run"]})
 
     async def run_signal(request):
-        return await call(service.signal, request.path_params["run"],
-                          request.query_params.get("name"))
+        return await call(service.call, "signal",
+                          {"run": request.path_params["run"],
+                           "name": request.query_params.get("name", "")})
 
     async def run_file(request):
         return await call(service.figure, request.path_params["run"],
@@ -161,6 +372,15 @@ def make_app(service: EditorService, token: str):
     async def no_favicon(request):
         return Response(status_code=204)
 
+    async def http_error(request, exc):
+        kind = {404: "NotFound", 405: "MethodNotAllowed"}.get(exc.status_code, "BadRequest")
+        msg = exc.detail if isinstance(exc.detail, str) else "bad request"
+        return failed(EditorError(f"{request.method} {request.url.path[:200]}: {msg}",
+                                  status=exc.status_code, kind=kind))
+
+    async def internal(request, exc):
+        return failed(exc)
+
     routes = [
         Route("/", index),
         Route("/favicon.ico", no_favicon),
@@ -168,13 +388,15 @@ def make_app(service: EditorService, token: str):
         Route("/api/run/{run}/cancel", run_cancel, methods=["POST"]),
         Route("/api/run/{run}/signal", run_signal, methods=["GET"]),
         Route("/api/run/{run}/file/{name}", run_file, methods=["GET"]),
+        Route("/api/live/stop", live_stop, methods=["POST"]),
         Route("/api/{op}", get_op, methods=["GET"]),
         Route("/api/{op}", post_op, methods=["POST"]),
     ]
     if STATIC.is_dir():
         routes.append(Mount("/", app=StaticFiles(directory=STATIC), name="static"))
-    app = Starlette(routes=routes)
-    return _TokenGate(app, token)
+    app = Starlette(routes=routes, exception_handlers={HTTPException: http_error,
+                                                       Exception: internal})
+    return Guard(TokenGate(app, token), port=port, names=names)
 
 
 class EditorServer:
@@ -219,8 +441,11 @@ class EditorServer:
                                     hint="choose another --port, or leave it out for a "
                                          "free one") from None
         self.port = sock.getsockname()[1]
-        config = uvicorn.Config(make_app(self.service, self.token), log_level="warning",
-                                access_log=False, lifespan="off")
+        names = () if self.host in ("127.0.0.1", "::1", "localhost") else (self.host,)
+        config = uvicorn.Config(make_app(self.service, self.token, port=self.port,
+                                         names=names),
+                                log_level="warning", access_log=False, lifespan="off",
+                                h11_max_incomplete_event_size=64 * 1024)
         self._server = uvicorn.Server(config)
         self._server.install_signal_handlers = lambda: None   # uvicorn < 0.29
         self._thread = threading.Thread(target=self._serve, args=(sock,), daemon=True,

@@ -26,9 +26,11 @@ references, generator mappings), exactly as in a scenario file.
 from __future__ import annotations
 
 import copy
-import tempfile
+import math
 import time
+import weakref
 from pathlib import Path
+from typing import NamedTuple
 
 from .documents import EDITOR_KEY, EMPTY_DOCUMENT, scenario_data
 from .errors import EditorError, error_json
@@ -38,7 +40,100 @@ from .runs import MPL_LOCK, Runs
 from .validation import Checker
 
 __all__ = ["EDITOR_KEY", "EMPTY_DOCUMENT", "EditorError", "EditorService", "error_json",
-           "scenario_data"]
+           "scenario_data", "OPERATIONS"]
+
+
+class Arg(NamedTuple):
+    """One argument of an operation: its JSON type and whether it must be
+    given (an optional one may also be ``null``: the default)."""
+
+    kind: str               # "text", "bool", "number" or "mapping"
+    required: bool = False
+    refused: str = "BadRequest"     # the error kind when it has another type
+
+
+_TEXT, _BOOL, _NUMBER, _MAP = Arg("text"), Arg("bool"), Arg("number"), Arg("mapping")
+_NEED_TEXT, _DOCUMENT = Arg("text", True), Arg("mapping", True, "BadDocument")
+
+#: Every operation of ``API.md`` and the JSON type of each of its arguments;
+#: :meth:`EditorService.call` refuses anything else (400 ``BadRequest``,
+#: naming the argument) before the operation runs: an unknown argument, a
+#: missing required one, ``"yes"`` for a boolean, ``5`` for a path.
+OPERATIONS = {
+    "palette": {},
+    "files": {},
+    "new": {},
+    "load": {"path": _TEXT, "builtin": _TEXT},
+    "validate": {"document": _DOCUMENT, "path": _TEXT},
+    "save": {"path": _NEED_TEXT, "document": _DOCUMENT, "revision": _TEXT, "draft": _BOOL,
+             "origin": _TEXT, "create": _BOOL},
+    "run": {"document": _DOCUMENT, "backend": _TEXT, "t_final": _NUMBER, "dt": _NUMBER,
+            "path": _TEXT},
+    "status": {"run": _NEED_TEXT},
+    "cancel": {"run": _NEED_TEXT},
+    "signal": {"run": _NEED_TEXT, "name": _NEED_TEXT},
+    "live": {"document": _DOCUMENT, "path": _TEXT},
+    "live_stop": {"url": _TEXT},
+    "export": {"document": _DOCUMENT, "format": _TEXT, "path": _TEXT},
+}
+#: Longest text argument (a path, a name, a run id), in characters.
+MAX_TEXT_ARG = 4096
+#: Largest picture an export hands back (bytes).
+MAX_EXPORT_BYTES = 32 * 1024**2
+
+_TYPES = {"text": (str,), "bool": (bool,), "number": (int, float), "mapping": (dict,)}
+_NAMES = {"text": "text", "bool": "true or false", "number": "a number",
+          "mapping": "a JSON object"}
+
+
+def checked_args(op, args) -> dict:
+    """``args`` of operation ``op`` checked against :data:`OPERATIONS` (nulls
+    of optional arguments dropped); an :class:`EditorError` otherwise."""
+    spec = OPERATIONS.get(op) if isinstance(op, str) else None
+    if spec is None:
+        raise EditorError(f"unknown operation '{str(op)[:80]}'", status=404, kind="NotFound",
+                          hint=f"operations: {sorted(OPERATIONS)}")
+    if args is None:
+        args = {}
+    if not isinstance(args, dict):
+        raise EditorError(f"the arguments of '{op}' are a JSON object", kind="BadRequest")
+    out = {}
+    for key, value in args.items():
+        arg = spec.get(key)
+        if arg is None:
+            raise EditorError(f"bad arguments for '{op}': unknown argument "
+                              f"'{str(key)[:80]}'", kind="BadRequest",
+                              hint=f"'{op}' takes {sorted(spec) or 'no arguments'}")
+        if value is None and not arg.required:
+            continue
+        ok = isinstance(value, _TYPES[arg.kind]) and \
+            (arg.kind == "bool" or not isinstance(value, bool))
+        if ok and arg.kind == "number":
+            ok = math.isfinite(value)
+        if ok and arg.kind == "text":
+            ok = len(value) <= MAX_TEXT_ARG
+        if not ok:
+            found = type(value).__name__ if not isinstance(value, str) else \
+                f"text of {len(value):,} characters"
+            raise EditorError(f"bad arguments for '{op}': '{key}' is {_NAMES[arg.kind]}"
+                              + (f" of at most {MAX_TEXT_ARG} characters"
+                                 if arg.kind == "text" else ""),
+                              kind=arg.refused, hint=f"found {found}")
+        out[key] = value
+    missing = [k for k, a in spec.items() if a.required and k not in out]
+    if missing:
+        raise EditorError(f"bad arguments for '{op}': missing {missing}", kind="BadRequest")
+    return out
+
+
+def _close(runs, lives, folder):
+    """Cancel the runs and remove their folders, stop the live views, let
+    the folder go (when the service is closed, let go of, or Python exits)."""
+    try:
+        runs.close()
+        lives.close()
+    finally:
+        folder.close()
 
 
 class EditorService:
@@ -59,16 +154,31 @@ class EditorService:
 
     def __init__(self, root=None, extra_modules=(), figure_urls="path"):
         self.folder = Folder(root)
-        self.root = self.folder.root
         self.extra_modules = tuple(extra_modules)
         self.figure_urls = figure_urls
         self._palette = None
-        self._runs = Runs()
+        self._runs = Runs(self.folder.confined)
         self._lives = LiveViews()
+        self._closer = weakref.finalize(self, _close, self._runs, self._lives, self.folder)
         self._checker = Checker(self._out_for, self.extra_modules)
         #: What the page opens first: ``{"path": ...}``, ``{"builtin": ...}``
         #: or None (a new, empty diagram); ``avblocks edit NAME|FILE`` sets it.
         self.initial = None
+
+    @property
+    def root(self) -> Path:
+        """The folder files are read from and written to (resolved)."""
+        return self.folder.root
+
+    @root.setter
+    def root(self, root):
+        if len(self._runs):
+            raise EditorError("the folder cannot change while runs are kept",
+                              kind="BadRequest")
+        self._closer()
+        self.folder = Folder(root)
+        self._runs = Runs(self.folder.confined)
+        self._closer = weakref.finalize(self, _close, self._runs, self._lives, self.folder)
 
     # ------------------------------------------------------------ paths
     def _path(self, path, *, save=False) -> Path:
@@ -114,7 +224,7 @@ class EditorService:
         ``draft``; a file changed on disk since ``revision`` is refused (409),
         and so is an existing file when ``create`` (a "save as" that would
         replace another file: 409 ``Exists``)."""
-        full = self.folder.target(path, create=create)
+        parts = self.folder.target(path, create=create)
         scenario_data(document)
         if origin is not None and not isinstance(origin, str):
             raise EditorError("origin is a built-in name or a path", kind="BadRequest")
@@ -123,7 +233,8 @@ class EditorService:
             if errors:
                 raise EditorError("the diagram has errors; save it as a draft to keep "
                                   "it as it is", kind="InvalidDiagram", errors=errors)
-        return self.folder.save(full, document, revision=revision, origin=origin)
+        return self.folder.save(parts, document, revision=revision, origin=origin,
+                                create=bool(create))
 
     # ------------------------------------------------------- validation
     def _source(self, path=None) -> str:
@@ -202,8 +313,8 @@ class EditorService:
         """A logged signal, decimated for the wire plot."""
         return self._runs.get(run).signal(name)
 
-    def figure(self, run, name) -> Path:
-        """The file of a run's figure ``name`` (a PNG in the run's folder)."""
+    def figure(self, run, name) -> bytes:
+        """The PNG bytes of a run's figure ``name`` (from the run's folder)."""
         return self._runs.get(run).figure(name)
 
     # -------------------------------------------------------------- live
@@ -211,6 +322,11 @@ class EditorService:
         """Open the drawn diagram in the live view; ``{url}``."""
         d, sim, _sc = self.build(document, path, fresh=True)     # the view runs it
         return self._lives.open(d, sim)
+
+    def live_stop(self, url=None) -> dict:
+        """Stop the live view at ``url`` (every one the editor started when
+        None); ``{stopped: [url, ...]}``."""
+        return {"stopped": self._lives.stop(url)}
 
     # ------------------------------------------------------------ export
     def export(self, document, format="python", path=None) -> dict:
@@ -224,38 +340,24 @@ class EditorService:
 
             from ..viz.diagram import draw_diagram
             d, _sim, _sc = self.build(document, path)
-            with tempfile.TemporaryDirectory() as tmp:
+            with self._runs.scratch() as place:      # under the folder, removed after
                 with MPL_LOCK:
-                    f = draw_diagram(d, Path(tmp) / f"diagram.{format}", engine="matplotlib")
-                raw = f.read_bytes()
+                    draw_diagram(d, place.path / f"diagram.{format}", engine="matplotlib")
+                raw = place.read((f"diagram.{format}",), MAX_EXPORT_BYTES)
             mime = "image/svg+xml" if format == "svg" else "image/png"
             return {"data_url": f"data:{mime};base64,"
                                 + base64.b64encode(raw).decode("ascii")}
         raise EditorError("export format is 'python', 'svg' or 'png'", kind="BadRequest")
 
     def close(self):
-        """Cancel the runs, stop live views, remove the runs' folders."""
-        self._runs.close()
-        self._lives.close()
+        """Cancel the runs, stop live views, remove the runs' folders and any
+        temporary file still being written."""
+        self._closer()
 
     # ------------------------------------------------------------ dispatch
     def call(self, op, args) -> dict:
         """Run operation ``op`` with the JSON arguments ``args`` (both
-        transports go through here)."""
-        args = dict(args or {})
-        fn = {
-            "palette": self.palette, "files": self.files, "new": self.new,
-            "load": self.load,
-            "validate": self.validate, "save": self.save, "run": self.run,
-            "status": self.status, "cancel": self.cancel, "signal": self.signal,
-            "live": self.live, "export": self.export,
-        }.get(op)
-        if fn is None:
-            raise EditorError(f"unknown operation '{op}'", status=404, kind="NotFound")
-        import inspect
-        try:
-            inspect.signature(fn).bind(**args)
-        except TypeError as e:
-            raise EditorError(f"bad arguments for '{op}': {e}", kind="BadRequest"
-                              ) from None
-        return fn(**args)
+        transports go through here), checked against :data:`OPERATIONS`
+        first."""
+        args = checked_args(op, args)
+        return getattr(self, op)(**args)

@@ -14,15 +14,17 @@ generator forms, flow styles and anchors/aliases stay as they were.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import io
+import stat
 from pathlib import Path
 
+from ..core.confined import Confined, FolderError
 from ..core.errors import ScenarioError
-from .files import read_scenario
-from .limits import MAX_FILE_BYTES, MAX_WIRES, max_blocks, too_many_blocks
-from .paths import inside
+from .files import _parse, read_scenario
+from .limits import MAX_FILE_BYTES, MAX_WIRES, check_values, max_blocks, too_many_blocks
 
 #: Suffixes a document may be saved under.
 SAVE_SUFFIXES = (".yaml", ".yml")
@@ -54,18 +56,28 @@ def _jsonable(v):
     return str(v)
 
 
+@contextlib.contextmanager
+def _opened(root):
+    """``root`` as a :class:`~avblocks.core.confined.Confined` folder (opened
+    here and closed after, unless it is one already)."""
+    if isinstance(root, Confined):
+        yield root
+        return
+    c = Confined(root)
+    try:
+        yield c
+    finally:
+        c.close()
+
+
 def _resolve(name_or_path, root):
-    """``(path, builtin name or None)`` of what :func:`load_document` names."""
+    """``(path, builtin name or None)`` of what :func:`load_document` names
+    (``root`` None: any path)."""
     from .loader import builtin_scenarios
     target = str(name_or_path)
     b = builtin_scenarios()
-    if root is not None and not Path(target).is_absolute():
-        p = Path(root) / target
-    else:
-        p = Path(target)
+    p = Path(target)
     if p.suffix in (".yaml", ".yml", ".toml"):
-        if root is not None:
-            p = inside(p, root, what="path")
         if not p.is_file():
             raise ScenarioError("no such scenario file", file=target)
         return p, None
@@ -115,17 +127,27 @@ def load_document(name_or_path, root=None) -> dict:
         scenario (naming the entry), or a built-in case study that exists
         only as Python code; a file that is not a mapping.
     """
-    p, builtin = _resolve(name_or_path, root)
-    raw, data = read_scenario(p)      # read once: size, encoding, YAML safety, limits
+    path = None
+    if root is not None and Path(str(name_or_path)).suffix in (".yaml", ".yml", ".toml"):
+        # a file under root: read once through the opened folder (no link
+        # followed), parsed from the bytes its revision is taken from
+        with _opened(root) as c:
+            parts = c.split(name_or_path)
+            if not parts:
+                raise FolderError("a file name is needed", kind="BadPath")
+            raw = c.read_bytes(parts, MAX_FILE_BYTES)
+            p, builtin, path = c.full(parts), None, c.rel(parts)
+        data = _parse(raw, p)
+        check_values(data, str(p))    # the limits `avblocks run` applies to the file
+    else:
+        p, builtin = _resolve(name_or_path, None)
+        raw, data = read_scenario(p)  # read once: size, encoding, YAML safety, limits
+        if builtin is None:
+            path = str(p)
     data = {} if data is None else data
     if not isinstance(data, dict):    # a draft may be invalid, but it is a mapping
         raise ScenarioError("a scenario file is a mapping of sections (name, blocks, "
                             f"wires, ...), found {type(data).__name__}", file=str(p))
-    path = None
-    if builtin is None:
-        path = str(p)
-        if root is not None:
-            path = Path(p).resolve().relative_to(Path(root).resolve()).as_posix()
     return {"document": _jsonable(data), "path": path, "builtin": builtin,
             "revision": revision_of(raw)}
 
@@ -542,22 +564,29 @@ def _splice_seq(node, new, lines, lo, hi, counts, indent, depth):
     return out
 
 
-def _origin_text(origin, root):
-    """The text of the file a document came from (a built-in name or a path)."""
+def _origin_text(origin, folder: Confined):
+    """The text of the file a document came from (a built-in name or a path
+    under ``folder``), or None."""
     if origin is None:
         return None
     from .loader import builtin_scenarios
     b = builtin_scenarios()
     if str(origin) in b and b[str(origin)].suffix in SAVE_SUFFIXES:
-        p = b[str(origin)]
-    else:
-        p = inside(origin, root, what="origin") if root is not None else Path(origin)
-    if p.suffix not in SAVE_SUFFIXES or not p.is_file():
+        return b[str(origin)].read_bytes().decode("utf-8-sig")
+    parts = folder.split(origin)
+    if not parts or Path(parts[-1]).suffix not in SAVE_SUFFIXES:
         return None
-    return p.read_bytes().decode("utf-8-sig")
+    try:
+        raw = folder.read_bytes(parts, MAX_FILE_BYTES)
+    except FolderError as e:
+        if e.kind == "NotFound":
+            return None
+        raise
+    return raw.decode("utf-8-sig", errors="replace")
 
 
-def save_document(path, document, root, revision=None, draft=False, origin=None) -> dict:
+def save_document(path, document, root, revision=None, draft=False, origin=None,
+                  create=False) -> dict:
     """Write a document as a YAML scenario file, atomically, under ``root``.
 
     Parameters
@@ -567,9 +596,12 @@ def save_document(path, document, root, revision=None, draft=False, origin=None)
         it must end in ``.yaml`` or ``.yml``.
     document : dict
         The document (see :func:`load_document`).
-    root : str or path
-        The only folder written to (symbolic links and ``..`` leaving it
-        are refused).
+    root : str, path or Confined
+        The only folder written to: opened once and walked by descriptor
+        (:class:`~avblocks.core.confined.Confined`), so ``..`` above it and
+        symbolic links (even one swapped in while the file is written) are
+        refused, and the temporary file lies in the same folder as the file
+        and is removed on every exit path.
     revision : str, optional
         The revision :func:`load_document` gave for ``path``: when the file
         on disk no longer has it, :class:`DocumentChanged` is raised and
@@ -582,56 +614,64 @@ def save_document(path, document, root, revision=None, draft=False, origin=None)
         Where the document was loaded from when that is not ``path`` (a
         built-in name, or another file under ``root``): its comments and
         forms are kept in the new file.
+    create : bool
+        Only create: a file at ``path`` (there before, or appearing while
+        this one is written) is left as it is and a
+        :class:`~avblocks.core.confined.FolderError` of kind ``Exists`` is
+        raised.
 
     Returns
     -------
     dict
         ``{"path": str (relative to root), "revision": str, "draft": bool}``.
     """
-    from ..core.atomic import atomic_write_bytes
     from .loader import Scenario, check_editor
-    root = Path(root).resolve()
     if not isinstance(document, dict):
         raise ScenarioError("a document must be a mapping of scenario sections",
                             entry="document")
-    p = inside(path, root, what="path")
-    if p.suffix not in SAVE_SUFFIXES:
-        raise ScenarioError(f"a scenario file is saved as .yaml or .yml, not "
-                            f"'{p.suffix or p.name}'", file=str(path), entry="path")
-    if p.is_dir():
-        raise ScenarioError("is a folder, not a scenario file", file=str(path))
-    blocks = document.get("blocks")
-    if isinstance(blocks, dict) and len(blocks) > max_blocks():
-        raise too_many_blocks(len(blocks), str(path))
-    if isinstance(document.get("wires"), list) and len(document["wires"]) > MAX_WIRES:
-        raise ScenarioError(f"{len(document['wires']):,} wires, more than {MAX_WIRES:,}",
-                            file=str(path), entry="wires")
-    check_editor(document.get("editor"), str(path))
-    original = None
-    if p.is_file():
-        raw = p.read_bytes()
-        if revision is not None and revision_of(raw) != revision:
-            raise DocumentChanged("the file changed on disk since it was loaded",
-                                  file=str(path),
-                                  hint="load it again, or save under another name")
-        original = raw.decode("utf-8-sig", errors="replace")
-    elif revision is not None and origin is None:
-        raise DocumentChanged("the file was removed since it was loaded", file=str(path),
-                              hint="save again without a revision to create it")
-    if original is None:
-        original = _origin_text(origin, root)
-    if not draft:
-        sc = Scenario(dict(document), str(p))
-        sc.build(output_dir=root / "avblocks-out")
-    text = dump_yaml(document, original)
-    if len(text.encode()) > MAX_FILE_BYTES:
-        raise ScenarioError(f"the file would be {len(text.encode()) / 1e6:.1f} MB; "
-                            f"scenario files are at most {MAX_FILE_BYTES / 1e6:.0f} MB",
-                            file=str(path))
-    p.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(p, text.encode())      # a temporary file, then os.replace
-    return {"path": p.relative_to(root).as_posix(), "revision": revision_of(text.encode()),
-            "draft": bool(draft)}
+    with _opened(root) as folder:
+        parts = folder.split(path)
+        if not parts:
+            raise FolderError("a file name is needed", kind="BadPath")
+        suffix = Path(parts[-1]).suffix
+        if suffix not in SAVE_SUFFIXES:
+            raise ScenarioError(f"a scenario file is saved as .yaml or .yml, not "
+                                f"'{suffix or parts[-1]}'", file=str(path), entry="path")
+        st = folder.stat(parts)
+        if st is not None and stat.S_ISDIR(st.st_mode):
+            raise ScenarioError("is a folder, not a scenario file", file=str(path))
+        if create and st is not None:
+            raise FolderError(f"'{folder.rel(parts)}' exists already", kind="Exists")
+        blocks = document.get("blocks")
+        if isinstance(blocks, dict) and len(blocks) > max_blocks():
+            raise too_many_blocks(len(blocks), str(path))
+        if isinstance(document.get("wires"), list) and len(document["wires"]) > MAX_WIRES:
+            raise ScenarioError(f"{len(document['wires']):,} wires, more than {MAX_WIRES:,}",
+                                file=str(path), entry="wires")
+        check_editor(document.get("editor"), str(path))
+        original = None
+        if st is not None:
+            raw = folder.read_bytes(parts, MAX_FILE_BYTES)     # a link is refused
+            if revision is not None and revision_of(raw) != revision:
+                raise DocumentChanged("the file changed on disk since it was loaded",
+                                      file=str(path),
+                                      hint="load it again, or save under another name")
+            original = raw.decode("utf-8-sig", errors="replace")
+        elif revision is not None and origin is None:
+            raise DocumentChanged("the file was removed since it was loaded", file=str(path),
+                                  hint="save again without a revision to create it")
+        if original is None:
+            original = _origin_text(origin, folder)
+        if not draft:
+            sc = Scenario(dict(document), str(folder.full(parts)))
+            sc.build(output_dir=folder.root / "avblocks-out")
+        data = dump_yaml(document, original).encode()
+        if len(data) > MAX_FILE_BYTES:
+            raise ScenarioError(f"the file would be {len(data) / 1e6:.1f} MB; scenario files "
+                                f"are at most {MAX_FILE_BYTES / 1e6:.0f} MB", file=str(path))
+        folder.write_atomic(parts, data, exclusive=bool(create))
+        return {"path": folder.rel(parts), "revision": revision_of(data),
+                "draft": bool(draft)}
 
 
 __all__ = ["load_document", "save_document", "dump_yaml", "DocumentChanged",

@@ -14,8 +14,8 @@ with the tests (``tests/labs/solutions/``), not here.
 
 from __future__ import annotations
 
-from .grading import CheckResult, Failed, Report, run_checks, run_checks_here
+from .grading import Check, CheckResult, Failed, Report, run_checks, run_checks_here
 from .registry import Lab, get, labs
 
-__all__ = ["CheckResult", "Failed", "Lab", "Report", "get", "labs", "run_checks",
+__all__ = ["Check", "CheckResult", "Failed", "Lab", "Report", "get", "labs", "run_checks",
            "run_checks_here"]

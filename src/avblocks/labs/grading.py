@@ -39,9 +39,12 @@ never fails with a traceback.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import signal
 import stat
+import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -419,8 +422,47 @@ def _fatal_message(err, lab, current, timeout, limits):
         f"the channel broke in check '{current}'"
 
 
+@contextlib.contextmanager
+def _interrupts():
+    """Remember a Ctrl-C (SIGINT) or SIGTERM that lands during a check:
+    ``simulate`` keeps what it simulated when interrupted and returns, so
+    the grader checks the list after each check and stops (the ``finally``
+    blocks kill the student's process and lab 6's emulator)."""
+    got: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield got
+        return
+
+    def handler(signum, frame):
+        got.append(signum)
+        raise KeyboardInterrupt
+
+    old = {}
+    for sig in (signal.SIGINT, getattr(signal, "SIGTERM", None)):
+        if sig is None:
+            continue
+        try:
+            old[sig] = signal.signal(sig, handler)
+        except (ValueError, OSError):
+            pass
+    try:
+        yield got
+    finally:
+        for sig, h in old.items():
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(sig, h)
+
+
+def limits_for(timeout, memory_mb, n_checks) -> SandboxLimits:
+    """The student's process's limits for ``n_checks`` checks of ``timeout``
+    seconds each: ``memory_mb`` of address space, CPU time for all of them."""
+    return SandboxLimits(memory_mb=int(memory_mb or 0),
+                         cpu_s=max(60.0, float(timeout) * (n_checks + 2)))
+
+
 def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_MB,
-               seed=None, extra=(), source=None, limits=None, on_result=None) -> Report:
+               seed=None, extra=(), source=None, limits=None, on_result=None,
+               sandbox=None) -> Report:
     """Grade ``path`` against ``lab``: the student's code runs in a
     :class:`~avblocks.labs.sandbox.Sandbox`, the checks here.
 
@@ -452,6 +494,10 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
     on_result : callable, optional
         ``on_result(kind, value)``: ``("start", check name)`` before each
         check (``"load"`` first) and ``("result", CheckResult)`` after it.
+    sandbox : Sandbox, optional
+        A student's process already started (:func:`grade_all` starts the
+        next one while a submission is graded, where that is safe); closed
+        here.
 
     Returns
     -------
@@ -462,9 +508,15 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
     if not (math.isfinite(timeout) and timeout > 0):
         raise ValueError(f"timeout must be a finite number of seconds > 0, got {timeout!r}")
     checks = lab.all_checks() + [as_check(c) for c in extra]
-    limits = limits or SandboxLimits(memory_mb=int(memory_mb or 0),
-                                     cpu_s=max(60.0, timeout * (len(checks) + 2)))
+    limits = limits or limits_for(timeout, memory_mb, len(checks))
     emit = on_result or (lambda kind, value: None)
+    with _interrupts() as interrupted:
+        return _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit,
+                    sandbox, interrupted)
+
+
+def _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit, sandbox,
+         interrupted):
     report = Report(lab=lab.number, file=str(path), seed=seed)
     name = Path(path).name
 
@@ -482,12 +534,16 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
     if source is None:
         source, err = read_submission(path)
         if err:
+            if sandbox is not None:
+                sandbox.close()
             load_failed(err)
             return report
-    sandbox = Sandbox(limits)
+    if sandbox is None:
+        sandbox = Sandbox(limits)
     runner = _Runner(sandbox, name)
     try:
-        sandbox.start()
+        if sandbox.run is None:
+            sandbox.start()
         try:
             report.limits = sandbox.wait_ready(time.monotonic() + STARTUP_ALLOWANCE)
         except TimedOut:
@@ -525,11 +581,15 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
             try:
                 with np.errstate(all="ignore"):
                     note = check.fn(sub)
+                if interrupted:
+                    raise KeyboardInterrupt
                 add(CheckResult(check.name, True, _one_line(note or ""), check.points,
                                 check.visibility))
             except KeyboardInterrupt:
                 raise
             except BaseException as e:  # noqa: BLE001 - every failure is one line
+                if interrupted:
+                    raise KeyboardInterrupt from None
                 msg, fatal = _explain(e, name, memory_mb)
                 if fatal:
                     text, why = _fatal_message(msg, lab, check.name, timeout, limits)
@@ -605,6 +665,7 @@ def grade_all(lab, paths, *, seeds=None, **kw) -> list[Report]:
     the grader's files changed (:class:`GraderTampered`).
 
     ``seeds``: one seed (or None) per path."""
+    from . import oscalls
     paths = [Path(p) for p in paths]
     seeds = list(seeds) if seeds is not None else [None] * len(paths)
     texts = [read_submission(p) for p in paths]
@@ -612,37 +673,59 @@ def grade_all(lab, paths, *, seeds=None, **kw) -> list[Report]:
     before = {f: _snapshot(f) for f in folders}
     pkg = _package_snapshot()
     reports = []
-    for p, (text, err), seed in zip(paths, texts, seeds):
-        if err:
-            r = Report(lab=lab.number, file=str(p), seed=seed)
-            r.checks.append(CheckResult("load", False, err, 0.0))
-            for c in lab.all_checks() + [as_check(c) for c in kw.get("extra", ())]:
-                r.checks.append(CheckResult(c.name, False, "not run: the file did not load",
-                                            c.points, c.visibility))
-            reports.append(r)
-            continue
-        r = run_checks(lab, p, seed=seed, source=text, **kw)
-        changed = []
-        for f in folders:
-            now = _snapshot(f)
-            changed += sorted(n for n in set(now) | set(before[f])
-                              if now.get(n) != before[f].get(n))
-            before[f] = now
-        if changed:
-            for c in r.checks:
-                if c.passed:
-                    c.passed = False
-                    c.message = "void: " + c.message
-            r.checks.append(CheckResult("files", False, (
-                f"the folder changed while this submission ran ({', '.join(changed[:5])}"
-                f"{' ...' if len(changed) > 5 else ''}): a submission must not write files; "
-                f"every other file was graded from the copy read before any code ran"), 0.0))
-        if _package_snapshot() != pkg:
-            raise GraderTampered(
-                f"the grader's own files (the avblocks package) changed while {p.name} ran; "
-                f"reinstall avblocks and grade in a read-only installation")
-        reports.append(r)
+    n_checks = len(lab.all_checks()) + len(kw.get("extra", ()))
+    limits = kw.pop("limits", None) or limits_for(kw.get("timeout") or DEFAULT_TIMEOUT,
+                                                  kw.get("memory_mb", DEFAULT_MEMORY_MB),
+                                                  n_checks)
+    # the next student's process starts while this one is graded, only where
+    # no student's process can reach another (Landlock ABI 6+, a subreaper)
+    ahead = oscalls.full_isolation()
+    nxt = None
+    try:
+        for i, (p, (text, err), seed) in enumerate(zip(paths, texts, seeds)):
+            sandbox, nxt = nxt, None
+            if ahead and i + 1 < len(paths) and texts[i + 1][1] is None:
+                nxt = Sandbox(limits).start()
+            reports.append(_grade_one(lab, p, text, err, seed, sandbox, limits, folders,
+                                      before, pkg, kw))
+    finally:
+        if nxt is not None:
+            nxt.close()
     return reports
+
+
+def _grade_one(lab, p, text, err, seed, sandbox, limits, folders, before, pkg, kw):
+    """One file of :func:`grade_all`, and the check of what it changed."""
+    if err:
+        if sandbox is not None:
+            sandbox.close()
+        r = Report(lab=lab.number, file=str(p), seed=seed)
+        r.checks.append(CheckResult("load", False, err, 0.0))
+        for c in lab.all_checks() + [as_check(c) for c in kw.get("extra", ())]:
+            r.checks.append(CheckResult(c.name, False, "not run: the file did not load",
+                                        c.points, c.visibility))
+        return r
+    r = run_checks(lab, p, seed=seed, source=text, limits=limits, sandbox=sandbox, **kw)
+    changed = []
+    for f in folders:
+        now = _snapshot(f)
+        changed += sorted(n for n in set(now) | set(before[f])
+                          if now.get(n) != before[f].get(n))
+        before[f] = now
+    if changed:
+        for c in r.checks:
+            if c.passed:
+                c.passed = False
+                c.message = "void: " + c.message
+        r.checks.append(CheckResult("files", False, (
+            f"the folder changed while this submission ran ({', '.join(changed[:5])}"
+            f"{' ...' if len(changed) > 5 else ''}): a submission must not write files; "
+            f"every other file was graded from the copy read before any code ran"), 0.0))
+    if _package_snapshot() != pkg:
+        raise GraderTampered(
+            f"the grader's own files (the avblocks package) changed while {p.name} ran; "
+            f"reinstall avblocks and grade in a read-only installation")
+    return r
 
 
 __all__ = ["Check", "CheckResult", "DEFAULT_MEMORY_MB", "DEFAULT_TIMEOUT", "Failed",

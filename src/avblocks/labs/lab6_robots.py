@@ -21,7 +21,6 @@ first checks are drawn per student.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import subprocess
@@ -171,31 +170,26 @@ def check_simulation(sub):
 
 
 def _emulator(endpoint, log, tmp):
-    """The robot emulator, in a session of its own (so that it and all it
-    starts can be killed together)."""
+    """The robot emulator under the sandbox's supervisor: it and all it
+    starts die when the check stops it, and also when the grader itself is
+    killed (:class:`avblocks.labs.oscalls.Supervised`)."""
     import avblocks
     src = str(Path(avblocks.__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
     cmd = [sys.executable, "-m", "avblocks", "robots", "emulate", "--names", "tb1,tb2",
            "--router", endpoint, "--log", str(log), "--rate", "50",
            "--pose0", "[[0, 0, 0], [0, 2, 0]]", "--drop", "tb2@2.0"]
-    return subprocess.Popen(cmd, env=env, cwd=tmp, stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, text=True, **oscalls.popen_options())
+    return oscalls.Supervised(cmd, env=env, cwd=tmp, stdout=subprocess.PIPE,
+                              stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
 
 
-def _stop_emulator(proc):
-    """Stop the emulator (politely first: it writes its log), then kill it
+def _stop_emulator(emu):
+    """Stop the emulator politely first (it writes its log), then kill it
     with everything it started."""
-    proc.terminate()
-    try:
-        proc.wait(10)
-    except subprocess.TimeoutExpired:
-        pass
-    oscalls.kill_tree(proc.pid)
-    with contextlib.suppress(subprocess.TimeoutExpired):
-        proc.wait(10)
-    if proc.stdout is not None:
-        proc.stdout.close()
+    emu.terminate(10.0)
+    emu.kill()
+    if emu.proc.stdout is not None:
+        emu.proc.stdout.close()
 
 
 def check_on_robots(sub):
@@ -209,13 +203,12 @@ def check_on_robots(sub):
     session, endpoint = open_router()
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "emulator.jsonl"
-        proc = _emulator(endpoint, log, tmp)
+        emu = _emulator(endpoint, log, tmp)
         try:
             t_end = time.monotonic() + 20
             while not (log.exists() and log.stat().st_size) and time.monotonic() < t_end:
-                if proc.poll() is not None:
-                    raise Failed(f"the robot emulator exited: "
-                                 f"{' '.join(proc.stdout.read()[-500:].split())}")
+                if emu.exit_code(0.0) is not None or emu.proc.poll() is not None:
+                    raise Failed("the robot emulator exited before it logged anything")
                 time.sleep(0.05)
             time.sleep(0.3)
             d = Diagram()
@@ -228,7 +221,7 @@ def check_on_robots(sub):
                            log=["fleet.pose", "fleet.fresh", "drive.cmd"])
             time.sleep(0.5)                     # the last commands reach the emulator
         finally:
-            _stop_emulator(proc)
+            _stop_emulator(emu)
             session.close()
         recs = [json.loads(s) for s in log.read_text().splitlines() if s.strip()]
     drop = [r for r in recs if r["ev"] == "drop"]

@@ -45,8 +45,8 @@ import threading
 import time
 
 #: the features :func:`disabled` can switch off (to test the fallbacks)
-FEATURES = ("resource", "landlock", "killpg", "setsid", "subreaper", "proc", "select",
-            "supervisor")
+FEATURES = ("resource", "landlock", "killpg", "setsid", "subreaper", "proc", "psutil",
+            "select", "supervisor")
 
 _OFF: set = set(filter(None, os.environ.get("AVBLOCKS_LAB_DISABLE", "").split(",")))
 
@@ -324,9 +324,10 @@ def _parents() -> dict:
             except (OSError, ValueError, IndexError):
                 continue
         return out
-    with contextlib.suppress(ImportError):
-        import psutil
-        return {p.pid: p.info["ppid"] for p in psutil.process_iter(["ppid"])}
+    if enabled("psutil"):
+        with contextlib.suppress(ImportError):
+            import psutil
+            return {p.pid: p.info["ppid"] for p in psutil.process_iter(["ppid"])}
     if IS_WINDOWS:
         return {}
     try:
@@ -470,6 +471,153 @@ def write_all(fd, data, deadline):
         raise TimeoutError("the student's process did not read its input")
     if box and box[0] is not None:
         raise box[0]
+
+
+# ------------------------------------------------------------------ supervised commands
+def full_isolation() -> bool:
+    """True where a student's process can reach no other process (Landlock
+    ABI 6+: no signal, no ptrace, no write outside its folder) and a
+    supervisor collects everything it starts: only then may the grader start
+    the next student's process while one still runs."""
+    return (IS_LINUX and enabled("supervisor") and enabled("subreaper")
+            and landlock_abi() >= 6)
+
+
+class Supervised:
+    """``cmd`` run under the supervisor (:func:`supervise`) where the
+    platform has one: the command and everything it starts die when
+    :meth:`kill` is called *or when this process ends in any way*, even by
+    SIGKILL (the supervisor sees its control socket close). Without a
+    supervisor (Windows, or switched off) ``cmd`` runs directly in a
+    session of its own and :meth:`kill` ends its tree.
+
+    ``popen`` keywords go to :class:`subprocess.Popen` (stdin, stdout, env, cwd).
+    """
+
+    def __init__(self, cmd, **popen):
+        self.ctrl = None
+        self._pid = None
+        self._code = None
+        self._ended = False
+        if IS_WINDOWS or not enabled("supervisor"):
+            env = dict(popen.pop("env", None) or os.environ)
+            if off():
+                env["AVBLOCKS_LAB_DISABLE"] = ",".join(off())
+            self.proc = subprocess.Popen(cmd, env=env, **popen, **popen_options())
+            self._pid = self.proc.pid
+            return
+        import socket
+        mine, theirs = socket.socketpair()
+        sup = [sys.executable, "-I", "-S", "-B", os.path.abspath(__file__), "supervise",
+               ",".join(off()) or "-", str(theirs.fileno()), "--", *cmd]
+        try:
+            self.proc = subprocess.Popen(sup, pass_fds=(theirs.fileno(),), **popen)
+        except BaseException:
+            mine.close()
+            raise
+        finally:
+            theirs.close()
+        self.ctrl = mine
+
+    @property
+    def supervised(self) -> bool:
+        return self.ctrl is not None
+
+    def _line(self, timeout):
+        self.ctrl.settimeout(max(0.001, timeout))
+        buf = b""
+        try:
+            while not buf.endswith(b"\n") and len(buf) < 200:
+                chunk = self.ctrl.recv(1)
+                if not chunk:
+                    return None
+                buf += chunk
+        except OSError:
+            return None
+        return buf.decode("ascii", "replace").strip()
+
+    def _until(self, prefix, timeout):
+        end = time.monotonic() + timeout
+        while True:
+            line = self._line(end - time.monotonic())
+            if line is None:
+                return None
+            if line.startswith("pid "):
+                with contextlib.suppress(ValueError, IndexError):
+                    self._pid = int(line.split()[1])
+            elif line.startswith("exit "):
+                with contextlib.suppress(ValueError):
+                    self._code = int(line[5:])
+                self._ended = True
+            if line.startswith(prefix):
+                return line
+            if time.monotonic() >= end:
+                return None
+
+    def pid(self, timeout=30.0):
+        """The command's process id (not the supervisor's)."""
+        if self._pid is None and self.ctrl is not None:
+            self._until("pid ", timeout)
+        return self._pid
+
+    def exit_code(self, timeout=5.0):
+        """The command's return code once it ended by itself (None if unknown)."""
+        if self.ctrl is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                return self.proc.wait(timeout)
+            return None
+        if not self._ended:
+            self._until("exit ", timeout)
+        return self._code
+
+    def terminate(self, timeout=10.0):
+        """Ask the command to stop (SIGTERM; Windows: CTRL_BREAK) and wait
+        for it up to ``timeout``; True when it ended."""
+        pid = self.pid()
+        if pid is None:
+            return True
+        with contextlib.suppress(OSError):
+            if IS_WINDOWS:
+                os.kill(pid, signal.CTRL_BREAK_EVENT)
+            else:
+                os.kill(pid, signal.SIGTERM)
+        if self.ctrl is None:
+            try:
+                self.proc.wait(timeout)
+                return True
+            except subprocess.TimeoutExpired:
+                return False
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with contextlib.suppress(OSError):
+                os.kill(pid, 0)
+                time.sleep(0.05)
+                continue
+            return True
+        return False
+
+    def kill(self, timeout=10.0):
+        """Kill the command with everything it started; its return code when
+        it had ended by itself."""
+        if self.ctrl is not None:
+            with contextlib.suppress(OSError):
+                self.ctrl.sendall(b"kill\n")
+            if not self._ended:
+                self._until("exit ", timeout)
+            if not self._ended and self._pid:   # the supervisor is gone: do its work
+                kill_tree(self._pid)
+            with contextlib.suppress(OSError):
+                self.ctrl.close()
+        else:
+            kill_tree(self.proc.pid)
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.ctrl is None:
+            return self.proc.returncode
+        return self._code
 
 
 # ------------------------------------------------------------------ the supervisor

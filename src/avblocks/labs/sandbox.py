@@ -31,7 +31,6 @@ import contextlib
 import os
 import queue
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -155,10 +154,7 @@ class Sandbox:
     def __init__(self, limits=SandboxLimits()):
         self.limits = limits
         self.workdir = None
-        self.proc = None
-        self.ctrl = None
-        self.child_pid = None
-        self.supervised = False
+        self.run = None
         self.ready = None
         self._q: queue.Queue = queue.Queue()
         self._seq = 0
@@ -172,31 +168,13 @@ class Sandbox:
     def start(self):
         """Start the child (returns at once; :meth:`wait_ready` waits for it)."""
         self.workdir = tempfile.mkdtemp(prefix="avblocks-lab-")
-        env = oscalls.child_environment(self.workdir)
-        child = [sys.executable, "-I", "-B", "-c", _BOOT, _SRC]
-        off = ",".join(oscalls.off()) or "-"
-        use_sup = not oscalls.IS_WINDOWS and oscalls.enabled("supervisor")
-        if use_sup:
-            mine, theirs = socket.socketpair()
-            cmd = [sys.executable, "-I", "-S", "-B", oscalls.__file__, "supervise", off,
-                   str(theirs.fileno()), "--"] + child
-            try:
-                self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                             stderr=subprocess.DEVNULL, env=env,
-                                             cwd=self.workdir, pass_fds=(theirs.fileno(),))
-            finally:
-                theirs.close()
-            self.ctrl = mine
-            self.supervised = True
-        else:
-            if off != "-":
-                env["AVBLOCKS_LAB_DISABLE"] = off
-            self.proc = subprocess.Popen(child, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                         stderr=subprocess.DEVNULL, env=env, cwd=self.workdir,
-                                         **oscalls.popen_options())
-            self.child_pid = self.proc.pid
-        self._out = self.proc.stdout.fileno()
-        self._in = self.proc.stdin.fileno()
+        self.run = oscalls.Supervised(
+            [sys.executable, "-I", "-B", "-c", _BOOT, _SRC], stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+            env=oscalls.child_environment(self.workdir), cwd=self.workdir)
+        proc = self.run.proc
+        self._out = proc.stdout.fileno()
+        self._in = proc.stdin.fileno()
         if oscalls.IS_WINDOWS or not oscalls.enabled("select"):
             # no select() on pipes: a reader thread hands frames over a queue
             self.reader = threading.Thread(target=self._read_loop, daemon=True,
@@ -212,6 +190,10 @@ class Sandbox:
             oscalls.write_all(self._in, wire.encode(config), time.monotonic() + 30)
         return self
 
+    @property
+    def supervised(self) -> bool:
+        return self.run is not None and self.run.supervised
+
     def wait_ready(self, deadline) -> dict:
         """Wait for the child's ``ready`` (until ``deadline``, a monotonic
         time); ``{limit: what was set}``."""
@@ -219,94 +201,29 @@ class Sandbox:
         if not (isinstance(msg, dict) and isinstance(msg.get("ready"), dict)):
             raise ChannelBroken("the process did not start as the grader's child")
         self.ready = {str(k)[:40]: _text(v, 200) for k, v in msg["ready"].items()}
-        if self.supervised:
-            self._read_pid(deadline)
         return self.ready
 
-    def _read_pid(self, deadline):
-        line = self._ctrl_until("pid ", max(0.5, deadline - time.monotonic()))
-        if line:
-            with contextlib.suppress(ValueError, IndexError):
-                self.child_pid = int(line.split()[1])
-                self.subreaper = line.split()[3] == "1"
-
-    def _ctrl_line(self, timeout):
-        if self.ctrl is None:
-            return None
-        self.ctrl.settimeout(timeout)
-        buf = b""
-        try:
-            while not buf.endswith(b"\n") and len(buf) < 200:
-                chunk = self.ctrl.recv(1)
-                if not chunk:
-                    break
-                buf += chunk
-        except OSError:
-            return None
-        return buf.decode("ascii", "replace").strip() or None
-
-    def _ctrl_until(self, prefix, timeout):
-        """The next control line starting with ``prefix`` (others skipped)."""
-        end = time.monotonic() + timeout
-        while True:
-            line = self._ctrl_line(max(0.01, end - time.monotonic()))
-            if line is None:
-                return None
-            if line.startswith(prefix):
-                return line
-            if time.monotonic() > end:
-                return None
-
-    def close(self) -> str | None:
+    def close(self) -> int | None:
         """Kill the child with everything it started, remove its folder;
-        the child's status when it had ended by itself."""
+        the child's return code when it had ended by itself."""
         if self._closed:
             return self._status
         self._closed = True
-        self.subreaper = getattr(self, "subreaper", False)
-        status = None
         try:
-            if self.supervised and self.ctrl is not None:
-                with contextlib.suppress(OSError):
-                    self.ctrl.sendall(b"kill\n")
-                line = self._ctrl_until("exit ", 10.0)
-                if line:
-                    status = line[5:].strip()
-                else:                       # the supervisor is gone: do its work
-                    if self.child_pid:
-                        oscalls.kill_tree(self.child_pid)
-                with contextlib.suppress(OSError):
-                    self.ctrl.close()
-            elif self.proc is not None:
-                oscalls.kill_tree(self.proc.pid)
-            if self.proc is not None:
-                for f in (self.proc.stdin, self.proc.stdout):
+            if self.run is not None:
+                proc = self.run.proc
+                for f in (proc.stdin, proc.stdout):
                     with contextlib.suppress(OSError):
                         f.close()
-                try:
-                    self.proc.wait(10)
-                except subprocess.TimeoutExpired:
-                    self.proc.kill()
-                    self.proc.wait()
-                if not self.supervised:
-                    status = str(self.proc.returncode)
+                self._status = self.run.kill()
         finally:
             if self.workdir:
                 shutil.rmtree(self.workdir, ignore_errors=True)
-        self._status = status
-        return status
+        return self._status
 
     def ended(self, wait=5.0) -> Died:
         """After the channel ended: the child's status, as a :class:`Died`."""
-        code = None
-        if self.supervised:
-            line = self._ctrl_until("exit ", wait)
-            if line:
-                with contextlib.suppress(ValueError):
-                    code = int(line[5:].strip())
-        elif self.proc is not None:
-            with contextlib.suppress(subprocess.TimeoutExpired):
-                code = self.proc.wait(wait)
+        code = self.run.exit_code(wait) if self.run is not None else None
         return Died(oscalls.status_text(code), code)
 
     # ------------------------------------------------------------ the channel

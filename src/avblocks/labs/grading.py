@@ -328,9 +328,9 @@ def describe(rec, name, *, memory_mb=None) -> str:
     if "readonly" in flags:
         what = rec.get("readonly") or "inputs"
         return (f"your code wrote into its {what}{where}: the arrays a block or function "
-                f"is handed are read-only, inputs must not be changed (in a diagram they "
-                f"are another block's output); compute a new array instead "
-                f"(x = x + dx, xp.where(...), or .copy() first)")
+                f"is handed (inputs, states) are read-only and must not be changed (in a "
+                f"diagram they belong to the simulator or to another block); compute a new "
+                f"array instead (x = x + dx, xp.where(...), or .copy() first)")
     if "interrupt" in flags:
         return (f"your code raised KeyboardInterrupt{where}: an interrupt stopped it "
                 f"(Ctrl-C, or a signal it sent itself); this is not a crash and not memory")

@@ -44,7 +44,8 @@ GOAL = np.array([[3.0, 0.0], [3.0, 2.0]])
 
 
 def _cmd(block, pose, fresh):
-    y = block.output(0.0, {}, {"pose": pose.copy(), "fresh": fresh.copy()}, np)
+    y = block.output(0.0, block.initial_state(), {"pose": pose.copy(), "fresh": fresh.copy()},
+                     np)
     if not isinstance(y, dict) or "cmd" not in y:
         raise Failed(f"output must return {{'cmd': (N, 2) array}}, returned "
                      f"{type(y).__name__}" + (f" with keys {list(y)}" if isinstance(y, dict)

@@ -134,13 +134,18 @@ class RemoteClass:
         return RemoteBlock(self._sub, ans["obj"], ans["block"], self.name)
 
 
-def returned(ans, what, sub=None, where_file=None):
+def returned(ans, what, sub=None, expected="an array: build one array, e.g. "
+                                            "xp.stack([...], axis=-1) or xp.asarray(...)"):
     """The value of a call's answer; :class:`Failed` when it is a list,
-    a tuple or something that is not data."""
+    a tuple or something that is not data (``expected`` says what should
+    have come)."""
     if not isinstance(ans, dict) or "value" not in ans:
         raise Failed(f"{what} gave no value")
     value = ans["value"]
     lines = ans.get("returns") if isinstance(ans.get("returns"), list) else []
+    if isinstance(value, (list, tuple)):
+        kind = "a list" if isinstance(value, list) else "a tuple"
+        raise Failed(f"{what} returned {kind}{_where_return(lines, sub)}, expected {expected}")
     _check_data(value, what, lines, sub)
     return value
 
@@ -221,7 +226,10 @@ class RemoteBlock(Block):
         ans = self._sub._request("method", obj=self._handle, name=method, args=list(args),
                                  kwargs=kwargs or {}, labels=labels, klabels=klabels or {})
         what = f"`{method}` of {self.class_name}"
-        value = returned(ans, what, self._sub)
+        ports = self._outputs if method == "output" else \
+            self._cstates if method == "derivative" else self._dstates
+        value = returned(ans, what, self._sub, expected="a dict {" + ", ".join(
+            f"'{k}': array" for k in ports) + "}")
         if not isinstance(value, dict):
             raise Failed(f"{what} returned {_kind(value)}, expected a dict {{name: array}}")
         return {k: _array(v, f"{what} (its `{k}`)") for k, v in value.items()}

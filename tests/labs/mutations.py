@@ -69,7 +69,8 @@ MUTATIONS = {
     (1, "float32"): ("lab1_kinematics.py", "/ track], axis=-1)",
                      "/ track], axis=-1).astype(np.float32)"),
     (1, "list"): ("lab1_kinematics.py",
-                  "return np.stack([radius * (wr + wl) / 2, radius * (wr - wl) / track], axis=-1)",
+                  "return np.stack([radius * (wr + wl) / 2, radius * (wr - wl) / track], "
+                  "axis=-1)",
                   "return [radius * (wr + wl) / 2, radius * (wr - wl) / track]"),
     (1, "inplace"): ("lab1_kinematics.py", "        v, w, th = cmd[:, 0], cmd[:, 1], pose[:, 2]\n",
                      "        pose[:, 2] = (pose[:, 2] + np.pi) % (2 * np.pi) - np.pi\n"
@@ -88,14 +89,16 @@ MUTATIONS = {
                      "    pose[:, 2] = wrap(pose[:, 2], xp)        # headings in (-pi, pi]\n"),
     # lab 5: the correction written into u_nom in place
     (5, "inplace"): ("lab5_safety.py",
-                     "    return xp.where(has[:, None], u_nom + (short / a2)[:, None] * a, u_nom)\n",
+                     "    return xp.where(has[:, None], u_nom + (short / a2)[:, None] * a, "
+                     "u_nom)\n",
                      "    u_nom[has] += (short / a2)[has, None] * a[has]      # in place\n"
                      "    return u_nom\n"),
     # lab 6: a hold that latches (in an attribute; in a discrete state)
     (6, "latch"): ("lab6_robots.py",
                    '        everyone = xp.all(u["fresh"])\n'
                    '        return {"cmd": xp.where(everyone, law, 0.0 * law)}\n',
-                   '        self.held = getattr(self, "held", False) or not bool(xp.all(u["fresh"]))\n'
+                   '        self.held = getattr(self, "held", False) or '
+                   'not bool(xp.all(u["fresh"]))\n'
                    '        return {"cmd": xp.where(self.held, 0.0 * law, law)}\n'),
     (6, "latch_state"): ("lab6_robots.py",
                          '        self.declare_output("cmd", (self.n, 2), unit="m/s, rad/s")\n\n'

@@ -604,7 +604,8 @@ def _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit, sand
 
 
 def _one_line(text) -> str:
-    text = "".join(c if c.isprintable() else " " for c in str(text))
+    from .sandbox import _ANSI
+    text = "".join(c if c.isprintable() else " " for c in _ANSI.sub("", str(text)))
     text = " ".join(text.split())
     return text if len(text) <= 2000 else text[:1997] + "..."
 
@@ -635,19 +636,23 @@ def _snapshot(folder) -> dict:
 
 
 def _package_snapshot() -> dict:
-    """Stat of every file of the installed avblocks package (the grader's own code)."""
+    """``{path: (size, mode, SHA-256)}`` of every file of the installed
+    avblocks package (the grader's own code; a time stamp alone may change,
+    which Landlock does not prevent and which changes nothing)."""
+    import hashlib
     root = Path(__file__).resolve().parents[1]
     out = {}
-    for dirpath, _dirs, files in os.walk(root):
-        if "__pycache__" in dirpath:
-            continue
+    for dirpath, dirs, files in os.walk(root):
+        dirs[:] = [d for d in dirs if d not in ("__pycache__", "node_modules")]
         for f in files:
             p = os.path.join(dirpath, f)
             try:
                 st = os.stat(p, follow_symlinks=False)
+                with open(p, "rb") as fh:
+                    digest = hashlib.sha256(fh.read()).hexdigest()
             except OSError:
                 continue
-            out[p] = (st.st_size, st.st_mtime_ns, st.st_ino)
+            out[p] = (st.st_size, st.st_mode, digest)
     return out
 
 

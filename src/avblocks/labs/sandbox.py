@@ -30,6 +30,7 @@ from __future__ import annotations
 import contextlib
 import os
 import queue
+import re
 import shutil
 import subprocess
 import sys
@@ -134,11 +135,15 @@ def clean_record(rec) -> dict:
     return out
 
 
+_ANSI = re.compile(r"\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-_]")
+
+
 def _text(v, n) -> str:
-    """``v`` as one line of printable text of at most ``n`` characters."""
+    """``v`` as one line of printable text of at most ``n`` characters
+    (terminal escape sequences removed, other control characters spaces)."""
     if not isinstance(v, str):
         return ""
-    v = "".join(c if c.isprintable() else " " for c in v)
+    v = "".join(c if c.isprintable() else " " for c in _ANSI.sub("", v))
     v = " ".join(v.split())
     return v if len(v) <= n else v[:n - 3] + "..."
 

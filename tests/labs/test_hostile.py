@@ -1,0 +1,236 @@
+"""Hostile submissions (``tests/labs/hostile/``) against the grader.
+
+One class folder holds every attack beside three honest files (a correct
+solution that imports ``random`` and ``numpy``, a wrong one, the untouched
+template) and is graded by the real command line, as an instructor would:
+``avblocks lab check 1 DIR --json``. Asserted, as issue 46 asks:
+
+* every attack fails with the message its docstring names (``expect:``),
+  or changes nothing (``passes: yes``); status 1, no traceback anywhere;
+* the honest files get exactly the verdicts and messages they get when
+  each is graded alone (the independent truth: a run with no attacker);
+* no process any attack started is left (each carries a per-run marker,
+  looked up with psutil), and the grader leaves no child of its own;
+* no file outside the student's own temporary folder was written (the
+  other submission, a planted file, ``/tmp``, the grader's package).
+
+Signals to the grader need Landlock's signal scoping (Linux 6.12+) to be
+refused, and the fallbacks (no Landlock) are tested with the grader
+running from a copy of the package, so that nothing here can change the
+checkout.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import pytest
+
+from avblocks.labs import get, oscalls, run_checks
+
+from .mutations import source
+
+psutil = pytest.importorskip("psutil")
+
+HERE = Path(__file__).resolve().parent
+HOSTILE = HERE / "hostile"
+ROOT = HERE.parents[1]
+SRC = ROOT / "src"
+SOLUTION = HERE / "solutions" / "lab1_kinematics.py"
+SCOPED = oscalls.landlock_abi() >= 6
+
+
+def _need_scoping():
+    """Signals to outside processes are refused only under Landlock ABI 6+:
+    skip elsewhere on a user's machine, never in CI."""
+    if not SCOPED and not os.environ.get("CI"):
+        pytest.skip("needs Landlock ABI 6 (Linux 6.12+) to refuse a student's signals")
+
+
+def expectations(text):
+    """``(passes, [texts its messages must hold])`` from a hostile file's docstring."""
+    passes = bool(re.search(r"^passes: yes$", text, re.M))
+    return passes, re.findall(r"^expect: (.+)$", text, re.M)
+
+
+def attacks():
+    names = sorted(p.name for p in HOSTILE.glob("*.py"))
+    return [n for n in names if n != "signals.py" or SCOPED or os.environ.get("CI")]
+
+
+def _cli(*args, env=None, src=SRC, timeout=900):
+    env = {**os.environ, **(env or {}),
+           "PYTHONPATH": str(src) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    return subprocess.run([sys.executable, "-m", "avblocks", "lab", *args], capture_output=True,
+                          text=True, env=env, timeout=timeout)
+
+
+def _marked(token):
+    out = []
+    for p in psutil.process_iter(["pid", "cmdline", "status"]):
+        try:
+            if p.info["status"] != psutil.STATUS_ZOMBIE and any(
+                    token in a for a in (p.info["cmdline"] or [])):
+                out.append((p.pid, p.info["cmdline"]))
+        except (psutil.NoSuchProcess, psutil.AccessDenied):
+            pass
+    return out
+
+
+def _children():
+    return [c for c in psutil.Process().children(recursive=True)
+            if c.status() != psutil.STATUS_ZOMBIE]
+
+
+def _class_folder(folder, token, names):
+    for n in names:
+        (folder / n).write_text((HOSTILE / n).read_text().replace("TOKEN", token))
+    (folder / "alice.py").write_text("import random\nimport numpy\n" + SOLUTION.read_text())
+    (folder / "carol.py").write_text(source(1, "wrong_sign"))
+    shutil.copyfile(get(1).template, folder / "dave.py")
+
+
+@pytest.fixture(scope="module")
+def class_run(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("class")
+    token = uuid.uuid4().hex
+    names = attacks()
+    _class_folder(folder, token, names)
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    children = {c.pid for c in _children()}
+    try:
+        p = _cli("check", "1", str(folder), "--json", "--timeout", "10")
+        survivors = _marked(token)
+        left = [c for c in _children() if c.pid not in children]
+    finally:
+        for pid, _ in _marked(token):          # never leave them to the next test
+            try:
+                psutil.Process(pid).kill()
+            except psutil.NoSuchProcess:
+                pass
+        sentinel = SRC / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt"
+        planted = [q for q in (sentinel, Path("/tmp") / f"avblocks-hostile-{token}.txt",
+                               Path("/tmp") / f"avblocks-hostile-{token}-pickle") if q.exists()]
+        for q in planted:
+            q.unlink()
+    doc = json.loads(p.stdout) if p.stdout.strip().startswith("[") else None
+    return {"proc": p, "doc": doc, "folder": folder, "before": before, "names": names,
+            "survivors": survivors, "left": left, "planted": planted}
+
+
+def test_the_class_is_graded_without_a_traceback(class_run):
+    p = class_run["proc"]
+    assert p.returncode == 1, p.stdout[-2000:] + p.stderr[-2000:]
+    assert "Traceback" not in p.stdout + p.stderr and p.stderr == ""
+    doc = class_run["doc"]
+    assert doc is not None, p.stdout[:2000]
+    graded = sorted(Path(r["file"]).name for r in doc)
+    assert graded == sorted(class_run["names"] + ["alice.py", "carol.py", "dave.py"])
+
+
+@pytest.mark.parametrize("name", attacks())
+def test_every_attack_fails_with_its_message(class_run, name):
+    report = next(r for r in class_run["doc"] if Path(r["file"]).name == name)
+    passes, needles = expectations((HOSTILE / name).read_text())
+    assert needles or passes, f"{name} states nothing to expect"
+    if passes:
+        assert report["passed"], report
+        return
+    assert report["passed"] is False
+    text = "\n".join(c["message"] for c in report["checks"] if not c["passed"])
+    for needle in needles:
+        assert needle in text, (name, needle, text)
+    for c in report["checks"]:                # one line of printable text each
+        assert c["message"].isprintable(), (name, c["message"])
+
+
+def test_the_honest_files_grade_as_when_graded_alone(class_run):
+    doc = {Path(r["file"]).name: r for r in class_run["doc"]}
+    folder = class_run["folder"]
+    for name, passed in (("alice.py", True), ("carol.py", False), ("dave.py", False)):
+        alone = run_checks(get(1), folder / name, timeout=10)
+        assert alone.passed is passed
+        together = [(c["name"], c["passed"], c["message"]) for c in doc[name]["checks"]]
+        assert together == [(c.name, c.passed, c.message) for c in alone.checks], name
+
+
+def test_no_process_is_left_behind(class_run):
+    assert class_run["survivors"] == []
+    assert class_run["left"] == []
+
+
+def test_no_file_outside_the_students_folder_was_written(class_run):
+    folder = class_run["folder"]
+    now = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert now == class_run["before"]          # alice.py intact, nothing planted
+    assert class_run["planted"] == []
+
+
+def test_signals_to_the_grader_are_refused(tmp_path):
+    _need_scoping()
+    token = uuid.uuid4().hex
+    _class_folder(tmp_path, token, ["signals.py"])
+    p = _cli("check", "1", str(tmp_path), "--json", "--timeout", "10")
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr
+    doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
+    text = "\n".join(c["message"] for c in doc["signals.py"]["checks"])
+    for needle in expectations((HOSTILE / "signals.py").read_text())[1]:
+        assert needle in text
+    assert doc["alice.py"]["passed"] and not doc["carol.py"]["passed"]
+
+
+# ---------------------------------------------------------------- without Landlock
+def _package_copy(tmp_path):
+    """The avblocks package copied, so that a fallback test cannot change
+    the checkout whatever a hostile file does."""
+    dst = tmp_path / "src"
+    shutil.copytree(SRC / "avblocks", dst / "avblocks",
+                    ignore=shutil.ignore_patterns("__pycache__", "node_modules"))
+    return dst
+
+
+def test_without_landlock_a_write_into_the_folder_fails_the_writer(tmp_path):
+    src = _package_copy(tmp_path)
+    folder = tmp_path / "class"
+    folder.mkdir()
+    token = uuid.uuid4().hex
+    (folder / "writes_folder.py").write_text(
+        (HOSTILE / "writes_folder.py").read_text().replace("TOKEN", token))
+    shutil.copyfile(SOLUTION, folder / "alice.py")
+    try:
+        p = _cli("check", "1", str(folder), "--json", "--timeout", "10", src=src,
+                 env={"AVBLOCKS_LAB_DISABLE": "landlock"})
+    finally:
+        Path(f"/tmp/avblocks-hostile-{token}.txt").unlink(missing_ok=True)
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr
+    doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
+    # alice was graded from the copy read before any student's code ran
+    assert doc["alice.py"]["passed"] and doc["alice.py"]["checks_passed"] == 5
+    assert doc["alice.py"]["limits"]["files"] == "not restricted: Landlock switched off"
+    files = {c["name"]: c["message"] for c in doc["writes_folder.py"]["checks"]}["files"]
+    assert files.startswith("the folder changed while this submission ran (alice.py, "
+                            "zzz_planted.py): a submission must not write files")
+    assert (folder / "alice.py").read_text().startswith("raise SystemExit")   # it did write
+
+
+def test_without_landlock_a_write_into_the_grader_stops_the_run(tmp_path):
+    src = _package_copy(tmp_path)
+    folder = tmp_path / "class"
+    folder.mkdir()
+    token = uuid.uuid4().hex
+    (folder / "writes_grader.py").write_text(
+        (HOSTILE / "writes_grader.py").read_text().replace("TOKEN", token))
+    shutil.copyfile(SOLUTION, folder / "zoe.py")
+    p = _cli("check", "1", str(folder), "--csv", "--timeout", "10", src=src,
+             env={"AVBLOCKS_LAB_DISABLE": "landlock"})
+    assert p.returncode == 2 and "Traceback" not in p.stdout + p.stderr
+    assert "the grader's own files (the avblocks package) changed while writes_grader.py " \
+           "ran; reinstall avblocks and grade in a read-only installation" in p.stderr
+    assert (src / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt").exists()

@@ -85,13 +85,13 @@ def check_saturation(sub):
     return f"far goals: the point moves at v_max = {vmax} straight at its goal"
 
 
-def _closed_loop(block, pose0, t_final):
+def _closed_loop(block, pose0, t_final, dt=0.01):
     dg = Diagram()
     fleet = dg.add(Unicycle(pose0=pose0), name="fleet")
     drive = dg.add(block, name="drive")
     dg.connect(fleet.pose, drive.pose)
     dg.connect(drive.cmd, fleet.cmd)
-    return simulate(dg, t_final, dt=0.01, log=[fleet.pose])[fleet.pose]
+    return simulate(dg, t_final, dt=dt, log=[fleet.pose])[fleet.pose]
 
 
 def check_against_library(sub):
@@ -113,7 +113,7 @@ def check_converges(sub):
                                          round(float(sub.rng(10).uniform(0.8, 2.0)), 3)))
     pose0 = _poses(sub, n, 7)
     goal = sub.rng(8).uniform(-5, 5, (n, 2))
-    final = _closed_loop(sub.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 30.0)[-1]
+    final = _closed_loop(sub.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 30.0, dt=0.02)[-1]
     p = final[:, :2] + d * np.column_stack([np.cos(final[:, 2]), np.sin(final[:, 2])])
     miss = np.linalg.norm(p - goal, axis=1)
     if np.all(miss < 1e-3):

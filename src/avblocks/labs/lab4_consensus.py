@@ -68,7 +68,7 @@ def check_law(sub):
     return "u = -K L x on a weighted graph"
 
 
-def _run(block, p0, t_final, dt=0.01):
+def _run(block, p0, t_final, dt=0.02):
     d = Diagram()
     agents = d.add(SingleIntegrator(position0=p0), name="agents")
     law = d.add(block, name="law")

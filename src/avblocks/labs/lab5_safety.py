@@ -121,7 +121,7 @@ def check_swap(sub):
     d.connect(agents.position, safe.position)
     d.connect(go.velocity, safe.velocity_nom)
     d.connect(safe.velocity, agents.velocity)
-    res = simulate(d, 30.0, dt=0.01, log=[agents.position])
+    res = simulate(d, 30.0, dt=0.02, log=[agents.position])
     x = res[agents.position]
     gap = np.linalg.norm(x[:, 0] - x[:, 1], axis=1)
     k = int(np.argmin(gap))

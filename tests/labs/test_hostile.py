@@ -26,8 +26,10 @@ import json
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
+import time
 import uuid
 from pathlib import Path
 
@@ -234,3 +236,31 @@ def test_without_landlock_a_write_into_the_grader_stops_the_run(tmp_path):
     assert "the grader's own files (the avblocks package) changed while writes_grader.py " \
            "ran; reinstall avblocks and grade in a read-only installation" in p.stderr
     assert (src / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt").exists()
+
+
+def test_ctrl_c_stops_the_grader_and_everything_the_student_started(tmp_path):
+    """SIGINT to the grader while a check runs (the student's code sleeps
+    after starting a sleeper): status 130, one line, nothing left."""
+    token = uuid.uuid4().hex
+    f = tmp_path / "sleepy.py"
+    f.write_text(SOLUTION.read_text() + (
+        "\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"
+        "    subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(3600)', "
+        f"{token!r}])\n    time.sleep(3600)\n"))
+    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.Popen([sys.executable, "-m", "avblocks", "lab", "check", "1", str(f)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        end = time.monotonic() + 120
+        while not _marked(token) and time.monotonic() < end and p.poll() is None:
+            time.sleep(0.1)
+        assert _marked(token), "the student's sleeper never started"
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    time.sleep(0.5)
+    assert p.returncode == 130 and "Traceback" not in out + err
+    assert err.strip().endswith("avblocks: interrupted")
+    assert _marked(token) == []

@@ -216,11 +216,13 @@ class Sandbox:
         self._closed = True
         try:
             if self.run is not None:
+                # kill first: a child that saw its input close would exit by
+                # itself and orphan what it started before the kill could see it
+                self._status = self.run.kill()
                 proc = self.run.proc
                 for f in (proc.stdin, proc.stdout):
                     with contextlib.suppress(OSError):
                         f.close()
-                self._status = self.run.kill()
         finally:
             if self.workdir:
                 shutil.rmtree(self.workdir, ignore_errors=True)

@@ -167,3 +167,14 @@ def test_gradescope_wants_one_file(capsys, tmp_path):
     assert main(["lab", "check", "1", str(tmp_path), "--gradescope",
                  str(tmp_path / "r.json")]) == 2
     assert "--gradescope writes the results of one submission" in capsys.readouterr().err
+
+
+def test_the_docs_list_the_csv_columns_the_grader_writes():
+    """docs/labs/index.md's table of CSV columns is the grader's own
+    (``report.CSV_COLUMNS`` and what each holds)."""
+    from avblocks.labs.report import CSV_COLUMNS, CSV_HELP
+    page = (HERE.parents[1] / "docs" / "labs" / "index.md").read_text()
+    table = page.split("<!-- csv-columns -->")[1].split("<!-- /csv-columns -->")[0]
+    rows = [ln.split("|")[1:3] for ln in table.strip().splitlines()[2:]]
+    assert [(a.strip().strip("`"), b.strip()) for a, b in rows] == \
+        [(c, CSV_HELP[c]) for c in CSV_COLUMNS]

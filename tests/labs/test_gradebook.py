@@ -15,14 +15,13 @@ import json
 import shutil
 from pathlib import Path
 
+import jsonschema
 import pytest
 
 from avblocks.cli import main
 from avblocks.labs import get
 
 from .mutations import source
-
-jsonschema = pytest.importorskip("jsonschema")
 
 HERE = Path(__file__).resolve().parent
 SOLUTION = HERE / "solutions" / "lab1_kinematics.py"

@@ -33,13 +33,12 @@ import time
 import uuid
 from pathlib import Path
 
+import psutil
 import pytest
 
 from avblocks.labs import get, oscalls, run_checks
 
 from .mutations import source
-
-psutil = pytest.importorskip("psutil")
 
 HERE = Path(__file__).resolve().parent
 HOSTILE = HERE / "hostile"

@@ -19,11 +19,10 @@ import time
 import uuid
 from pathlib import Path
 
+import psutil
 import pytest
 
 from avblocks.labs import get, oscalls, run_checks
-
-psutil = pytest.importorskip("psutil")
 
 HERE = Path(__file__).resolve().parent
 SRC = HERE.parents[1] / "src"

@@ -454,7 +454,7 @@ def write_all(fd, data, deadline):
 
     def writer():
         try:
-            with contextlib.suppress(OSError):
+            with contextlib.suppress(OSError, AttributeError):   # Windows before 3.12
                 os.set_blocking(fd, True)
             mv = view
             while mv:

@@ -105,7 +105,7 @@ def check_rate(sub):
                                         round(float(rng.uniform(0.4, 0.7)), 3)))
     lam2 = 2 - 2 * np.cos(2 * np.pi / n)
     p0 = sub.rng(6).normal(size=(n, 2)) * 3
-    t, traj = _run(sub.MyConsensus(_ring(n), gain=k), p0, 40.0)
+    t, traj = _run(sub.MyConsensus(_ring(n), gain=k), p0, 40.0, dt=0.05)
     dis = np.linalg.norm(traj - traj.mean(axis=1, keepdims=True), axis=(1, 2))
     i1, i2 = np.searchsorted(t, 20.0), np.searchsorted(t, 40.0) - 1
     if not (dis[i2] > 0 and dis[i1] > 0):

@@ -428,6 +428,24 @@ def status_text(returncode) -> str:
 
 
 # ------------------------------------------------------------------ pipes
+def read_exact(fd, n, deadline) -> bytes:
+    """Exactly ``n`` bytes from pipe ``fd`` before ``deadline`` (POSIX,
+    ``select``): :class:`TimeoutError` past it, :class:`EOFError` at the
+    end. Windows has no ``select`` on pipes: the sandbox reads there with a
+    thread instead."""
+    import select
+    buf = bytearray()
+    while len(buf) < n:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            raise TimeoutError("no data before the deadline")
+        chunk = os.read(fd, min(n - len(buf), 1 << 20))
+        if not chunk:
+            raise EOFError
+        buf += chunk
+    return bytes(buf)
+
+
 def write_all(fd, data, deadline):
     """Write all of ``data`` to pipe ``fd`` before ``deadline`` (a
     ``time.monotonic()`` value); :class:`TimeoutError` when the reader does

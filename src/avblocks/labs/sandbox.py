@@ -284,22 +284,15 @@ class Sandbox:
 
     def _next_direct(self, deadline, what):
         """The next frame, read here with ``select`` (POSIX)."""
-        import select
         if self._broken is not None:
             raise self._broken
         fd = self._out
 
         def read_exact(n):
-            buf = bytearray()
-            while len(buf) < n:
-                left = deadline - time.monotonic()
-                if left <= 0 or not select.select([fd], [], [], left)[0]:
-                    raise TimedOut(what)
-                chunk = os.read(fd, min(n - len(buf), 1 << 20))
-                if not chunk:
-                    raise EOFError
-                buf += chunk
-            return bytes(buf)
+            try:
+                return oscalls.read_exact(fd, n, deadline)
+            except TimeoutError:
+                raise TimedOut(what) from None
 
         try:
             value, n = wire.read(read_exact, self.limits.wire)

@@ -243,22 +243,47 @@ def test_without_landlock_a_write_into_the_grader_stops_the_run(tmp_path):
     assert (src / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt").exists()
 
 
+SLEEPER = ("\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"
+           "    subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(3600)', "
+           "TOKEN])\n    time.sleep(3600)\n")
+
+
+def _grader_on_a_sleeper(tmp_path, token):
+    f = tmp_path / "sleepy.py"
+    f.write_text(SOLUTION.read_text() + SLEEPER.replace("TOKEN", repr(token)))
+    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    p = subprocess.Popen([sys.executable, "-P", "-m", "avblocks", "lab", "check", "1", str(f)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    end = time.monotonic() + 120
+    while not _marked(token) and time.monotonic() < end and p.poll() is None:
+        time.sleep(0.1)
+    return p
+
+
+def test_killing_the_grader_kills_what_the_student_started(tmp_path):
+    """SIGKILL to the grader (no handler, no finally): the supervisor sees
+    its control socket close and kills the student's process tree."""
+    token = uuid.uuid4().hex
+    p = _grader_on_a_sleeper(tmp_path, token)
+    try:
+        assert _marked(token), "the student's sleeper never started"
+        p.kill()
+        p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    end = time.monotonic() + 10
+    while _marked(token) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert _marked(token) == []
+
+
 def test_ctrl_c_stops_the_grader_and_everything_the_student_started(tmp_path):
     """SIGINT to the grader while a check runs (the student's code sleeps
     after starting a sleeper): status 130, one line, nothing left."""
     token = uuid.uuid4().hex
-    f = tmp_path / "sleepy.py"
-    f.write_text(SOLUTION.read_text() + (
-        "\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"
-        "    subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(3600)', "
-        f"{token!r}])\n    time.sleep(3600)\n"))
-    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
-    p = subprocess.Popen([sys.executable, "-m", "avblocks", "lab", "check", "1", str(f)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = _grader_on_a_sleeper(tmp_path, token)
     try:
-        end = time.monotonic() + 120
-        while not _marked(token) and time.monotonic() < end and p.poll() is None:
-            time.sleep(0.1)
         assert _marked(token), "the student's sleeper never started"
         p.send_signal(signal.SIGINT)
         out, err = p.communicate(timeout=60)

@@ -34,7 +34,7 @@ from .sandbox import SandboxError, StudentRaised
 RESERVED = frozenset({"rng", "seeded", "seed", "pick", "lab", "check", "deadline"})
 
 _MAX_PORTS = 64
-_MAX_ELEMENTS = 10 ** 7
+_MAX_ELEMENTS = 10 ** 6
 _DTYPES = {"float64", "float32", "float16", "int64", "int32", "int16", "int8", "uint8",
            "uint16", "uint32", "uint64", "bool", "complex128", "complex64"}
 

@@ -101,12 +101,8 @@ def _class_folder(folder, token, names):
     shutil.copyfile(get(1).template, folder / "dave.py")
 
 
-@pytest.fixture(scope="module")
-def class_run(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("class")
-    token = uuid.uuid4().hex
-    names = attacks()
-    _class_folder(folder, token, names)
+def _grade_the_class(folder, token, names):
+    """Grade the class folder from inside it; what the run left behind."""
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     children = {c.pid for c in _children()}
     try:
@@ -126,58 +122,57 @@ def class_run(tmp_path_factory):
         for q in planted:
             q.unlink()
     doc = json.loads(p.stdout) if p.stdout.strip().startswith("[") else None
-    for r in doc or []:
-        r["file"] = str(folder / Path(r["file"]).name)
-    return {"proc": p, "doc": doc, "folder": folder, "before": before, "names": names,
-            "survivors": survivors, "left": left, "planted": planted}
+    return p, doc, before, survivors, left, planted
 
 
-def test_the_class_is_graded_without_a_traceback(class_run):
-    p = class_run["proc"]
-    assert p.returncode == 1, p.stdout[-2000:] + p.stderr[-2000:]
-    assert "Traceback" not in p.stdout + p.stderr and p.stderr == ""
-    doc = class_run["doc"]
-    assert doc is not None, p.stdout[:2000]
-    graded = sorted(Path(r["file"]).name for r in doc)
-    assert graded == sorted(class_run["names"] + ["alice.py", "carol.py", "dave.py"])
-
-
-@pytest.mark.parametrize("name", attacks())
-def test_every_attack_fails_with_its_message(class_run, name):
-    report = next(r for r in class_run["doc"] if Path(r["file"]).name == name)
-    passes, needles = expectations((HOSTILE / name).read_text())
-    assert needles or passes, f"{name} states nothing to expect"
-    if passes:
-        assert report["passed"], report
-        return
-    assert report["passed"] is False
-    text = "\n".join(c["message"] for c in report["checks"] if not c["passed"])
-    for needle in needles:
-        assert needle in text, (name, needle, text)
-    for c in report["checks"]:                # one line of printable text each
-        assert c["message"].isprintable(), (name, c["message"])
-
-
-def test_the_honest_files_grade_as_when_graded_alone(class_run):
-    doc = {Path(r["file"]).name: r for r in class_run["doc"]}
-    folder = class_run["folder"]
+def test_a_class_folder_full_of_attacks(tmp_path):
+    """Every attack of tests/labs/hostile/ in one class folder with three
+    honest files, graded by the command line from inside the folder. One
+    test (not one per attack) so that the class is graded once, also
+    under pytest-xdist; every failure is collected before the assert."""
+    folder = tmp_path / "class"
+    folder.mkdir()
+    token = uuid.uuid4().hex
+    names = attacks()
+    _class_folder(folder, token, names)
+    p, doc, before, survivors, left, planted = _grade_the_class(folder, token, names)
+    problems = []
+    # the run: status 1, no traceback anywhere, one report per file
+    if p.returncode != 1 or "Traceback" in p.stdout + p.stderr or p.stderr or doc is None:
+        pytest.fail(f"status {p.returncode}\n{p.stdout[-3000:]}\n{p.stderr[-3000:]}")
+    got = {Path(r["file"]).name: r for r in doc}
+    if sorted(got) != sorted(names + ["alice.py", "carol.py", "dave.py"]):
+        problems.append(f"graded {sorted(got)}")
+    # every attack fails with the message its docstring names, or changes nothing
+    for name in names:
+        report = got.get(name)
+        passes, needles = expectations((HOSTILE / name).read_text())
+        if report is None or not (needles or passes):
+            problems.append(f"{name}: no report, or its docstring expects nothing")
+            continue
+        if passes != report["passed"]:
+            problems.append(f"{name}: passed={report['passed']}: {report['checks']}")
+        text = "\n".join(c["message"] for c in report["checks"] if not c["passed"])
+        problems += [f"{name}: {n!r} not in {text!r}" for n in needles if n not in text]
+        problems += [f"{name}: a message that is not one printable line: {c['message']!r}"
+                     for c in report["checks"] if not c["message"].isprintable()]
+    # the honest files: exactly the verdicts and messages they get graded alone
     for name, passed in (("alice.py", True), ("carol.py", False), ("dave.py", False)):
         alone = run_checks(get(1), folder / name, timeout=10)
-        assert alone.passed is passed
-        together = [(c["name"], c["passed"], c["message"]) for c in doc[name]["checks"]]
-        assert together == [(c.name, c.passed, c.message) for c in alone.checks], name
-
-
-def test_no_process_is_left_behind(class_run):
-    assert class_run["survivors"] == []
-    assert class_run["left"] == []
-
-
-def test_no_file_outside_the_students_folder_was_written(class_run):
-    folder = class_run["folder"]
-    now = {p.name: p.read_bytes() for p in folder.iterdir()}
-    assert now == class_run["before"]          # alice.py intact, nothing planted
-    assert class_run["planted"] == []
+        together = [(c["name"], c["passed"], c["message"]) for c in got[name]["checks"]]
+        if alone.passed is not passed or together != [(c.name, c.passed, c.message)
+                                                      for c in alone.checks]:
+            problems.append(f"{name}: alone {alone.checks}, in the class {together}")
+    # no process left, no file written outside the students' own folders
+    if survivors or left:
+        problems.append(f"left running: {survivors} {left}")
+    now = {q.name: q.read_bytes() for q in folder.iterdir()}
+    if now != before:
+        problems.append(f"the folder changed: {sorted(set(now) ^ set(before))} "
+                        f"{[n for n in now if n in before and now[n] != before[n]]}")
+    if planted:
+        problems.append(f"files planted: {planted}")
+    assert not problems, "\n".join(problems)
 
 
 def test_signals_to_the_grader_are_refused(tmp_path):

@@ -145,6 +145,9 @@ def test_extra_checks_with_points_in_the_csv_and_results_json(capsys, tmp_path):
         ("hidden: wheels still", 2.5, "after_published"), ("hidden: spin in place", 1.5,
                                                             "visible")]
     assert doc["score"] == 9.0
+    # what a student sees at once does not count the check shown after publication
+    assert doc["output"].startswith("lab 1: 6 of 6 checks passed, 6.5 of 6.5 points (and 1 "
+                                    "more check shown later)")
 
 
 @pytest.mark.parametrize("body,says", [

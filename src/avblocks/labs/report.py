@@ -168,8 +168,15 @@ def gradescope(r: Report, *, execution_time=None) -> dict:
                       "visibility": c.visibility if c.visibility in VISIBILITY else "visible"})
     got, most = r.points
     notes = [f"{c.name}: {c.message}" for c in r.checks if c.points == 0 and not c.passed]
-    ok, total = r.score
-    head = f"lab {r.lab}: {ok} of {total} checks passed, {got:g} of {most:g} points"
+    # the summary a student sees at once counts the visible checks only: the
+    # others' results show when their visibility says so
+    seen = [c for c in r.graded if c.visibility == "visible"]
+    ok, total = sum(c.passed for c in seen), len(seen)
+    pts, most_seen = sum(c.score for c in seen), sum(c.points for c in seen)
+    head = f"lab {r.lab}: {ok} of {total} checks passed, {pts:g} of {most_seen:g} points"
+    later = len(r.graded) - len(seen)
+    if later:
+        head += f" (and {later} more check{'s' if later > 1 else ''} shown later)"
     if r.seed is not None:
         head += f" (cases of seed {r.seed})"
     doc = {"score": float(got), "output": "\n".join([head] + notes), "output_format": "text",

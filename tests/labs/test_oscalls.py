@@ -118,7 +118,9 @@ def _in_child(code):
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                        env={**os.environ, "PYTHONPATH": str(SRC)})
     assert p.returncode == 0, p.stderr
-    return json.loads(p.stdout)
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert len(lines) == 1, (p.stdout, p.stderr)
+    return json.loads(lines[0][7:])
 
 
 @posix
@@ -129,7 +131,7 @@ def test_limits_are_set_as_reported():
         "said = oscalls.apply_limits(memory_mb=3000, cpu_s=77, files=99, file_mb=5)\n"
         "got = {k: resource.getrlimit(getattr(resource, k))[0] for k in "
         "('RLIMIT_AS', 'RLIMIT_CPU', 'RLIMIT_NOFILE', 'RLIMIT_FSIZE', 'RLIMIT_CORE')}\n"
-        "print(json.dumps([said, got]))\n")
+        "print('RESULT ' + json.dumps([said, got]))\n")
     said, got = out
     assert got == {"RLIMIT_AS": 3000 * 2 ** 20, "RLIMIT_CPU": 77, "RLIMIT_NOFILE": 99,
                    "RLIMIT_FSIZE": 5 * 2 ** 20, "RLIMIT_CORE": 0}
@@ -166,7 +168,7 @@ def test_landlock_allows_writes_only_in_the_folder(tmp_path):
         "    os.kill(os.getppid(), 0); res['signal'] = 'sent'\n"
         "except OSError as e:\n"
         "    res['signal'] = type(e).__name__\n"
-        "print(json.dumps([said, res]))\n")
+        "print('RESULT ' + json.dumps([said, res]))\n")
     said, res = out
     assert said["files"].startswith("writes only inside its own temporary folder")
     assert res["in"] == res["null"] == "written"

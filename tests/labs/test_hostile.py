@@ -246,7 +246,10 @@ SLEEPER = ("\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"
 def _grader_on_a_sleeper(tmp_path, token):
     f = tmp_path / "sleepy.py"
     f.write_text(SOLUTION.read_text() + SLEEPER.replace("TOKEN", repr(token)))
-    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    tmp = tmp_path / "tmp"                   # the grader's temporary folders go here
+    tmp.mkdir()
+    env = {**os.environ, "TMPDIR": str(tmp),
+           "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
     p = subprocess.Popen([sys.executable, "-P", "-m", "avblocks", "lab", "check", "1", str(f)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     end = time.monotonic() + 120
@@ -271,6 +274,11 @@ def test_killing_the_grader_kills_what_the_student_started(tmp_path):
     while _marked(token) and time.monotonic() < end:
         time.sleep(0.1)
     assert _marked(token) == []
+    # and the student's temporary folder is gone (the supervisor removed it)
+    end = time.monotonic() + 10
+    while list((tmp_path / "tmp").iterdir()) and time.monotonic() < end:
+        time.sleep(0.1)
+    assert list((tmp_path / "tmp").iterdir()) == []
 
 
 def test_ctrl_c_stops_the_grader_and_everything_the_student_started(tmp_path):

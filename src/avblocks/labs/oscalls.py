@@ -509,10 +509,12 @@ class Supervised:
     supervisor (Windows, or switched off) ``cmd`` runs directly in a
     session of its own and :meth:`kill` ends its tree.
 
-    ``popen`` keywords go to :class:`subprocess.Popen` (stdin, stdout, env, cwd).
+    ``popen`` keywords go to :class:`subprocess.Popen` (stdin, stdout, env,
+    cwd); ``cleanup``, a folder the supervisor removes once everything is
+    dead (the student's temporary folder, also when the grader was killed).
     """
 
-    def __init__(self, cmd, **popen):
+    def __init__(self, cmd, cleanup=None, **popen):
         self.ctrl = None
         self._pid = None
         self._code = None
@@ -527,7 +529,7 @@ class Supervised:
         import socket
         mine, theirs = socket.socketpair()
         sup = [sys.executable, "-I", "-S", "-B", os.path.abspath(__file__), "supervise",
-               ",".join(off()) or "-", str(theirs.fileno()), "--", *cmd]
+               ",".join(off()) or "-", str(theirs.fileno()), str(cleanup or "-"), "--", *cmd]
         try:
             self.proc = subprocess.Popen(sup, pass_fds=(theirs.fileno(),), **popen)
         except BaseException:
@@ -640,7 +642,7 @@ class Supervised:
 
 # ------------------------------------------------------------------ the supervisor
 def supervise(argv):
-    """The supervisor (POSIX): ``oscalls.py supervise OFF CTRL_FD -- CMD...``.
+    """The supervisor (POSIX): ``oscalls.py supervise OFF CTRL_FD CLEANUP -- CMD...``.
 
     It becomes the subreaper of what it starts (Linux), starts ``CMD`` (the
     student's process) in a new session with its own stdin/stdout (the
@@ -648,10 +650,11 @@ def supervise(argv):
     on the control socket ``CTRL_FD``, then waits. When the child ends by
     itself, or the grader writes ``kill`` or goes away (end of file), it
     kills the child's session and every descendant it can find (orphans
-    come back to it as the subreaper), reaps them, writes ``exit <code>``
-    (the child's return code) and exits."""
-    disabled_names, ctrl_fd = argv[0], int(argv[1])
-    cmd = argv[3:]
+    come back to it as the subreaper), reaps them, removes the folder
+    ``CLEANUP`` (``-``: none), writes ``exit <code>`` (the child's return
+    code) and exits."""
+    disabled_names, ctrl_fd, cleanup = argv[0], int(argv[1]), argv[2]
+    cmd = argv[4:]
     set_off([n for n in disabled_names.split(",") if n and n != "-"])
     import socket
     ctrl = socket.socket(fileno=ctrl_fd)
@@ -695,6 +698,9 @@ def supervise(argv):
         with contextlib.suppress(Exception):
             child.wait(5)
         code = child.returncode
+    if cleanup != "-":
+        import shutil
+        shutil.rmtree(cleanup, ignore_errors=True)
     reap()
     with contextlib.suppress(OSError):
         ctrl.setblocking(True)
@@ -703,6 +709,6 @@ def supervise(argv):
 
 
 if __name__ == "__main__":                       # the supervisor, run as a script
-    if len(sys.argv) > 4 and sys.argv[1] == "supervise" and sys.argv[4] == "--":
+    if len(sys.argv) > 5 and sys.argv[1] == "supervise" and sys.argv[5] == "--":
         sys.exit(supervise(sys.argv[2:]))
-    sys.exit(f"usage: {sys.argv[0]} supervise OFF CTRL_FD -- CMD...")
+    sys.exit(f"usage: {sys.argv[0]} supervise OFF CTRL_FD CLEANUP -- CMD...")

@@ -174,7 +174,8 @@ class Sandbox:
         """Start the child (returns at once; :meth:`wait_ready` waits for it)."""
         self.workdir = tempfile.mkdtemp(prefix="avblocks-lab-")
         self.run = oscalls.Supervised(
-            [sys.executable, "-I", "-B", "-c", _BOOT, _SRC], stdin=subprocess.PIPE,
+            [sys.executable, "-I", "-B", "-c", _BOOT, _SRC], cleanup=self.workdir,
+            stdin=subprocess.PIPE,
             stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
             env=oscalls.child_environment(self.workdir), cwd=self.workdir)
         proc = self.run.proc

@@ -62,6 +62,64 @@ MUTATIONS = {
                    '        everyone = xp.all(u["fresh"])\n        if not everyone:\n'
                    '            raise RuntimeError("a robot is silent")\n'),
     (6, "wrong_shape"): ("lab6_robots.py", "0.0 * law)}", "0.0 * law).T}"),
+    # issue 46, mistakes that used to pass or get a poor message:
+    # lab 1: the turn rate wrapped like an angle; float32 numbers; a list; a write into the state
+    (1, "wrap_rate"): ("lab1_kinematics.py", "v * xp.sin(th), w]",
+                       "v * xp.sin(th), av.utility.wrap_angle(w, xp)]"),
+    (1, "float32"): ("lab1_kinematics.py", "/ track], axis=-1)",
+                     "/ track], axis=-1).astype(np.float32)"),
+    (1, "list"): ("lab1_kinematics.py",
+                  "return np.stack([radius * (wr + wl) / 2, radius * (wr - wl) / track], "
+                  "axis=-1)",
+                  "return [radius * (wr + wl) / 2, radius * (wr - wl) / track]"),
+    (1, "inplace"): ("lab1_kinematics.py", "        v, w, th = cmd[:, 0], cmd[:, 1], pose[:, 2]\n",
+                     "        pose[:, 2] = (pose[:, 2] + np.pi) % (2 * np.pi) - np.pi\n"
+                     "        v, w, th = cmd[:, 0], cmd[:, 1], pose[:, 2]\n"),
+    # lab 2: the look-ahead point computed in the pose input
+    (2, "inplace"): ("lab2_go_to_goal.py",
+                     "        ex = self.goal[:, 0] - pose[:, 0] - self.d * c\n"
+                     "        ey = self.goal[:, 1] - pose[:, 1] - self.d * s\n",
+                     "        pose[:, 0] += self.d * c          # the look-ahead point, in place\n"
+                     "        pose[:, 1] += self.d * s\n"
+                     "        ex = self.goal[:, 0] - pose[:, 0]\n"
+                     "        ey = self.goal[:, 1] - pose[:, 1]\n"),
+    # lab 3: the follower's heading wrapped in place
+    (3, "inplace"): ("lab3_formation.py", "    zeta = xp.arctan2(dy, dx)\n",
+                     "    zeta = xp.arctan2(dy, dx)\n"
+                     "    pose[:, 2] = wrap(pose[:, 2], xp)        # headings in (-pi, pi]\n"),
+    # lab 5: the correction written into u_nom in place
+    (5, "inplace"): ("lab5_safety.py",
+                     "    return xp.where(has[:, None], u_nom + (short / a2)[:, None] * a, "
+                     "u_nom)\n",
+                     "    u_nom[has] += (short / a2)[has, None] * a[has]      # in place\n"
+                     "    return u_nom\n"),
+    # lab 6: a hold that latches (in an attribute; in a discrete state)
+    (6, "latch"): ("lab6_robots.py",
+                   '        everyone = xp.all(u["fresh"])\n'
+                   '        return {"cmd": xp.where(everyone, law, 0.0 * law)}\n',
+                   '        self.held = getattr(self, "held", False) or '
+                   'not bool(xp.all(u["fresh"]))\n'
+                   '        return {"cmd": xp.where(self.held, 0.0 * law, law)}\n'),
+    (6, "latch_state"): ("lab6_robots.py",
+                         '        self.declare_output("cmd", (self.n, 2), unit="m/s, rad/s")\n\n'
+                         '    def output(self, t, x, u, xp):\n'
+                         '        law = av.controllers.point_to_point_law(u["pose"], '
+                         'xp.asarray(self.goal), self.d,\n'
+                         '                                                self.gain, '
+                         'self.v_max, xp)\n'
+                         '        everyone = xp.all(u["fresh"])\n'
+                         '        return {"cmd": xp.where(everyone, law, 0.0 * law)}\n',
+                         '        self.declare_output("cmd", (self.n, 2), unit="m/s, rad/s")\n'
+                         '        self.declare_discrete_state("held", False)\n\n'
+                         '    def output(self, t, x, u, xp):\n'
+                         '        law = av.controllers.point_to_point_law(u["pose"], '
+                         'xp.asarray(self.goal), self.d,\n'
+                         '                                                self.gain, '
+                         'self.v_max, xp)\n'
+                         '        held = x["held"] | ~xp.all(u["fresh"])\n'
+                         '        return {"cmd": xp.where(held, 0.0 * law, law)}\n\n'
+                         '    def update(self, t, x, u, xp):\n'
+                         '        return {"held": x["held"] | ~xp.all(u["fresh"])}\n'),
     (6, "wrong_sign"): ("lab6_robots.py",
                         '        everyone = xp.all(u["fresh"])\n'
                         '        return {"cmd": xp.where(everyone, law, 0.0 * law)}\n',

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from avblocks.cli import main
-from avblocks.labs import get, labs
+from avblocks.labs import Lab, get, labs, run_checks
 
 from .mutations import MUTATIONS, source, write
 
@@ -130,6 +130,33 @@ WRONG_EXPECTED = {
     (5, "crash"): ("the barrier constraint",
                    ["your code raised KeyError: 'agent without a neighbour'",
                     "line {agent without a neighbour} of lab5_crash.py, in safety_filter_pair"]),
+    # issue 46: mistakes that used to pass, or to get a message that did not say why
+    (1, "wrap_rate"): ("derivative (eq. 1)",
+                       ["for a turn rate omega = 4.0000 rad/s: the rate was wrapped into "
+                        "(-pi, pi] like an angle"]),
+    (1, "float32"): ("differential drive: wheels_to_cmd",
+                     ["the result is float32 (dtype float32), expected float64"]),
+    (1, "list"): ("differential drive: wheels_to_cmd",
+                  ["`wheels_to_cmd` returned a list (line {return [radius} of lab1_list.py), "
+                   "expected an array"]),
+    (1, "inplace"): ("derivative (eq. 1)",
+                     ["your code wrote into its state `pose` (line {pose[:, 2] = (} of "
+                      "lab1_inplace.py, in derivative)", "read-only and must not be changed"]),
+    (2, "inplace"): ("the law (inverse map)",
+                     ["your code wrote into its input `pose` (line {pose[:, 0] +=} of "
+                      "lab2_inplace.py, in output)", "must not be changed"]),
+    (3, "inplace"): ("the law (eqs. 2-5)",
+                     ["your code wrote into its argument `pose` (line {pose[:, 2] = wrap} of "
+                      "lab3_inplace.py, in follower_cmd)"]),
+    (5, "inplace"): ("the projection",
+                     ["your code wrote into its argument `u_nom` (line {u_nom[has] +=} of "
+                      "lab5_inplace.py, in safety_filter_pair)"]),
+    (6, "latch"): ("the law and the group hold",
+                   ["with every robot fresh again after robots 0 and 3 were silent",
+                    "found [-0., -0.]"]),
+    (6, "latch_state"): ("in simulation: held while a robot is silent, then goes on",
+                         ["did not move again after robot 1 reported again at 4.5 s",
+                          "the hold latched"]),
 }
 
 
@@ -146,12 +173,23 @@ def test_the_flocking_wrong_sign_breaks_the_flock(capsys, tmp_path):
     assert "expected at least 0.35 d = 0.35 m" in failed["flocking: a flock forms"]
 
 
+def without_emulator(lab):
+    """Lab 6 without its run on the robot emulator (seconds of real time,
+    exercised by the reference solution, the template and wrong_sign)."""
+    return Lab(lab.number, lab.name, lab.title, names=lab.names,
+               checks=[c for c in lab.checks if c[0] != "on the robot emulator over Zenoh"])
+
+
 @pytest.mark.parametrize("number,kind", sorted(WRONG_EXPECTED))
 def test_a_wrong_solution_gets_the_right_message(capsys, tmp_path, number, kind):
     path = write(tmp_path, number, kind)
-    rc, out, _ = check(capsys, number, path, "--json")
+    if number == 6 and kind != "wrong_sign":
+        r = run_checks(without_emulator(get(6)), path)
+        rc, doc = (0 if r.passed else 1), r.as_dict()
+    else:
+        rc, out, _ = check(capsys, number, path, "--json")
+        doc = json.loads(out)
     assert rc == 1
-    doc = json.loads(out)
     assert doc["passed"] is False and doc["lab"] == number
     name, needles = WRONG_EXPECTED[number, kind]
     failed = {c["name"]: c["message"] for c in doc["checks"] if not c["passed"]}
@@ -258,10 +296,10 @@ def _run_cli(*args):
 
 def test_an_endless_loop_in_a_check_times_out_and_the_rest_is_reported(tmp_path):
     f = _variant(tmp_path, "loop.py", after=LOOP)
-    p = _run_cli("check", "1", str(f), "--timeout", "3")
+    p = _run_cli("check", "1", str(f), "--timeout", "8")
     assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stderr
     line = [ln for ln in p.stdout.splitlines() if "timed out" in ln]
-    assert line == ["  FAIL  differential drive: wheels_to_cmd: timed out after 3 s in check "
+    assert line == ["  FAIL  differential drive: wheels_to_cmd: timed out after 8 s in check "
                     "'differential drive: wheels_to_cmd' of lab 1: the check was stopped (an "
                     "endless loop, or a step far too slow?); raise the limit with --timeout "
                     "SECONDS"], p.stdout
@@ -284,7 +322,9 @@ def test_a_sleep_while_loading_times_out(capsys, tmp_path):
     f = _variant(tmp_path, "sleep.py", before=SLEEP)
     rc, out, _ = check(capsys, 1, f, "--timeout", "2", "--json")
     doc = json.loads(out)
-    assert rc == 1 and doc["passed"] is False and doc["checks_total"] == 1
+    # a file that does not load scores 0 of the lab's 5 checks, not 0 of 1
+    assert rc == 1 and doc["passed"] is False and doc["checks_total"] == 5
+    assert doc["checks_passed"] == 0 and doc["points"] == 0 and doc["max_points"] == 5
     assert doc["checks"][0]["name"] == "load"
     assert doc["checks"][0]["message"].startswith(
         "timed out after 2 s while loading the file of lab 1")
@@ -323,20 +363,29 @@ def test_a_folder_goes_on_after_a_timeout(tmp_path):
     shutil.copyfile(_solution(1), tmp_path / "alice.py")
     _variant(tmp_path, "bob.py", before=SLEEP)
     shutil.copyfile(_solution(1), tmp_path / "carol.py")
-    p = _run_cli("check", "1", str(tmp_path), "--csv", "--timeout", "2")
+    p = _run_cli("check", "1", str(tmp_path), "--csv", "--timeout", "8")
     assert p.returncode == 1 and "Traceback" not in p.stderr, p.stderr
     rows = list(csv.DictReader(io.StringIO(p.stdout)))
     assert [(r["file"], r["passed"]) for r in rows] == [("alice.py", "yes"), ("bob.py", "no"),
                                                         ("carol.py", "yes")]
-    assert rows[1]["failed"].startswith("load: timed out after 2 s while loading the file")
-    p = _run_cli("check", "1", str(tmp_path), "--timeout", "2")
-    assert "bob.py    FAIL  0/1  load: timed out after 2 s" in p.stdout
+    assert rows[1]["failed"].startswith("load: timed out after 8 s while loading the file")
+    p = _run_cli("check", "1", str(tmp_path), "--timeout", "8")
+    assert "bob.py    FAIL  0/5  load: timed out after 8 s" in p.stdout
     assert "2 of 3 submissions pass every check" in p.stdout
 
 
-def test_a_negative_limit_is_status_2(capsys):
-    assert main(["lab", "check", "1", str(_solution(1)), "--timeout", "-1"]) == 2
-    assert "a negative limit" in capsys.readouterr().err
+@pytest.mark.parametrize("option", [["--timeout", "-1"], ["--timeout", "0"],
+                                    ["--timeout", "inf"], ["--timeout", "nan"],
+                                    ["--timeout", "1e999"], ["--timeout", "soon"],
+                                    ["--memory", "-5"], ["--memory", "1.5"], ["--seed", "-1"],
+                                    ["--student", ""], ["--bogus"], ["--json", "--csv"]])
+def test_a_bad_option_is_refused_with_status_2(capsys, option):
+    with pytest.raises(SystemExit) as e:
+        main(["lab", "check", "1", str(_solution(1)), *option])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and "Traceback" not in err
+    assert "error: " in err and (option[0] in err or "unrecognized arguments" in err
+                                 or "not allowed with" in err), err
 
 
 def test_run_checks_from_a_script_read_on_stdin():
@@ -352,3 +401,64 @@ def test_run_checks_from_a_script_read_on_stdin():
                        env=env, timeout=600)
     assert p.returncode == 0 and p.stdout.strip() == "PASSED", p.stdout + p.stderr
     assert p.stderr == ""
+
+
+# ---------------------------------------------------------------- messages (issue 46)
+def test_a_keyboard_interrupt_in_the_students_code_is_named_as_such(capsys, tmp_path):
+    f = _variant(tmp_path, "ctrlc.py", after="\n\ndef wheels_to_cmd(*a, **k):\n"
+                 "    raise KeyboardInterrupt\n")
+    rc, out, _ = check(capsys, 1, f, "--json")
+    msg = {c["name"]: c["message"] for c in json.loads(out)["checks"]}[
+        "differential drive: wheels_to_cmd"]
+    assert rc == 1 and msg.startswith(
+        f"your code raised KeyboardInterrupt (line {_line_of(f, 'raise KeyboardInterrupt')} "
+        f"of ctrlc.py, in wheels_to_cmd): an interrupt stopped it"), msg
+    assert "crash" in msg and "not a crash" in msg and "memory" in msg  # says what it is NOT
+    assert "ended" not in msg
+
+
+@pytest.mark.parametrize("data,says", [
+    (b"\x7fELF\x02\x01\x01\x00" + bytes(range(256)) * 4,
+     "the file is not Python source text (it holds NUL bytes"),
+    ("def f():\n    return 'caf\u00e9'\n".encode("latin-1"),
+     "the file is not Python source text: byte 24 is not UTF-8"),   # the e-acute
+])
+def test_a_binary_file_is_one_readable_line(capsys, tmp_path, data, says):
+    f = tmp_path / "binary.py"
+    f.write_bytes(data)
+    rc, out, _ = check(capsys, 1, f, "--json")
+    doc = json.loads(out)
+    assert rc == 1 and doc["checks"][0]["name"] == "load"
+    assert doc["checks"][0]["message"].startswith(says), doc["checks"][0]["message"]
+    assert "line None" not in out
+    assert doc["checks_total"] == len(get(1).checks) and doc["points"] == 0
+
+
+def test_a_list_returned_from_output_names_the_line(capsys, tmp_path):
+    src = _solution(4).read_text().replace(
+        'return {"velocity": -self.gain * (lap @ p)}', 'return [-self.gain * (lap @ p)]')
+    f = tmp_path / "listout.py"
+    f.write_text(src)
+    rc, out, _ = check(capsys, 4, f, "--json")
+    msg = {c["name"]: c["message"] for c in json.loads(out)["checks"]}["the law u = -K L x"]
+    line = _line_of(f, "return [-self.gain")
+    assert rc == 1 and msg.startswith(
+        f"`output` of MyConsensus returned a list (line {line} of listout.py), expected a "
+        f"dict {{'velocity': array}}"), msg
+
+
+def test_the_csv_help_names_exactly_the_header_columns(capsys, tmp_path):
+    with pytest.raises(SystemExit):
+        main(["lab", "check", "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    shutil.copyfile(_solution(1), tmp_path / "alice.py")
+    (tmp_path / "broken.py").write_text("def broken(:\n")
+    rc, out, _ = check(capsys, 1, tmp_path, "--csv")
+    header = out.splitlines()[0].split(",")
+    assert f"one CSV row per submission, columns: {', '.join(header)}" in help_text
+    rows = list(csv.DictReader(io.StringIO(out)))
+    assert rc == 1 and [r["file"] for r in rows] == ["alice.py", "broken.py"]
+    # points, not only pass/fail; a file that does not load: 0 of the lab's points
+    assert [(r["points"], r["max_points"], r["checks_passed"], r["checks_total"])
+            for r in rows] == [("5", "5", "5", "5"), ("0", "5", "0", "5")]
+    assert rows[1]["failed"].startswith("load: the file does not parse: SyntaxError")

@@ -1,39 +1,125 @@
-"""Running a student's file against a lab's checks, and reporting.
+"""Grading a student's file against a lab's checks.
 
-A check is a function of the loaded submission (a module) that returns a
-short note when it passes and raises :class:`Failed` with a message naming
-the port, the case, what was expected and what was found when it does not.
-Anything else the student's code raises inside a check (or while the file
-is loaded) is caught and reported as one readable line: the exception, its
-message and the line of the student's file it came from. A check never
-ends the grader with a traceback.
+The lab contract
+----------------
+A lab is a module ``labN_name.py`` beside this one that ends with
+``LAB = Lab(N, "name", "title", names=(...), checks=[...])``:
 
-:func:`run_checks` runs the student's code in a child process (a fresh
-``python``, fed the lab over a pipe), so that it cannot hang or corrupt the grader: every check
-(and the loading of the file) has a time limit, after which the child is
-killed and the check reported as timed out; the child's stdout and stderr
-go to the null device (a print cannot break ``--json`` or ``--csv``); and
-on Linux/macOS its address space is limited (``RLIMIT_AS``), so a huge
-allocation ends as a ``MemoryError`` reported like any other exception.
-:func:`run_checks_here` runs the same checks in this process, unguarded.
+* ``names``: what the student's file must define (classes, functions);
+* ``checks``: ``(name, check)`` pairs (or :class:`Check` objects, which add
+  points and a visibility), run in order. ``check(sub)`` receives a
+  :class:`~avblocks.labs.remote.Submission`: ``sub.MyBlock(...)`` constructs
+  the student's block *in the student's process* and returns a proxy block
+  to wire into a diagram the check simulates itself; ``sub.my_function(...)``
+  calls the student's function there and returns its result as data;
+  ``sub.rng(k)`` draws the check's case ``k`` (the fixed case of the lab's
+  page without a seed, a per-student case with one). A check returns a
+  short note when the student's code is right and raises :class:`Failed`
+  naming the port, the case, what was expected and what was found when it
+  is not (:func:`compare`, :func:`expect_shape`, :func:`check_ports` do
+  that). Compare with independent truth (a closed form, a library block,
+  a property of the closed loop), never with the reference solution.
+
+The template is ``templates/labN_name.py`` (the ports declared, the bodies
+to write raising ``NotImplementedError``); the reference solution and
+wrong solutions live with the tests (``tests/labs/``). See
+docs/labs/index.md, "Adding a lab".
+
+The security boundary
+---------------------
+:func:`run_checks` never imports the student's file: it reads the file
+once (a regular file, UTF-8 text, at most :data:`MAX_SOURCE_BYTES`), starts
+a :class:`~avblocks.labs.sandbox.Sandbox` and sends it the text. The
+expected values, the comparisons and the verdicts stay here. Whatever the
+student's code does (raise, loop, exit, crash, print, write garbage into
+the channel, fork) becomes one readable line in the report and, for what
+ends the process, "not run" for the checks after it; the grader itself
+never fails with a traceback.
 """
 
 from __future__ import annotations
 
 import contextlib
-import importlib.util
-import io
+import math
 import os
-import sys
+import signal
+import stat
+import threading
 import time
-import traceback
-import uuid
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from .remote import RESERVED, Failed, Submission, seed_for
+from .report import VISIBILITY, CheckResult, Report
+from .sandbox import (
+    ChannelBroken,
+    Died,
+    Sandbox,
+    SandboxError,
+    SandboxLimits,
+    StudentRaised,
+    TimedOut,
+)
+
 _TEMPLATES = Path(__file__).resolve().parent / "templates"
+
+#: the default time limit of loading the file and of each check [s]
+DEFAULT_TIMEOUT = 60.0
+#: the default limit of the child's address space [MiB] (``RLIMIT_AS``)
+DEFAULT_MEMORY_MB = 4096
+#: how long the child may take to start and import avblocks before the
+#: first limit starts counting [s] (not the student's time)
+STARTUP_ALLOWANCE = 300.0
+#: the largest submission file read
+MAX_SOURCE_BYTES = 1 << 20
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check of a lab (or of an instructor's ``--extra-checks``).
+
+    Parameters
+    ----------
+    name : str
+        Shown in the report.
+    fn : callable
+        ``fn(sub) -> note``; raises :class:`Failed` when the student's code is
+        wrong (see the module docstring).
+    points : float
+        What it is worth (> 0).
+    visibility : str
+        Gradescope's visibility (``visible``, ``hidden``, ``after_due_date``,
+        ``after_published``).
+    """
+
+    name: str
+    fn: object
+    points: float = 1.0
+    visibility: str = "visible"
+
+    def __post_init__(self):
+        if not (isinstance(self.name, str) and self.name.strip()):
+            raise ValueError(f"a check's name is a non-empty text, got {self.name!r}")
+        if not callable(self.fn):
+            raise ValueError(f"check {self.name!r}: fn is not callable")
+        p = self.points
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not (
+                math.isfinite(p) and p > 0):
+            raise ValueError(f"check {self.name!r}: points must be a finite number > 0, "
+                             f"got {p!r}")
+        if self.visibility not in VISIBILITY:
+            raise ValueError(f"check {self.name!r}: visibility must be one of {VISIBILITY}, "
+                             f"got {self.visibility!r}")
+
+
+def as_check(entry) -> Check:
+    """A :class:`Check` from a lab's ``checks`` entry: a Check, ``(name, fn)``
+    or ``(name, fn, points)``."""
+    if isinstance(entry, Check):
+        return entry
+    return Check(*entry)
 
 
 @dataclass(frozen=True)
@@ -50,8 +136,9 @@ class Lab:
         One line for ``avblocks lab list``.
     names : tuple of str
         What the student's file must define (a block class, a function).
-    checks : list of (str, callable)
-        ``(name, check(module) -> note)``, run in order.
+    checks : list
+        ``(name, check(sub) -> note)`` pairs or :class:`Check` objects, run
+        in order.
     """
 
     number: int
@@ -60,335 +147,22 @@ class Lab:
     names: tuple = ()
     checks: list = field(default_factory=list, compare=False)
 
+    def __post_init__(self):
+        clash = RESERVED.intersection(self.names)
+        if clash:
+            raise ValueError(f"lab {self.number}: {sorted(clash)} are the grader's own names")
+
     @property
     def template(self) -> Path:
         """The template file (copied by ``avblocks lab start``)."""
         return _TEMPLATES / f"lab{self.number}_{self.name}.py"
 
-
-class Failed(Exception):
-    """A check's verdict: the student's code ran but gave the wrong answer."""
-
-
-@dataclass
-class CheckResult:
-    """One check of one submission."""
-
-    name: str
-    passed: bool
-    message: str = ""
+    def all_checks(self) -> list[Check]:
+        """The checks as :class:`Check` objects."""
+        return [as_check(c) for c in self.checks]
 
 
-@dataclass
-class Report:
-    """Every check of one submission."""
-
-    lab: int
-    file: str
-    checks: list[CheckResult] = field(default_factory=list)
-
-    @property
-    def passed(self) -> bool:
-        return bool(self.checks) and all(c.passed for c in self.checks)
-
-    @property
-    def score(self) -> tuple[int, int]:
-        return sum(c.passed for c in self.checks), len(self.checks)
-
-    def as_dict(self) -> dict:
-        ok, total = self.score
-        return {"lab": self.lab, "file": self.file, "passed": self.passed,
-                "checks_passed": ok, "checks_total": total,
-                "checks": [asdict(c) for c in self.checks]}
-
-    def text(self) -> str:
-        ok, total = self.score
-        lines = [f"lab {self.lab}: {self.file}"]
-        for c in self.checks:
-            mark = "PASS" if c.passed else "FAIL"
-            msg = c.message.replace("\n", "\n        ")
-            lines.append(f"  {mark}  {c.name}" + (f": {msg}" if msg else ""))
-        lines.append(f"{ok} of {total} checks passed" + ("" if ok == total else
-                                                         "; see the FAIL lines above"))
-        return "\n".join(lines)
-
-
-def where_in(path, exc: BaseException) -> str:
-    """`` (line N of FILE, in FUNC)`` for the deepest frame of ``exc`` in the
-    student's file, or ``""``."""
-    path = str(Path(path).resolve())
-    spot = ""
-    for fr in traceback.extract_tb(exc.__traceback__):
-        try:
-            same = str(Path(fr.filename).resolve()) == path
-        except (OSError, ValueError):
-            same = False
-        if same:
-            spot = f" (line {fr.lineno} of {Path(path).name}, in {fr.name})"
-    return spot
-
-
-def describe(exc: BaseException, path) -> str:
-    """One line for an exception raised by the student's code."""
-    kind = type(exc).__name__
-    msg = " ".join(str(exc).split()) or "(no message)"
-    spot = where_in(path, exc)
-    if isinstance(exc, NotImplementedError):
-        return f"not written yet: NotImplementedError: {msg}{spot}"
-    if not spot:
-        return f"the check could not use what your code returned: {kind}: {msg}"
-    return f"your code raised {kind}: {msg}{spot}"
-
-
-def load(path):
-    """Execute the student's file as a fresh module; (module, None) or
-    (None, message). Its prints are swallowed (they would mix with the
-    report, and break ``--json``)."""
-    path = Path(path)
-    if not path.is_file():
-        return None, f"no such file: {path}"
-    name = f"avblocks_lab_submission_{uuid.uuid4().hex}"
-    try:
-        spec = importlib.util.spec_from_file_location(name, path)
-        mod = importlib.util.module_from_spec(spec)
-        with contextlib.redirect_stdout(io.StringIO()):
-            spec.loader.exec_module(mod)
-    except KeyboardInterrupt:
-        raise
-    except BaseException as e:      # noqa: BLE001 -- the student's code: report, never crash
-        if isinstance(e, SyntaxError):
-            return None, f"the file does not parse: SyntaxError: {e.msg} (line {e.lineno})"
-        return None, f"loading the file: {describe(e, path)}"
-    finally:
-        sys.modules.pop(name, None)
-    return mod, None
-
-
-#: the default time limit of one check of a student's file [s]
-DEFAULT_TIMEOUT = 60.0
-#: the default limit of the child's address space [MiB] (``RLIMIT_AS``)
-DEFAULT_MEMORY_MB = 4096
-#: how long the child may take to start and import avblocks before the
-#: first limit starts counting [s] (not the student's time)
-STARTUP_ALLOWANCE = 300.0
-
-
-def run_checks_here(lab, path, emit=None) -> Report:
-    """Load ``path`` and run every check of ``lab`` on it in this process
-    (no time or memory limit: :func:`run_checks` is the guarded form).
-
-    ``emit(kind, value)``, when given, is told ``("start", check name)``
-    before each check (``"load"`` first) and ``("result", CheckResult)``
-    after it."""
-    emit = emit or (lambda kind, value: None)
-    report = Report(lab=lab.number, file=str(path))
-
-    def add(result):
-        report.checks.append(result)
-        emit("result", result)
-
-    emit("start", "load")
-    mod, err = load(path)
-    if mod is None:
-        add(CheckResult("load", False, err))
-        return report
-    missing = [n for n in lab.names if not hasattr(mod, n)]
-    if missing:
-        add(CheckResult(
-            "load", False, f"the file defines no {', '.join(missing)} (expected: "
-            f"{', '.join(lab.names)}, as in the template `avblocks lab start {lab.number}`)"))
-        return report
-    for name, fn in lab.checks:
-        emit("start", name)
-        try:
-            with np.errstate(all="ignore"), contextlib.redirect_stdout(io.StringIO()):
-                note = fn(mod)
-            add(CheckResult(name, True, note or ""))
-        except Failed as e:
-            add(CheckResult(name, False, str(e)))
-        except KeyboardInterrupt:
-            raise
-        except BaseException as e:  # noqa: BLE001 -- the student's code: report, never crash
-            add(CheckResult(name, False, _error_message(e, path)))
-    return report
-
-
-def _child():
-    """The child process of :func:`run_checks` (``python -c``): reads
-    ``(lab, path, memory_mb)`` pickled from stdin, sends its results over
-    the stdout it was started with, then points fds 1 and 2 at the null
-    device (the student's prints go nowhere) and limits its address space."""
-    import pickle
-    from multiprocessing.connection import Connection
-
-    lab, path, memory_mb = pickle.load(sys.stdin.buffer)
-    conn = Connection(os.dup(1), readable=False)
-    null = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(null, 1)
-    os.dup2(null, 2)
-    if memory_mb:
-        try:
-            import resource
-            limit = int(memory_mb) * 2 ** 20
-            _, hard = resource.getrlimit(resource.RLIMIT_AS)
-            if hard != resource.RLIM_INFINITY:
-                limit = min(limit, hard)
-            resource.setrlimit(resource.RLIMIT_AS, (limit, hard))
-        except (ImportError, ValueError, OSError):   # Windows, or not allowed: no limit
-            pass
-    conn.send(("ready", None))
-    try:
-        run_checks_here(lab, path, emit=lambda kind, value: conn.send((kind, value)))
-    except KeyboardInterrupt:
-        return
-    conn.send(("done", None))
-
-
-def _start_child(lab, path, memory_mb):
-    """A ``python -c`` child running :func:`_child` (not multiprocessing:
-    its spawn re-imports the caller's ``__main__``, which fails for a script
-    read from stdin and re-runs an unguarded script), and the connection its
-    results come on."""
-    import pickle
-    import subprocess
-    from multiprocessing.connection import Connection
-
-    src = str(Path(__file__).resolve().parents[2])        # the folder holding avblocks
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([src] + [p for p in (env.get("PYTHONPATH"),) if p])
-    proc = subprocess.Popen(
-        [sys.executable, "-c", "from avblocks.labs.grading import _child; _child()"],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, env=env)
-    try:
-        proc.stdin.write(pickle.dumps((lab, str(path), memory_mb)))
-        proc.stdin.close()
-    except OSError:
-        pass
-    return proc, Connection(os.dup(proc.stdout.fileno()), writable=False)
-
-
-def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_MB) -> Report:
-    """Load ``path`` and run every check of ``lab`` on it, in a child process.
-
-    Parameters
-    ----------
-    lab : Lab
-        The lab whose checks run.
-    path : str or Path
-        The student's file.
-    timeout : float or None
-        Seconds allowed to loading the file and to each check (``None`` or 0:
-        no limit). A check that runs longer is stopped (the child is killed)
-        and fails with ``timed out after ... s in check '...'``; the checks
-        after it are reported as not run.
-    memory_mb : int or None
-        The child's address-space limit in MiB (``RLIMIT_AS``, where the
-        platform has it; ``None`` or 0: no limit). A larger allocation raises
-        ``MemoryError`` in the student's code, reported like any exception.
-
-    Returns
-    -------
-    Report
-        Every check's verdict. The child's prints are discarded.
-    """
-    timeout = float(timeout) if timeout else None
-    report = Report(lab=lab.number, file=str(path))
-    proc, recv = _start_child(lab, path, memory_mb)
-    current, started = None, False
-    deadline = time.monotonic() + STARTUP_ALLOWANCE
-    try:
-        while True:
-            left = None if (started and timeout is None) else max(0.0, deadline - time.monotonic())
-            if not recv.poll(left):
-                _stop(proc)
-                if not started:
-                    report.checks.append(CheckResult("load", False, (
-                        f"the grader's child process did not start within "
-                        f"{STARTUP_ALLOWANCE:g} s")))
-                else:
-                    _timed_out(report, lab, current, timeout)
-                break
-            try:
-                kind, value = recv.recv()
-            except (EOFError, OSError):
-                try:
-                    code = proc.wait(5)
-                except Exception:      # noqa: BLE001 -- still running: stopped below
-                    code = None
-                _died(report, lab, current, code)
-                break
-            if kind == "ready":
-                started = True
-            elif kind == "start":
-                current = value
-                if timeout is not None:
-                    deadline = time.monotonic() + timeout
-            elif kind == "result":
-                if "MemoryError" in value.message and memory_mb:
-                    value.message += (f" (the grader allows {int(memory_mb)} MiB: "
-                                      f"--memory)")
-                report.checks.append(value)
-            else:                                            # done
-                break
-    finally:
-        recv.close()
-        proc.stdout.close()
-        try:
-            proc.wait(5)
-        except Exception:              # noqa: BLE001 -- still running: stop it
-            pass
-        _stop(proc)
-    return report
-
-
-def _stop(proc):
-    if proc.poll() is None:
-        proc.kill()
-    proc.wait()
-
-
-def _not_run(report, lab, after, why):
-    done = {c.name for c in report.checks}
-    if after == "load":
-        return
-    for name, _ in lab.checks:
-        if name not in done:
-            report.checks.append(CheckResult(name, False, f"not run: {why}"))
-
-
-def _timed_out(report, lab, current, timeout):
-    where = "while loading the file" if current == "load" else f"in check '{current}'"
-    report.checks.append(CheckResult(current, False, (
-        f"timed out after {timeout:g} s {where} of lab {lab.number}: the "
-        f"check was stopped (an endless loop, or a step far too slow?); "
-        f"raise the limit with --timeout SECONDS")))
-    _not_run(report, lab, current, f"check '{current}' timed out")
-
-
-def _died(report, lab, current, code):
-    how = (f"signal {-code}" if code is not None and code < 0 else f"exit status {code}")
-    report.checks.append(CheckResult(current or "load", False, (
-        f"the process running your code ended ({how}) in check '{current}' of lab "
-        f"{lab.number}: a call to os._exit, a crash in compiled code, or out of memory")))
-    _not_run(report, lab, current, f"the process ended in check '{current}'")
-
-
-def _error_message(e, path) -> str:
-    from ..core.errors import AvError
-    cause = e.__cause__ or e.__context__
-    if isinstance(e, AvError) and cause is not None and not isinstance(cause, AvError):
-        # the simulator caught the student's exception and named the block
-        what = "not written yet" if isinstance(cause, NotImplementedError) else \
-            "your code raised an error"
-        return (f"{what} while the diagram ran: {' '.join(str(e).split())}"
-                f"{where_in(path, cause)}")
-    if isinstance(e, AvError):
-        # the library's own message names block, port, expected and found
-        return f"avblocks refused it: {' '.join(str(e).split())}{where_in(path, e)}"
-    return describe(e, path)
-
-
-# ------------------------------------------------------------ helpers for checks
+# ------------------------------------------------------------------ helpers for checks
 def fmt(a, digits=4) -> str:
     """A short text for a number or an array."""
     a = np.asarray(a, dtype=float)
@@ -396,14 +170,40 @@ def fmt(a, digits=4) -> str:
                            threshold=12)
 
 
-def compare(port, expected, found, *, atol, case="", rtol=0.0):
-    """Raise :class:`Failed` naming the port, the worst agent (row), the
-    case, and expected against found, unless they agree."""
-    expected = np.asarray(expected, dtype=float)
+def _fmt_pair(expected, found, digits=4):
+    """Texts of ``expected`` and ``found`` with enough digits to tell them
+    apart (up to 17)."""
+    e, f = np.asarray(expected, dtype=float), np.asarray(found, dtype=float)
+    d = digits
+    while d < 17 and np.array_equal(np.round(e, d), np.round(f, d)) and not np.array_equal(e, f):
+        d += 2
+    return fmt(e, d), fmt(f, d)
+
+
+def _low_precision(a) -> bool:
+    return isinstance(a, np.ndarray) and a.dtype.kind == "f" and a.dtype.itemsize < 8
+
+
+def _as_numbers(port, value, case):
+    if isinstance(value, (list, tuple)):
+        raise Failed(f"port `{port}`{case}: found a {type(value).__name__}, expected an array "
+                     f"(xp.stack([...], axis=-1) builds one)")
     try:
-        found = np.asarray(found, dtype=float)
+        a = np.asarray(value)
+        if a.dtype.kind not in "biuf":
+            raise TypeError(f"dtype {a.dtype}")
+        return a
     except (TypeError, ValueError) as e:
         raise Failed(f"port `{port}`{case}: found a value that is not numbers ({e})") from None
+
+
+def compare(port, expected, found, *, atol, case="", rtol=0.0):
+    """Raise :class:`Failed` naming the port, the worst agent (row), the
+    case, and expected against found, unless they agree; a float32 result
+    that misses is said to be a dtype problem."""
+    expected = np.asarray(expected, dtype=float)
+    raw = _as_numbers(port, found, case)
+    found = raw.astype(float)
     if found.shape != expected.shape:
         raise Failed(f"port `{port}`{case}: shape {found.shape}, expected {expected.shape}")
     if not np.all(np.isfinite(found)):
@@ -414,16 +214,21 @@ def compare(port, expected, found, *, atol, case="", rtol=0.0):
         return float(np.max(np.abs(found - expected))) if found.size else 0.0
     flat = err.reshape(err.shape[0], -1).max(axis=1) if err.ndim > 1 else err
     i = int(np.argmax(flat))
-    raise Failed(f"port `{port}`{case}, agent {i}: expected {fmt(expected[i])}, "
-                 f"found {fmt(found[i])} (tolerance {atol:g})")
+    if _low_precision(raw):
+        raise Failed(f"port `{port}`{case}: the result is {raw.dtype} (dtype {raw.dtype}), "
+                     f"expected float64: {raw.dtype} keeps about "
+                     f"{np.finfo(raw.dtype).precision} digits, the check needs {atol:g} "
+                     f"(largest error {float(np.max(np.abs(found - expected))):.2g}); compute "
+                     f"in float64 (no dtype=np.float32, no .astype(np.float32))")
+    e_txt, f_txt = _fmt_pair(expected[i], found[i])
+    raise Failed(f"port `{port}`{case}, agent {i}: expected {e_txt}, found {f_txt} "
+                 f"(tolerance {atol:g})")
 
 
 def expect_shape(port, value, shape, case=""):
-    """``value`` as a float array of ``shape``, or :class:`Failed` naming the port."""
-    try:
-        a = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise Failed(f"port `{port}`{case}: found a value that is not numbers ({e})") from None
+    """``value`` as a numeric array of ``shape`` (its dtype kept), or
+    :class:`Failed` naming the port."""
+    a = _as_numbers(port, value, case)
     if a.shape != tuple(shape):
         raise Failed(f"port `{port}`{case}: shape {a.shape}, expected {tuple(shape)}")
     return a
@@ -432,15 +237,503 @@ def expect_shape(port, value, shape, case=""):
 def check_ports(block, *, inputs=None, outputs=None, states=None):
     """Raise :class:`Failed` when ``block`` does not declare these ports with
     these shapes (``{name: shape}``)."""
+    cls = getattr(block, "class_name", type(block).__name__)
     kinds = (("input", inputs, block.input_ports), ("output", outputs, block.output_ports),
              ("continuous state", states, block.continuous_states))
     for kind, want, have in kinds:
         for name, shape in (want or {}).items():
             if name not in have:
-                raise Failed(f"{type(block).__name__} declares no {kind} `{name}` "
+                raise Failed(f"{cls} declares no {kind} `{name}` "
                              f"(has: {', '.join(have) or 'none'})")
             got = have[name].shape if hasattr(have[name], "shape") else None
             if got is not None and tuple(got) != tuple(shape):
-                raise Failed(f"{kind} `{name}` of {type(block).__name__}: shape "
+                raise Failed(f"{kind} `{name}` of {cls}: shape "
                              f"{tuple(got)}, expected {tuple(shape)}")
     return "declared as in the template"
+
+
+# ------------------------------------------------------------------ the submission's text
+def read_submission(path) -> tuple[str | None, str | None]:
+    """``(text, None)`` for a readable submission, ``(None, why)`` otherwise:
+    the file is opened without following a symbolic link, must be a
+    regular file of at most :data:`MAX_SOURCE_BYTES` and UTF-8 text."""
+    path = Path(path)
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
+    try:
+        fd = os.open(path, flags)
+    except FileNotFoundError:
+        return None, f"no such file: {path.name}"
+    except OSError as e:
+        if path.is_symlink():
+            return None, "the file is a symbolic link: submit the .py file itself"
+        return None, f"the file cannot be read ({e.strerror})"
+    try:
+        st = os.fstat(fd)
+        if not stat.S_ISREG(st.st_mode):
+            return None, "not a regular file"
+        if st.st_size > MAX_SOURCE_BYTES:
+            return None, (f"the file holds {st.st_size} bytes, more than a lab's "
+                          f"{MAX_SOURCE_BYTES} (is it the right file?)")
+        chunks, size = [], 0
+        while size <= MAX_SOURCE_BYTES:
+            b = os.read(fd, 1 << 16)
+            if not b:
+                break
+            chunks.append(b)
+            size += len(b)
+        data = b"".join(chunks)
+    finally:
+        os.close(fd)
+    if len(data) > MAX_SOURCE_BYTES:
+        return None, f"the file holds more than {MAX_SOURCE_BYTES} bytes"
+    if b"\x00" in data:
+        return None, ("the file is not Python source text (it holds NUL bytes: a binary "
+                      "file, or a notebook or archive saved as .py?)")
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        return None, (f"the file is not Python source text: byte {e.start} is not UTF-8 "
+                      f"(a binary file, or text saved in another encoding?)")
+    return text, None
+
+
+# ------------------------------------------------------------------ running the checks
+class _Runner:
+    """One submission's sandbox, as the proxies see it."""
+
+    def __init__(self, sandbox, display_name):
+        self.sandbox = sandbox
+        self.display_name = display_name
+
+    def request(self, op, deadline, **fields):
+        return self.sandbox.request(op, deadline, **fields)
+
+
+def _where(rec, name) -> str:
+    line, func = rec.get("line"), rec.get("func")
+    if line is None:
+        return ""
+    return f" (line {line} of {name}" + (f", in {func})" if func else ")")
+
+
+def describe(rec, name, *, memory_mb=None) -> str:
+    """One line for an error record of the student's process (see
+    :func:`avblocks.labs._child.error_record`)."""
+    kind, msg, flags = rec["kind"], rec["message"] or "(no message)", rec["flags"]
+    where = _where(rec, name)
+    if "syntax" in flags:
+        return f"the file does not parse: SyntaxError: {msg} (line {rec.get('line')})"
+    if "not_implemented" in flags:
+        return f"not written yet: NotImplementedError: {msg}{where}"
+    if "readonly" in flags:
+        what = rec.get("readonly") or "inputs"
+        return (f"your code wrote into its {what}{where}: the arrays a block or function "
+                f"is handed (inputs, states) are read-only and must not be changed (in a "
+                f"diagram they belong to the simulator or to another block); compute a new "
+                f"array instead (x = x + dx, xp.where(...), or .copy() first)")
+    if "interrupt" in flags:
+        return (f"your code raised KeyboardInterrupt{where}: an interrupt stopped it "
+                f"(Ctrl-C, or a signal it sent itself); this is not a crash and not memory")
+    if "memory" in flags:
+        lim = f" (the grader allows {int(memory_mb)} MiB: --memory)" if memory_mb else ""
+        return f"your code raised MemoryError: {msg}{where}{lim}"
+    if "too_large" in flags:
+        return f"your code returned too much: {msg}"
+    if "refused" in flags:
+        return f"the grader could not call your code: {msg}"
+    if "avblocks" in flags:
+        cause = rec.get("cause")
+        return f"avblocks refused it: {msg}{where or (_where(cause, name) if cause else '')}"
+    if not where:
+        return f"your code raised {kind}: {msg} (when the grader called it)"
+    return f"your code raised {kind}: {msg}{where}"
+
+
+def _chain(exc):
+    seen, out = set(), []
+    while exc is not None and id(exc) not in seen and len(out) < 20:
+        seen.add(id(exc))
+        out.append(exc)
+        exc = exc.__cause__ or exc.__context__
+    return out
+
+
+def _explain(exc, name, memory_mb):
+    """``(message, fatal)`` for what a check raised: fatal when the
+    student's process is gone or cannot be trusted to answer."""
+    from ..core.errors import AvError, SimulationError
+    chain = _chain(exc)
+    for e in chain:
+        if isinstance(e, (TimedOut, Died, ChannelBroken)):
+            return e, True
+    for e in chain:
+        if isinstance(e, Failed):
+            return str(e), False
+    for e in chain:
+        if isinstance(e, StudentRaised):
+            msg = describe(e.record, name, memory_mb=memory_mb)
+            if isinstance(exc, SimulationError):
+                where = []
+                if exc.block:
+                    where.append(f"block '{exc.block}'")
+                if exc.time is not None:
+                    where.append(f"t = {exc.time:.4g} s")
+                msg += " while the diagram ran" + (f" ({', '.join(where)})" if where else "")
+            return msg, False
+    if isinstance(exc, AvError):
+        return f"avblocks refused it: {' '.join(str(exc).split())}", False
+    text = " ".join(str(exc).split()) or "(no message)"
+    return f"the check could not use what your code returned: {type(exc).__name__}: " \
+           f"{text[:300]}", False
+
+
+def _stopped(report, checks, current, why):
+    done = {c.name for c in report.checks}
+    for c in checks:
+        if c.name not in done and c.name != current:
+            report.checks.append(CheckResult(c.name, False, f"not run: {why}", c.points,
+                                             c.visibility))
+
+
+def _fatal_message(err, lab, current, timeout, limits):
+    where = "while loading the file" if current == "load" else f"in check '{current}'"
+    if isinstance(err, TimedOut):
+        return (f"timed out after {timeout:g} s {where} of lab {lab.number}: the check was "
+                f"stopped (an endless loop, or a step far too slow?); raise the limit with "
+                f"--timeout SECONDS"), f"check '{current}' timed out"
+    if isinstance(err, Died):
+        code = err.returncode
+        sig = -code if code is not None and code < 0 else None
+        import signal as _signal
+        names = {getattr(_signal, n, None): n for n in ("SIGKILL", "SIGXCPU", "SIGSEGV",
+                                                         "SIGBUS", "SIGABRT", "SIGINT",
+                                                         "SIGTERM")}
+        why = {"SIGKILL": "it was killed: out of memory, or a limit of the grader",
+               "SIGXCPU": f"it used up its {limits.cpu_s:g} s of CPU time (the grader's limit)",
+               "SIGSEGV": "a crash in compiled code, or a recursion too deep for the C stack",
+               "SIGBUS": "a crash in compiled code", "SIGABRT": "a crash in compiled code",
+               "SIGINT": "an interrupt (SIGINT) it did not handle",
+               "SIGTERM": "a termination signal (SIGTERM)"}.get(names.get(sig)) if sig else None
+        why = why or "a call to os._exit, a crash in compiled code, or out of memory"
+        return (f"the process running your code ended ({err.status}) {where} of lab "
+                f"{lab.number}: {why}"), f"the process ended in check '{current}'"
+    return (f"the process running your code broke the grader's channel {where} of lab "
+            f"{lab.number}: {err}; nothing it sends is trusted after that"), \
+        f"the channel broke in check '{current}'"
+
+
+@contextlib.contextmanager
+def _interrupts():
+    """Remember a Ctrl-C (SIGINT) or SIGTERM that lands during a check:
+    ``simulate`` keeps what it simulated when interrupted and returns, so
+    the grader checks the list after each check and stops (the ``finally``
+    blocks kill the student's process and lab 6's emulator)."""
+    got: list = []
+    if threading.current_thread() is not threading.main_thread():
+        yield got
+        return
+
+    def handler(signum, frame):
+        got.append(signum)
+        raise KeyboardInterrupt
+
+    old = {}
+    for sig in (signal.SIGINT, getattr(signal, "SIGTERM", None)):
+        if sig is None:
+            continue
+        try:
+            old[sig] = signal.signal(sig, handler)
+        except (ValueError, OSError):
+            pass
+    try:
+        yield got
+    finally:
+        for sig, h in old.items():
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(sig, h)
+
+
+def limits_for(timeout, memory_mb, n_checks) -> SandboxLimits:
+    """The student's process's limits for ``n_checks`` checks of ``timeout``
+    seconds each: ``memory_mb`` of address space, CPU time for all of them."""
+    return SandboxLimits(memory_mb=int(memory_mb or 0),
+                         cpu_s=max(60.0, float(timeout) * (n_checks + 2)))
+
+
+def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_MB,
+               seed=None, extra=(), source=None, limits=None, on_result=None,
+               sandbox=None) -> Report:
+    """Grade ``path`` against ``lab``: the student's code runs in a
+    :class:`~avblocks.labs.sandbox.Sandbox`, the checks here.
+
+    Parameters
+    ----------
+    lab : Lab
+        The lab whose checks run.
+    path : str or Path
+        The student's file (its name is what messages quote).
+    timeout : float
+        Seconds allowed to loading the file and to each check (finite, > 0).
+        A check that runs longer is stopped (the student's process is
+        killed) and fails with ``timed out after ... s in check '...'``; the
+        checks after it are reported as not run. ``None`` or 0 (older
+        callers): :data:`DEFAULT_TIMEOUT`.
+    memory_mb : int or None
+        The address-space limit of the student's process in MiB
+        (``RLIMIT_AS`` where the platform has it); ``None`` or 0: none.
+    seed : int, optional
+        Draw the cases from this seed (``Submission.rng``) instead of the
+        lab page's fixed cases.
+    extra : sequence of Check
+        More checks (an instructor's ``--extra-checks``), run after the lab's.
+    source : str, optional
+        The file's text, already read (a folder run reads every file first).
+    limits : SandboxLimits, optional
+        The other limits of the student's process (default
+        :class:`SandboxLimits` with ``memory_mb``).
+    on_result : callable, optional
+        ``on_result(kind, value)``: ``("start", check name)`` before each
+        check (``"load"`` first) and ``("result", CheckResult)`` after it.
+    sandbox : Sandbox, optional
+        A student's process already started (:func:`grade_all` starts the
+        next one while a submission is graded, where that is safe); closed
+        here.
+
+    Returns
+    -------
+    Report
+        Every check's verdict, with what the grader could set of the limits.
+    """
+    timeout = float(timeout) if timeout else DEFAULT_TIMEOUT
+    if not (math.isfinite(timeout) and timeout > 0):
+        raise ValueError(f"timeout must be a finite number of seconds > 0, got {timeout!r}")
+    checks = lab.all_checks() + [as_check(c) for c in extra]
+    limits = limits or limits_for(timeout, memory_mb, len(checks))
+    emit = on_result or (lambda kind, value: None)
+    with _interrupts() as interrupted:
+        return _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit,
+                    sandbox, interrupted)
+
+
+def _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit, sandbox,
+         interrupted):
+    report = Report(lab=lab.number, file=str(path), seed=seed)
+    name = Path(path).name
+
+    def add(result):
+        report.checks.append(result)
+        emit("result", result)
+
+    def load_failed(msg):
+        add(CheckResult("load", False, msg, 0.0))
+        for c in checks:
+            report.checks.append(CheckResult(c.name, False, "not run: the file did not load",
+                                             c.points, c.visibility))
+
+    emit("start", "load")
+    if source is None:
+        source, err = read_submission(path)
+        if err:
+            if sandbox is not None:
+                sandbox.close()
+            load_failed(err)
+            return report
+    if sandbox is None:
+        sandbox = Sandbox(limits)
+    runner = _Runner(sandbox, name)
+    try:
+        if sandbox.run is None:
+            sandbox.start()
+        try:
+            report.limits = sandbox.wait_ready(time.monotonic() + STARTUP_ALLOWANCE)
+        except TimedOut:
+            load_failed(f"the grader's child process did not start within "
+                        f"{STARTUP_ALLOWANCE:g} s")
+            return report
+        except (Died, ChannelBroken) as e:
+            load_failed(f"the grader's child process failed to start ({e})")
+            return report
+        try:
+            found = sandbox.request("load", time.monotonic() + timeout, source=source,
+                                    filename=str(Path(path).resolve()), names=list(lab.names))
+        except StudentRaised as e:
+            load_failed("loading the file: " + describe(e.record, name, memory_mb=memory_mb)
+                        if "syntax" not in e.record["flags"] else
+                        describe(e.record, name))
+            return report
+        except SandboxError as e:
+            msg, _ = _fatal_message(e, lab, "load", timeout, limits)
+            load_failed(msg)
+            return report
+        names = found.get("names", {}) if isinstance(found, dict) else {}
+        names = {k: v for k, v in names.items() if k in lab.names} if isinstance(names, dict) \
+            else {}
+        missing = [n for n in lab.names if n not in names]
+        if missing:
+            load_failed(f"the file defines no {', '.join(missing)} (expected: "
+                        f"{', '.join(lab.names)}, as in the template `avblocks lab start "
+                        f"{lab.number}`)")
+            return report
+        for check in checks:
+            emit("start", check.name)
+            sub = Submission(runner, names, seed=seed, check=check.name,
+                             deadline=time.monotonic() + timeout)
+            try:
+                with np.errstate(all="ignore"):
+                    note = check.fn(sub)
+                if interrupted:
+                    raise KeyboardInterrupt
+                add(CheckResult(check.name, True, _one_line(note or ""), check.points,
+                                check.visibility))
+            except KeyboardInterrupt:
+                raise
+            except BaseException as e:  # noqa: BLE001 - every failure is one line
+                if interrupted:
+                    raise KeyboardInterrupt from None
+                msg, fatal = _explain(e, name, memory_mb)
+                if fatal:
+                    text, why = _fatal_message(msg, lab, check.name, timeout, limits)
+                    add(CheckResult(check.name, False, text, check.points, check.visibility))
+                    _stopped(report, checks, check.name, why)
+                    break
+                add(CheckResult(check.name, False, _one_line(msg), check.points,
+                                check.visibility))
+    finally:
+        sandbox.close()
+    return report
+
+
+def _one_line(text) -> str:
+    from .sandbox import _ANSI
+    text = "".join(c if c.isprintable() else " " for c in _ANSI.sub("", str(text)))
+    text = " ".join(text.split())
+    return text if len(text) <= 2000 else text[:1997] + "..."
+
+
+def run_checks_here(lab, path, emit=None) -> Report:
+    """Kept for older scripts: the same as :func:`run_checks` (the student's
+    code no longer runs in the grader's process, whatever the caller asks),
+    with ``emit(kind, value)`` told ``("start", check name)`` and
+    ``("result", CheckResult)`` as the checks go."""
+    return run_checks(lab, path, on_result=emit)
+
+
+# ------------------------------------------------------------------ a folder
+def _snapshot(folder) -> dict:
+    """``{name: (size, mtime_ns, inode)}`` of the files directly in ``folder``."""
+    out = {}
+    try:
+        with os.scandir(folder) as it:
+            for e in it:
+                try:
+                    st = e.stat(follow_symlinks=False)
+                except OSError:
+                    continue
+                out[e.name] = (st.st_size, st.st_mtime_ns, st.st_ino, stat.S_IFMT(st.st_mode))
+    except OSError:
+        pass
+    return out
+
+
+def _package_snapshot() -> dict:
+    """``{path: (size, mode, SHA-256)}`` of every file of the installed
+    avblocks package (the grader's own code; a time stamp alone may change,
+    which Landlock does not prevent and which changes nothing)."""
+    import hashlib
+    root = Path(__file__).resolve().parents[1]
+    out = {}
+    for dirpath, dirs, files in os.walk(root):
+        dirs[:] = [d for d in dirs if d not in ("__pycache__", "node_modules")]
+        for f in files:
+            p = os.path.join(dirpath, f)
+            try:
+                st = os.stat(p, follow_symlinks=False)
+                with open(p, "rb") as fh:
+                    digest = hashlib.sha256(fh.read()).hexdigest()
+            except OSError:
+                continue
+            out[p] = (st.st_size, st.st_mode, digest)
+    return out
+
+
+class GraderTampered(Exception):
+    """The grader's own files changed while it graded: its results cannot
+    be trusted (exit status 2)."""
+
+
+def grade_all(lab, paths, *, seeds=None, **kw) -> list[Report]:
+    """Grade several files of one folder. Every file is read before any
+    student's code runs (each is graded from that copy, whatever a
+    submission writes later); after each submission the folder and the
+    grader's own package are compared with their state before it, and a
+    submission that changed them fails (``files``), or stops the run when
+    the grader's files changed (:class:`GraderTampered`).
+
+    ``seeds``: one seed (or None) per path."""
+    from . import oscalls
+    paths = [Path(p) for p in paths]
+    seeds = list(seeds) if seeds is not None else [None] * len(paths)
+    texts = [read_submission(p) for p in paths]
+    folders = sorted({p.parent for p in paths})
+    before = {f: _snapshot(f) for f in folders}
+    pkg = _package_snapshot()
+    reports = []
+    n_checks = len(lab.all_checks()) + len(kw.get("extra", ()))
+    limits = kw.pop("limits", None) or limits_for(kw.get("timeout") or DEFAULT_TIMEOUT,
+                                                  kw.get("memory_mb", DEFAULT_MEMORY_MB),
+                                                  n_checks)
+    # the next student's process starts while this one is graded, only where
+    # no student's process can reach another (Landlock ABI 6+, a subreaper)
+    ahead = oscalls.full_isolation()
+    nxt = None
+    try:
+        for i, (p, (text, err), seed) in enumerate(zip(paths, texts, seeds)):
+            sandbox, nxt = nxt, None
+            if ahead and i + 1 < len(paths) and texts[i + 1][1] is None:
+                nxt = Sandbox(limits).start()
+            reports.append(_grade_one(lab, p, text, err, seed, sandbox, limits, folders,
+                                      before, pkg, kw))
+    finally:
+        if nxt is not None:
+            nxt.close()
+    return reports
+
+
+def _grade_one(lab, p, text, err, seed, sandbox, limits, folders, before, pkg, kw):
+    """One file of :func:`grade_all`, and the check of what it changed."""
+    if err:
+        if sandbox is not None:
+            sandbox.close()
+        r = Report(lab=lab.number, file=str(p), seed=seed)
+        r.checks.append(CheckResult("load", False, err, 0.0))
+        for c in lab.all_checks() + [as_check(c) for c in kw.get("extra", ())]:
+            r.checks.append(CheckResult(c.name, False, "not run: the file did not load",
+                                        c.points, c.visibility))
+        return r
+    r = run_checks(lab, p, seed=seed, source=text, limits=limits, sandbox=sandbox, **kw)
+    changed = []
+    for f in folders:
+        now = _snapshot(f)
+        changed += sorted(n for n in set(now) | set(before[f])
+                          if now.get(n) != before[f].get(n))
+        before[f] = now
+    if changed:
+        for c in r.checks:
+            if c.passed:
+                c.passed = False
+                c.message = "void: " + c.message
+        r.checks.append(CheckResult("files", False, (
+            f"the folder changed while this submission ran ({', '.join(changed[:5])}"
+            f"{' ...' if len(changed) > 5 else ''}): a submission must not write files; "
+            f"every other file was graded from the copy read before any code ran"), 0.0))
+    if _package_snapshot() != pkg:
+        raise GraderTampered(
+            f"the grader's own files (the avblocks package) changed while {p.name} ran; "
+            f"reinstall avblocks and grade in a read-only installation")
+    return r
+
+
+__all__ = ["Check", "CheckResult", "DEFAULT_MEMORY_MB", "DEFAULT_TIMEOUT", "Failed",
+           "GraderTampered", "Lab", "Report", "as_check", "check_ports", "compare",
+           "describe", "expect_shape", "fmt", "grade_all", "read_submission", "run_checks",
+           "run_checks_here", "seed_for"]

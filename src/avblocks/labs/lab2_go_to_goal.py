@@ -5,6 +5,9 @@ kinematics of the look-ahead point (its velocity under the student's
 command must be ``K (goal - p)``, or have length ``v_max`` when saturated);
 the library's ``controllers.PointToPoint`` in closed loop; convergence of
 every look-ahead point to its goal.
+
+With a seed (``--seed``, ``--student``) the poses, goals, look-ahead
+distance, gain and speed limit are drawn per student.
 """
 
 from __future__ import annotations
@@ -18,8 +21,8 @@ from ..vehicles import Unicycle
 from .grading import Failed, Lab, check_ports, compare, expect_shape, fmt
 
 
-def _poses(n, seed, spread=5.0):
-    rng = np.random.default_rng(seed)
+def _poses(sub, n, seed, spread=5.0):
+    rng = sub.rng(seed)
     return np.column_stack([rng.uniform(-spread, spread, (n, 2)),
                             rng.uniform(-np.pi, np.pi, n)])
 
@@ -39,16 +42,23 @@ def _point_velocity(pose, cmd, d):
     return np.column_stack([v * c - d * w * s, v * s + d * w * c])
 
 
-def check_ports_(mod):
-    b = mod.GoToGoal(np.zeros((4, 2)))
+def check_ports_(sub):
+    b = sub.GoToGoal(np.zeros((4, 2)))
     return check_ports(b, inputs={"pose": (4, 3)}, outputs={"cmd": (4, 2)})
 
 
-def check_law(mod):
-    n, d, k = 6, 0.2, 0.8
-    pose = _poses(n, 1, spread=1.0)
-    goal = np.random.default_rng(2).uniform(-1, 1, (n, 2))
-    b = mod.GoToGoal(goal, d=d, gain=k, v_max=100.0)        # never saturated here
+def _gains(sub, k, fixed):
+    rng = sub.rng(100 + k)
+    return sub.pick(fixed, lambda: (round(float(rng.uniform(0.1, 0.3)), 3),
+                                    round(float(rng.uniform(0.6, 2.0)), 3)))
+
+
+def check_law(sub):
+    n = 6
+    d, k = _gains(sub, 1, (0.2, 0.8))
+    pose = _poses(sub, n, 1, spread=1.0)
+    goal = sub.rng(2).uniform(-1, 1, (n, 2))
+    b = sub.GoToGoal(goal, d=d, gain=k, v_max=100.0)        # never saturated here
     cmd = _cmd(b, pose)
     c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
     w = k * (goal - pose[:, :2] - d * np.column_stack([c, s]))
@@ -60,11 +70,12 @@ def check_law(mod):
     return "v, omega from the inverse map; dp/dt = K (goal - p)"
 
 
-def check_saturation(mod):
-    n, d, k, vmax = 5, 0.1, 2.0, 0.5
-    pose = _poses(n, 3)
-    goal = pose[:, :2] + 40.0 * np.random.default_rng(4).normal(size=(n, 2))   # far away
-    cmd = _cmd(mod.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose)
+def check_saturation(sub):
+    n, vmax = 5, sub.pick(0.5, lambda: round(float(sub.rng(7).uniform(0.3, 1.5)), 3))
+    d, k = _gains(sub, 2, (0.1, 2.0))
+    pose = _poses(sub, n, 3)
+    goal = pose[:, :2] + 40.0 * sub.rng(4).normal(size=(n, 2))   # far away
+    cmd = _cmd(sub.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose)
     pdot = _point_velocity(pose, cmd, d)
     p = pose[:, :2] + d * np.column_stack([np.cos(pose[:, 2]), np.sin(pose[:, 2])])
     e = goal - p
@@ -74,20 +85,21 @@ def check_saturation(mod):
     return f"far goals: the point moves at v_max = {vmax} straight at its goal"
 
 
-def _closed_loop(block, pose0, t_final):
+def _closed_loop(block, pose0, t_final, dt=0.01):
     dg = Diagram()
     fleet = dg.add(Unicycle(pose0=pose0), name="fleet")
     drive = dg.add(block, name="drive")
     dg.connect(fleet.pose, drive.pose)
     dg.connect(drive.cmd, fleet.cmd)
-    return simulate(dg, t_final, dt=0.01, log=[fleet.pose])[fleet.pose]
+    return simulate(dg, t_final, dt=dt, log=[fleet.pose])[fleet.pose]
 
 
-def check_against_library(mod):
-    n, d, k, vmax = 8, 0.15, 1.2, 1.0
-    pose0 = _poses(n, 5)
-    goal = np.random.default_rng(6).uniform(-6, 6, (n, 2))
-    mine = _closed_loop(mod.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 6.0)
+def check_against_library(sub):
+    n, vmax = 8, 1.0
+    d, k = _gains(sub, 3, (0.15, 1.2))
+    pose0 = _poses(sub, n, 5)
+    goal = sub.rng(6).uniform(-6, 6, (n, 2))
+    mine = _closed_loop(sub.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 6.0)
     ref = _closed_loop(PointToPoint(goal[:, None, :], d=d, gain=k, v_max=vmax, radius=1e-9),
                        pose0, 6.0)
     compare("pose (of the vehicles driven)", ref[-1], mine[-1], atol=1e-8,
@@ -95,11 +107,13 @@ def check_against_library(mod):
     return "the same closed loop as controllers.PointToPoint to 1e-8 m"
 
 
-def check_converges(mod):
-    n, d, k, vmax = 10, 0.1, 1.0, 1.0
-    pose0 = _poses(n, 7)
-    goal = np.random.default_rng(8).uniform(-5, 5, (n, 2))
-    final = _closed_loop(mod.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 30.0)[-1]
+def check_converges(sub):
+    n, vmax = 10, 1.0
+    d, k = sub.pick((0.1, 1.0), lambda: (round(float(sub.rng(9).uniform(0.1, 0.3)), 3),
+                                         round(float(sub.rng(10).uniform(0.8, 2.0)), 3)))
+    pose0 = _poses(sub, n, 7)
+    goal = sub.rng(8).uniform(-5, 5, (n, 2))
+    final = _closed_loop(sub.GoToGoal(goal, d=d, gain=k, v_max=vmax), pose0, 30.0, dt=0.02)[-1]
     p = final[:, :2] + d * np.column_stack([np.cos(final[:, 2]), np.sin(final[:, 2])])
     miss = np.linalg.norm(p - goal, axis=1)
     if np.all(miss < 1e-3):

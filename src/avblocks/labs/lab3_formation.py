@@ -6,6 +6,9 @@ and D, matrix products per agent); the library's
 exact motion, which must give ``dl/dt = K_l (l_ref - l)`` and
 ``dalpha/dt = K_alpha (alpha_ref - alpha)``; the closed loop behind a
 turning leader, whose distance error decays exactly as ``exp(-K_l t)``.
+
+With a seed (``--seed``, ``--student``) the configurations, references,
+off-axis distance, gains and the leader's command are drawn per student.
 """
 
 from __future__ import annotations
@@ -44,34 +47,44 @@ def _truth(pose, pose_l, cmd_l, l_ref, a_ref, d, kl, ka):
     return out
 
 
-def _case(n, seed):
-    rng = np.random.default_rng(seed)
+def _case(sub, n, seed):
+    rng = sub.rng(seed)
     pose_l = np.column_stack([rng.uniform(-3, 3, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
     pose = pose_l + np.column_stack([rng.uniform(-3, 3, (n, 2)), rng.uniform(-1, 1, n)])
     cmd_l = np.column_stack([rng.uniform(0.2, 1.5, n), rng.uniform(-0.5, 0.5, n)])
     return pose, pose_l, cmd_l
 
 
-def _call(mod, pose, pose_l, cmd_l, *args):
-    out = mod.follower_cmd(pose.copy(), pose_l.copy(), cmd_l.copy(), *args, xp=np)
+def _call(sub, pose, pose_l, cmd_l, *args):
+    out = sub.follower_cmd(pose.copy(), pose_l.copy(), cmd_l.copy(), *args, xp=np)
     return expect_shape("cmd (follower_cmd)", out, (len(pose), 2))
 
 
-def check_law(mod):
-    pose, pose_l, cmd_l = _case(7, 1)
-    args = (1.5, 0.4, 0.2, 1.3, 0.8)
-    found = _call(mod, pose, pose_l, cmd_l, *args)
+def _params(sub, k, fixed):
+    """(l_ref, alpha_ref, d, k_l, k_alpha): ``fixed``, or drawn with a seed."""
+    rng = sub.rng(100 + k)
+    return sub.pick(fixed, lambda: tuple(round(float(v), 3) for v in (
+        rng.uniform(0.8, 2.0), rng.uniform(-0.8, 0.8), rng.uniform(0.08, 0.3),
+        rng.uniform(0.5, 2.0), rng.uniform(0.5, 2.0))))
+
+
+def check_law(sub):
+    pose, pose_l, cmd_l = _case(sub, 7, 1)
+    args = _params(sub, 1, (1.5, 0.4, 0.2, 1.3, 0.8))
+    found = _call(sub, pose, pose_l, cmd_l, *args)
     compare("cmd (follower_cmd)", _truth(pose, pose_l, cmd_l, *args), found, atol=1e-9,
             case=" at random follower and leader poses (eqs. 2-5)")
     return "eqs. 2-5 at 7 random configurations"
 
 
-def check_library(mod):
-    pose, pose_l, cmd_l = _case(9, 2)
-    l_ref = np.linspace(0.8, 2.0, 9)
-    a_ref = np.linspace(-1.0, 1.0, 9)
-    found = _call(mod, pose, pose_l, cmd_l, l_ref, a_ref, 0.15, 0.9, 1.4)
-    want = leader_follower_law(pose, pose_l, cmd_l, l_ref, a_ref, 0.15, 0.9, 1.4)
+def check_library(sub):
+    pose, pose_l, cmd_l = _case(sub, 9, 2)
+    rng = sub.rng(3)
+    l_ref = sub.pick(np.linspace(0.8, 2.0, 9), lambda: rng.uniform(0.8, 2.0, 9))
+    a_ref = sub.pick(np.linspace(-1.0, 1.0, 9), lambda: rng.uniform(-1.0, 1.0, 9))
+    _, _, d, kl, ka = _params(sub, 2, (None, None, 0.15, 0.9, 1.4))
+    found = _call(sub, pose, pose_l, cmd_l, l_ref, a_ref, d, kl, ka)
+    want = leader_follower_law(pose, pose_l, cmd_l, l_ref, a_ref, d, kl, ka)
     compare("cmd (follower_cmd)", want, found, atol=1e-9,
             case=" with per-agent references, against controllers.leader_follower_law")
     return "the library's leader_follower_law, per-agent references"
@@ -87,10 +100,10 @@ def _step(pose, cmd, h):
     return pose + np.column_stack([dx, dy, w * h])
 
 
-def check_kinematics(mod):
-    pose, pose_l, cmd_l = _case(6, 3)
-    l_ref, a_ref, d, kl, ka = 1.2, -0.3, 0.1, 0.7, 1.1
-    cmd = _call(mod, pose, pose_l, cmd_l, l_ref, a_ref, d, kl, ka)
+def check_kinematics(sub):
+    pose, pose_l, cmd_l = _case(sub, 6, 3)
+    l_ref, a_ref, d, kl, ka = _params(sub, 3, (1.2, -0.3, 0.1, 0.7, 1.1))
+    cmd = _call(sub, pose, pose_l, cmd_l, l_ref, a_ref, d, kl, ka)
     h = 1e-5                            # central differences: error O(h^2)
     l0, a0, _ = _s(pose, pose_l, d)
     lp, ap, _ = _s(_step(pose, cmd, h), _step(pose_l, cmd_l, h), d)
@@ -102,15 +115,16 @@ def check_kinematics(mod):
     return "finite differences of eq. 2: ds/dt = (u_l, u_alpha)"
 
 
-def _closed_loop(mod, k_l, k_alpha, t_final):
+POSE0 = np.array([[0.0, 0.0, 0.0], [-1.5, 0.8, 0.2], [-2.5, -1.2, -0.3], [-3.0, 0.1, 0.4]])
+
+
+def _closed_loop(sub, pose0, lead_cmd, k_l, k_alpha, t_final):
     n = 4
-    pose0 = np.array([[0.0, 0.0, 0.0], [-1.5, 0.8, 0.2], [-2.5, -1.2, -0.3],
-                      [-3.0, 0.1, 0.4]])
-    block = mod.MyFormation(n, l_ref=[1.0, 1.0, 2.0], alpha_ref=[0.6, -0.6, 0.0], d=0.1,
+    block = sub.MyFormation(n, l_ref=[1.0, 1.0, 2.0], alpha_ref=[0.6, -0.6, 0.0], d=0.1,
                             k_l=k_l, k_alpha=k_alpha)
     dg = Diagram()
     fleet = dg.add(Unicycle(pose0=pose0), name="fleet")
-    lead = dg.add(Constant(np.tile([0.8, 0.15], (n, 1))), name="lead")
+    lead = dg.add(Constant(np.tile(lead_cmd, (n, 1))), name="lead")
     form = dg.add(block, name="form")
     dg.connect(fleet.pose, form.pose)
     dg.connect(lead.y, form.cmd_in)
@@ -119,9 +133,27 @@ def _closed_loop(mod, k_l, k_alpha, t_final):
     return res.t, res[fleet.pose]
 
 
-def check_closed_loop(mod):
-    k_l = 1.5
-    t, traj = _closed_loop(mod, k_l, 2.0, 12.0)
+def check_closed_loop(sub):
+    rng = sub.rng(4)
+    k_l, k_a = sub.pick((1.5, 2.0), lambda: (round(float(rng.uniform(1.5, 2.2)), 3),
+                                             round(float(rng.uniform(1.6, 2.5)), 3)))
+
+    def perturbed():
+        """The followers start a little elsewhere, each with a distance error
+        of at least 0.2 m (the decay ratio is measured on it)."""
+        for _ in range(100):
+            dp = np.column_stack([rng.uniform(-0.2, 0.2, (4, 2)), rng.uniform(-0.1, 0.1, 4)])
+            dp[0] = 0.0
+            p0 = POSE0 + dp
+            l, _, _ = _s(p0[1:], np.repeat(p0[:1], 3, axis=0), 0.1)
+            if np.all(np.abs(np.array([1.0, 1.0, 2.0]) - l) > 0.2):
+                return p0
+        return POSE0
+
+    pose0 = sub.pick(POSE0, perturbed)
+    v0, w0 = sub.pick((0.8, 0.15), lambda: (round(float(rng.uniform(0.5, 1.0)), 3),
+                                            round(float(rng.uniform(-0.2, 0.2)), 3)))
+    t, traj = _closed_loop(sub, pose0, [v0, w0], k_l, k_a, 12.0)
     l_ref = np.array([1.0, 1.0, 2.0])
     a_ref = np.array([0.6, -0.6, 0.0])
     errs = []
@@ -131,7 +163,8 @@ def check_closed_loop(mod):
     e_end = np.abs(np.column_stack(errs[-1])).max()
     if not e_end < 1e-6:
         i = int(np.argmax(np.abs(np.column_stack(errs[-1])).max(axis=1)))
-        raise Failed(f"follower {i + 1} behind a turning leader (v_0 = 0.8, omega_0 = 0.15): "
+        raise Failed(f"follower {i + 1} behind a turning leader (v_0 = {v0:g}, omega_0 = "
+                     f"{w0:g}): "
                      f"formation error (l, alpha) {np.column_stack(errs[-1])[i].round(4)} "
                      f"after 12 s; expected below 1e-6")
     ratio = errs[1][0] / errs[0][0]

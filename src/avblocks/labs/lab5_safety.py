@@ -14,6 +14,12 @@ other constants in 3-D; and the closed loop of twelve double integrators
 behind a moving target: no pair closer than 0.35 d at any time, at the end
 every pair at least 0.8 d apart, every agent with a neighbour within r,
 and the velocities aligned (order parameter at least 0.999).
+
+The filter's inputs arrive read-only: writing the correction into
+``u_nom`` in place (in a diagram, another block's output) fails at once
+with a message naming it. With a seed (``--seed``, ``--student``) the
+configurations, radii, gains and the flocking constants are drawn per
+student.
 """
 
 from __future__ import annotations
@@ -29,8 +35,8 @@ from ..vehicles import DoubleIntegrator, SingleIntegrator
 from .grading import Failed, Lab, compare, expect_shape
 
 
-def _case(n, seed):
-    rng = np.random.default_rng(seed)
+def _case(sub, n, seed):
+    rng = sub.rng(seed)
     p = rng.uniform(-2, 2, (n, 2))
     u = rng.normal(size=(n, 2))
     nb = (np.arange(n) + 1) % n
@@ -46,15 +52,21 @@ def _truth(p, u, nb, radius, gamma):
     return np.where((nb >= 0)[:, None], out, u)
 
 
-def _call(mod, p, u, nb, radius, gamma):
-    out = mod.safety_filter_pair(p.copy(), u.copy(), nb.copy(), radius, gamma, xp=np)
+def _call(sub, p, u, nb, radius, gamma):
+    out = sub.safety_filter_pair(p.copy(), u.copy(), nb.copy(), radius, gamma, xp=np)
     return expect_shape("velocity (safety_filter_pair)", out, p.shape)
 
 
-def check_projection(mod):
-    p, u, nb = _case(12, 1)
-    radius, gamma = 1.0, 2.0
-    found = _call(mod, p, u, nb, radius, gamma)
+def _radius_gamma(sub, k, fixed):
+    rng = sub.rng(100 + k)
+    return sub.pick(fixed, lambda: (round(float(rng.uniform(0.6, 1.4)), 3),
+                                    round(float(rng.uniform(0.5, 3.0)), 3)))
+
+
+def check_projection(sub):
+    p, u, nb = _case(sub, 12, 1)
+    radius, gamma = _radius_gamma(sub, 1, (1.0, 2.0))
+    found = _call(sub, p, u, nb, radius, gamma)
     want = _truth(p, u, nb, radius, gamma)
     active = int(np.sum(np.any(want != u, axis=1)))
     compare("velocity (safety_filter_pair)", want, found, atol=1e-9,
@@ -62,11 +74,11 @@ def check_projection(mod):
     return f"the projection at 12 configurations, {active} of them active"
 
 
-def check_constraint(mod):
-    p, u, nb = _case(40, 2)
-    radius, gamma = 0.8, 1.5
+def check_constraint(sub):
+    p, u, nb = _case(sub, 40, 2)
+    radius, gamma = _radius_gamma(sub, 2, (0.8, 1.5))
     nb[::7] = -1                                        # some agents have no neighbour
-    found = _call(mod, p, u, nb, radius, gamma)
+    found = _call(sub, p, u, nb, radius, gamma)
     has = nb >= 0
     a = p - p[np.where(has, nb, 0)]
     b = -gamma * (np.sum(a * a, axis=1) - radius ** 2) / 4
@@ -84,29 +96,32 @@ def check_constraint(mod):
     return "a . u >= b met; u_nom kept where it was safe or alone"
 
 
-def check_library(mod):
-    p, u, nb = _case(15, 3)
-    found = _call(mod, p, u, nb, 1.2, 0.7)
-    want = safety_filter(p, u, nb[:, None], 1.2, gamma=0.7)
+def check_library(sub):
+    p, u, nb = _case(sub, 15, 3)
+    radius, gamma = _radius_gamma(sub, 3, (1.2, 0.7))
+    found = _call(sub, p, u, nb, radius, gamma)
+    want = safety_filter(p, u, nb[:, None], radius, gamma=gamma)
     compare("velocity (safety_filter_pair)", want, found, atol=1e-9,
             case=" against controllers.safety_filter with one neighbour each")
     return "controllers.safety_filter with one neighbour per agent"
 
 
-def check_swap(mod):
-    radius = 1.0
-    p0 = np.array([[-3.0, 0.1], [3.0, -0.1]])
+def check_swap(sub):
+    rng = sub.rng(15)
+    radius = sub.pick(1.0, lambda: round(float(rng.uniform(0.8, 1.2)), 3))
+    dy = sub.pick(0.1, lambda: round(float(rng.uniform(0.05, 0.2)), 3))
+    p0 = np.array([[-3.0, dy], [3.0, -dy]])
     goals = np.array([[3.0, 0.0], [-3.0, 0.0]])
     d = Diagram()
     agents = d.add(SingleIntegrator(position0=p0), name="agents")
     go = d.add(HolonomicPointToPoint(goals[:, None, :], gain=1.0, v_max=1.0, radius=0.05),
                name="go")
-    safe = d.add(mod.MySafetyFilter(2, radius, gamma=2.0), name="safe")
+    safe = d.add(sub.MySafetyFilter(2, radius, gamma=2.0), name="safe")
     d.connect(agents.position, go.position)
     d.connect(agents.position, safe.position)
     d.connect(go.velocity, safe.velocity_nom)
     d.connect(safe.velocity, agents.velocity)
-    res = simulate(d, 30.0, dt=0.01, log=[agents.position])
+    res = simulate(d, 30.0, dt=0.02, log=[agents.position])
     x = res[agents.position]
     gap = np.linalg.norm(x[:, 0] - x[:, 1], axis=1)
     k = int(np.argmin(gap))
@@ -156,20 +171,20 @@ def _alpha_truth(q, p, d, r, eps, a, b, h, c1, c2):
     return out
 
 
-def _flock_case(n, dim, seed, spread):
-    rng = np.random.default_rng(seed)
+def _flock_case(sub, n, dim, seed, spread):
+    rng = sub.rng(seed)
     return rng.uniform(0, spread, (n, dim)), rng.normal(size=(n, dim))
 
 
-def _alpha(mod, q, p, d, r, **k):
-    out = mod.flocking_alpha(q.copy(), p.copy(), d, r, xp=np, **k)
+def _alpha(sub, q, p, d, r, **k):
+    out = sub.flocking_alpha(q.copy(), p.copy(), d, r, xp=np, **k)
     return expect_shape("accel (flocking_alpha)", out, q.shape)
 
 
-def check_flocking_equations(mod):
-    q, p = _flock_case(10, 2, 7, 3.0)
-    d, r = 1.0, 1.2
-    found = _alpha(mod, q, p, d, r)
+def check_flocking_equations(sub):
+    q, p = _flock_case(sub, 10, 2, 7, 3.0)
+    d, r = sub.pick((1.0, 1.2), lambda: (1.0, round(float(sub.rng(16).uniform(1.1, 1.6)), 3)))
+    found = _alpha(sub, q, p, d, r)
     want = _alpha_truth(q, p, d, r, 0.1, 5.0, 5.0, 0.2, 1.0, 1.0)
     dist = np.linalg.norm(q[:, None] - q[None], axis=-1)[np.triu_indices(10, 1)]
     within = int(np.sum(dist < r))
@@ -178,27 +193,34 @@ def check_flocking_equations(mod):
     return f"eq. (23) at 10 agents, {within} of 45 pairs within range"
 
 
-def check_flocking_library(mod):
-    q, p = _flock_case(9, 3, 8, 4.0)
-    k = dict(eps=0.2, a=3.0, b=6.0, h=0.3, c1=2.0, c2=0.5)
-    found = _alpha(mod, q, p, 1.5, 2.5, **k)
+def check_flocking_library(sub):
+    q, p = _flock_case(sub, 9, 3, 8, 4.0)
+    rng = sub.rng(17)
+    k = sub.pick(dict(eps=0.2, a=3.0, b=6.0, h=0.3, c1=2.0, c2=0.5), lambda: {
+        key: round(float(v), 3) for key, v in (
+            ("eps", rng.uniform(0.05, 0.3)), ("a", rng.uniform(1.0, 4.0)),
+            ("b", rng.uniform(4.0, 8.0)), ("h", rng.uniform(0.1, 0.5)),
+            ("c1", rng.uniform(0.5, 2.5)), ("c2", rng.uniform(0.2, 1.5)))})
+    found = _alpha(sub, q, p, 1.5, 2.5, **k)
     idx = np.array([[j for j in range(9) if j != i] for i in range(9)])
     want = flocking_law(q, p, idx, 1.5, 2.5, xp=np, **k)
     compare("accel (flocking_alpha)", want, found, atol=1e-9,
-            case=" in 3-D, eps=0.2, a=3, b=6, h=0.3, c1=2, c2=0.5, against "
-                 "controllers.flocking_law")
+            case=" in 3-D, " + ", ".join(f"{n}={v:g}" for n, v in k.items())
+                 + ", against controllers.flocking_law")
     return "controllers.flocking_law in 3-D with other constants"
 
 
-def check_flock_forms(mod):
+def check_flock_forms(sub):
     n, d = 12, 1.0
     r = 1.2 * d
-    rng = np.random.default_rng(5)
+    rng = sub.rng(5)
     grid = np.stack(np.meshgrid(np.arange(4.0), np.arange(3.0)), -1).reshape(-1, 2) * 1.1
     q0, v0 = grid + rng.uniform(-0.2, 0.2, (n, 2)), rng.normal(size=(n, 2))
     dg = Diagram()
     flock = dg.add(DoubleIntegrator(q0, velocity0=v0), name="flock")
-    law = dg.add(mod.MyFlocking(n, d, target=[2.0, 2.0], target_velocity=[1.0, 0.5]),
+    target_v = sub.pick([1.0, 0.5], lambda: [round(float(v), 3) for v in
+                                             rng.uniform(-1.0, 1.0, 2)])
+    law = dg.add(sub.MyFlocking(n, d, target=[2.0, 2.0], target_velocity=target_v),
                  name="law")
     dg.connect(flock.position, law.position)
     dg.connect(flock.velocity, law.velocity)

@@ -1,0 +1,714 @@
+"""Every platform call of the grader's sandbox, with its fallbacks.
+
+The grader runs a student's code in a child process (see
+:mod:`avblocks.labs.sandbox`). What the operating system offers to contain
+that process differs between Linux, macOS and Windows; this module is the
+only place that knows, so that the rest of the grader asks for a feature
+and is told, in words, what it got:
+
+* **its own session** (POSIX ``setsid``, through ``start_new_session``;
+  Windows ``CREATE_NEW_PROCESS_GROUP``): the terminal's Ctrl-C does not
+  reach it, and it can be killed with its group;
+* **resource limits** (``setrlimit``: ``RLIMIT_AS`` memory, ``RLIMIT_CPU``,
+  ``RLIMIT_NPROC`` processes, ``RLIMIT_NOFILE``, ``RLIMIT_FSIZE``,
+  ``RLIMIT_CORE``) on Linux and macOS (macOS may refuse or not enforce
+  ``RLIMIT_AS``; ``RLIMIT_NPROC`` does not bind root); none on Windows;
+  the report says which were set;
+* **Landlock** (Linux 5.13+): no file written outside its own folder; from
+  ABI 4 no TCP, from ABI 6 no signal to any process outside (the grader,
+  other students); ``ptrace`` of outside processes always refused.
+  Elsewhere nothing stops a write, and the grader detects changed files
+  afterwards (:func:`avblocks.labs.grading.grade_all`);
+* **killing everything it started**: a supervisor that is the "child
+  subreaper" of the student's process (Linux ``prctl``), so that even a
+  daemon that double-forked out of the session comes back to it and is
+  killed; elsewhere ``killpg`` and the process tree (``/proc``, ``psutil``,
+  ``ps`` or ``taskkill``), which a daemon can escape.
+
+Tests force each fallback with :func:`disabled` (the names in
+:data:`FEATURES`); the child and the supervisor are told which features
+are off, so the whole chain takes the fallback path.
+
+This module imports only the standard library: the supervisor runs it as a
+script (``python -I -S oscalls.py supervise ...``), before and without
+NumPy or avblocks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+#: the features :func:`disabled` can switch off (to test the fallbacks)
+FEATURES = ("resource", "landlock", "killpg", "setsid", "subreaper", "proc", "psutil",
+            "select", "supervisor")
+
+_OFF: set = set(filter(None, os.environ.get("AVBLOCKS_LAB_DISABLE", "").split(",")))
+
+IS_WINDOWS = os.name == "nt"
+IS_LINUX = sys.platform.startswith("linux")
+
+
+def enabled(name) -> bool:
+    """True unless feature ``name`` was switched off (:func:`disabled`)."""
+    return name not in _OFF
+
+
+def off() -> list:
+    """The features switched off in this process (passed on to the child)."""
+    return sorted(_OFF)
+
+
+def set_off(names):
+    """Switch off exactly ``names`` in this process (the child and the
+    supervisor call it with what the grader sends them)."""
+    bad = set(names) - set(FEATURES)
+    if bad:
+        raise ValueError(f"unknown sandbox feature(s) {sorted(bad)}; known: {FEATURES}")
+    _OFF.clear()
+    _OFF.update(names)
+
+
+@contextlib.contextmanager
+def disabled(*names):
+    """Run the grader with these features off, as on a platform without them
+    (a test helper: ``with disabled("landlock", "resource"): run_checks(...)``)."""
+    old = set(_OFF)
+    set_off(old | set(names))
+    try:
+        yield
+    finally:
+        set_off(old)
+
+
+def _resource():
+    if not enabled("resource"):
+        return None
+    try:
+        import resource
+    except ImportError:            # Windows
+        return None
+    return resource
+
+
+# ------------------------------------------------------------------ starting
+def popen_options() -> dict:
+    """Keyword arguments of :class:`subprocess.Popen` that put the child in
+    a session (POSIX) or process group (Windows) of its own, so that a
+    signal for the grader's terminal (Ctrl-C) does not reach it and the
+    grader can end it with everything it started."""
+    if IS_WINDOWS:
+        return {"creationflags": subprocess.CREATE_NEW_PROCESS_GROUP
+                | getattr(subprocess, "CREATE_NO_WINDOW", 0)}
+    if enabled("setsid"):
+        return {"start_new_session": True}
+    return {}
+
+
+def child_environment(workdir) -> dict:
+    """The whole environment of the student's process: nothing of the
+    grader's (no tokens, no ``PYTHONPATH``), one thread per math library
+    (fair time limits, no thread storms against ``RLIMIT_NPROC``), its
+    own home and temporary folder, a plotting backend without a display."""
+    env = {"HOME": str(workdir), "TMPDIR": str(workdir), "TEMP": str(workdir),
+           "TMP": str(workdir), "LANG": "C.UTF-8", "LC_ALL": "C.UTF-8",
+           "PATH": os.defpath, "MPLBACKEND": "Agg", "MPLCONFIGDIR": str(workdir),
+           "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+           "NUMEXPR_NUM_THREADS": "1", "VECLIB_MAXIMUM_THREADS": "1",
+           "PYTHONHASHSEED": "0", "PYTHONIOENCODING": "utf-8"}
+    if IS_WINDOWS:                 # Python and its DLLs need these to start
+        for key in ("SYSTEMROOT", "SYSTEMDRIVE", "WINDIR", "COMSPEC", "PATHEXT"):
+            if key in os.environ:
+                env[key] = os.environ[key]
+    return env
+
+
+# ------------------------------------------------------------------ limits
+def apply_limits(*, memory_mb=None, cpu_s=None, processes=None, files=None,
+                 file_mb=None) -> dict:
+    """Set this process's resource limits (the child calls it before it
+    runs the student's code). Returns ``{limit: what was done}`` in words,
+    for the report: a limit the platform does not have is said, not an
+    error."""
+    res = _resource()
+    out = {}
+    if res is None:
+        why = ("not set: this platform has no setrlimit (Windows)" if enabled("resource")
+               else "not set: setrlimit switched off")
+        for key, val in (("memory", memory_mb), ("cpu", cpu_s), ("processes", processes),
+                         ("files", files), ("file_size", file_mb)):
+            if val:
+                out[key] = why
+        return out
+
+    def setlim(key, name, value, text):
+        rl = getattr(res, name, None)
+        if rl is None:
+            out[key] = f"not set: this platform has no {name}"
+            return
+        try:
+            _, hard = res.getrlimit(rl)
+            value = int(value)
+            if hard != res.RLIM_INFINITY:
+                value = min(value, hard)
+            if key == "cpu":               # SIGXCPU at the soft limit, SIGKILL 5 s later
+                hard = value + 5 if hard == res.RLIM_INFINITY else min(hard, value + 5)
+            res.setrlimit(rl, (value, hard))
+            out[key] = f"{text(value)} ({name})"
+        except (ValueError, OSError) as e:
+            out[key] = f"not set: {name} refused ({e})"
+
+    if memory_mb:
+        setlim("memory", "RLIMIT_AS", memory_mb * 2 ** 20,
+               lambda v: f"{v // 2 ** 20} MiB of address space")
+
+    if cpu_s:
+        setlim("cpu", "RLIMIT_CPU", max(1, int(cpu_s)), lambda v: f"{v} s of CPU time")
+    if processes:
+        if os.geteuid() == 0:
+            out["processes"] = "not enforced: the grader runs as root (uid 0), which " \
+                               "RLIMIT_NPROC does not bind"
+        elif IS_LINUX and enabled("proc"):
+            mine = _user_tasks(os.geteuid())
+            setlim("processes", "RLIMIT_NPROC", mine + int(processes),
+                   lambda v: f"{int(processes)} more processes or threads than the user's "
+                             f"{mine}")
+        else:
+            out["processes"] = "not set: the user's process count is unknown here"
+    if files:
+        setlim("files", "RLIMIT_NOFILE", files, lambda v: f"{v} open files")
+    if file_mb:
+        setlim("file_size", "RLIMIT_FSIZE", file_mb * 2 ** 20,
+               lambda v: f"files up to {v // 2 ** 20} MiB")
+    setlim("core", "RLIMIT_CORE", 0, lambda v: "no core dumps")
+    return out
+
+
+def _user_tasks(uid) -> int:
+    """Threads of every process of ``uid`` (what ``RLIMIT_NPROC`` counts on
+    Linux), from ``/proc``."""
+    n = 0
+    for d in os.listdir("/proc"):
+        if not d.isdigit():
+            continue
+        try:
+            with open(f"/proc/{d}/status", "rb") as f:
+                txt = f.read().decode("ascii", "replace")
+        except OSError:
+            continue
+        fields = dict(line.split(":", 1) for line in txt.splitlines() if ":" in line)
+        try:
+            if int(fields["Uid"].split()[0]) == uid:
+                n += int(fields["Threads"])
+        except (KeyError, ValueError, IndexError):
+            pass
+    return n
+
+
+# ------------------------------------------------------------------ Landlock
+_LL_FS_ABI1 = sum(1 << b for b in (1, 4, 5, 6, 7, 8, 9, 10, 11, 12))   # the write rights
+_LL_REFER, _LL_TRUNCATE, _LL_IOCTL_DEV = 1 << 13, 1 << 14, 1 << 15
+_LL_FILE_WRITE = (1 << 1)                                           # WRITE_FILE
+
+
+def landlock_abi() -> int:
+    """The kernel's Landlock ABI version (0: none, or switched off)."""
+    if not (IS_LINUX and enabled("landlock")):
+        return 0
+    try:
+        import ctypes
+        libc = ctypes.CDLL(None, use_errno=True)
+        abi = libc.syscall(444, None, ctypes.c_size_t(0), ctypes.c_uint32(1))
+    except (OSError, AttributeError):
+        return 0
+    return max(0, int(abi))
+
+
+def restrict_writes(workdir) -> dict:
+    """Landlock this process (and all it starts): files may be created,
+    written, truncated or removed only under ``workdir`` (and ``/dev/null``
+    written); with ABI 4+ no TCP ``bind``/``connect``; with ABI 6+ no
+    signal to, and no abstract-socket connection with, any process outside
+    (the grader, the supervisor, other students). Landlock also refuses
+    ``ptrace`` of outside processes. Returns ``{"files": ..., "network":
+    ..., "signals": ...}`` in words."""
+    abi = landlock_abi()
+    if abi <= 0:
+        why = ("not restricted: Landlock is not available (Linux 5.13+ only)"
+               if enabled("landlock") else "not restricted: Landlock switched off")
+        return {"files": why, "network": why, "signals": why}
+    import ctypes
+    libc = ctypes.CDLL(None, use_errno=True)
+    fs = _LL_FS_ABI1 | (_LL_REFER if abi >= 2 else 0) | (_LL_TRUNCATE if abi >= 3 else 0) \
+        | (_LL_IOCTL_DEV if abi >= 5 else 0)
+    net = 3 if abi >= 4 else 0
+    scoped = 3 if abi >= 6 else 0
+
+    class Attr(ctypes.Structure):
+        _fields_ = [("fs", ctypes.c_uint64), ("net", ctypes.c_uint64),
+                    ("scoped", ctypes.c_uint64)]
+
+    class Rule(ctypes.Structure):
+        _pack_ = 1
+        _fields_ = [("allowed", ctypes.c_uint64), ("parent_fd", ctypes.c_int32)]
+
+    size = 24 if abi >= 6 else 16 if abi >= 4 else 8
+    attr = Attr(fs, net, scoped)
+    rs = libc.syscall(444, ctypes.byref(attr), ctypes.c_size_t(size), ctypes.c_uint32(0))
+    if rs < 0:
+        err = os.strerror(ctypes.get_errno())
+        why = f"not restricted: Landlock refused the ruleset ({err})"
+        return {"files": why, "network": why, "signals": why}
+    try:
+        rules = [(str(workdir), fs)]
+        if os.path.exists(os.devnull):
+            rules.append((os.devnull, fs & (_LL_FILE_WRITE | _LL_TRUNCATE | _LL_IOCTL_DEV)))
+        for path, allowed in rules:
+            fd = os.open(path, getattr(os, "O_PATH", os.O_RDONLY) | os.O_CLOEXEC)
+            try:
+                rule = Rule(allowed, fd)
+                if libc.syscall(445, ctypes.c_int(rs), ctypes.c_int(1), ctypes.byref(rule),
+                                ctypes.c_uint32(0)) < 0:
+                    raise OSError(ctypes.get_errno(), f"landlock_add_rule({path})")
+            finally:
+                os.close(fd)
+        if libc.prctl(38, 1, 0, 0, 0) < 0:                       # PR_SET_NO_NEW_PRIVS
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_NO_NEW_PRIVS)")
+        if libc.syscall(446, ctypes.c_int(rs), ctypes.c_uint32(0)) < 0:
+            raise OSError(ctypes.get_errno(), "landlock_restrict_self")
+    except OSError as e:
+        why = f"not restricted: Landlock failed ({e})"
+        return {"files": why, "network": why, "signals": why}
+    finally:
+        os.close(rs)
+    return {"files": f"writes only inside its own temporary folder (Landlock ABI {abi})",
+            "network": ("no TCP bind or connect (Landlock)" if net else
+                        "not restricted: Landlock ABI < 4 has no network rules"),
+            "signals": ("no signal to, and no ptrace of, any process outside its own "
+                        "(Landlock)" if scoped else
+                        "ptrace of outside processes refused (Landlock); signals not "
+                        "restricted: Landlock ABI < 6")}
+
+
+# ------------------------------------------------------------------ processes
+def become_subreaper() -> bool:
+    """Make this process the "child subreaper" of everything it starts
+    (Linux): an orphaned descendant (a daemon that double-forked away from
+    its session) is re-parented here instead of to ``init``, so it can
+    still be found and killed. False where there is no such thing."""
+    if not (IS_LINUX and enabled("subreaper")):
+        return False
+    try:
+        import ctypes
+        return ctypes.CDLL(None, use_errno=True).prctl(36, 1, 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _parents() -> dict:
+    """``{pid: parent pid}`` of every process this user can see."""
+    if IS_LINUX and enabled("proc"):
+        out = {}
+        for d in os.listdir("/proc"):
+            if not d.isdigit():
+                continue
+            try:
+                with open(f"/proc/{d}/stat", "rb") as f:
+                    stat = f.read().decode("ascii", "replace")
+                out[int(d)] = int(stat.rsplit(")", 1)[1].split()[1])
+            except (OSError, ValueError, IndexError):
+                continue
+        return out
+    if enabled("psutil"):
+        with contextlib.suppress(ImportError):
+            import psutil
+            return {p.pid: p.info["ppid"] for p in psutil.process_iter(["ppid"])}
+    if IS_WINDOWS:
+        return {}
+    try:
+        text = subprocess.run(["ps", "-A", "-o", "pid=,ppid="], capture_output=True,
+                              text=True, timeout=10).stdout
+    except (OSError, subprocess.SubprocessError):
+        return {}
+    out = {}
+    for line in text.splitlines():
+        with contextlib.suppress(ValueError):
+            pid, ppid = map(int, line.split())
+            out[pid] = ppid
+    return out
+
+
+def descendants(pid) -> list:
+    """Every live descendant of ``pid`` (children, grandchildren...)."""
+    parents = _parents()
+    kids: dict = {}
+    for p, pp in parents.items():
+        kids.setdefault(pp, []).append(p)
+    out, stack = [], list(kids.get(pid, ()))
+    while stack:
+        p = stack.pop()
+        if p in out or p == pid:
+            continue
+        out.append(p)
+        stack.extend(kids.get(p, ()))
+    return out
+
+
+def _kill(pid, group=False):
+    if IS_WINDOWS:
+        with contextlib.suppress(OSError, subprocess.SubprocessError):
+            subprocess.run(["taskkill", "/F", "/T", "/PID", str(pid)], capture_output=True,
+                           timeout=30)
+        return
+    if group and enabled("killpg") and hasattr(os, "killpg"):
+        with contextlib.suppress(OSError):
+            os.killpg(pid, signal.SIGKILL)
+    with contextlib.suppress(OSError):
+        os.kill(pid, signal.SIGKILL)
+
+
+def kill_tree(pid, *, mine=False, rounds=50):
+    """Kill process ``pid``, its session or process group and every
+    descendant found, again until none is left (a process that forks while
+    the kill goes on is caught by a later round). ``mine``: also every
+    descendant of this process (the supervisor, a subreaper, collects the
+    orphans of ``pid``'s tree that way, and reaps what it killed; the
+    grader never reaps, its other children's statuses are theirs)."""
+    if not IS_WINDOWS and enabled("killpg") and hasattr(os, "killpg"):
+        with contextlib.suppress(OSError):
+            os.killpg(pid, signal.SIGSTOP)       # freeze the group: no fork while we look
+    for _ in range(rounds):
+        rest = descendants(pid)
+        if mine:
+            rest += [p for p in descendants(os.getpid()) if p not in rest]
+        _kill(pid, group=True)
+        if not rest:
+            if mine:
+                reap()
+            return
+        for p in rest:
+            _kill(p, group=True)
+        if mine:
+            reap()
+        time.sleep(0.005)
+
+
+def reap():
+    """Collect every dead child of this process (POSIX), so none stays a
+    zombie."""
+    if IS_WINDOWS:
+        return
+    while True:
+        try:
+            pid, _ = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        except OSError:
+            return
+        if pid == 0:
+            return
+
+
+def status_text(returncode) -> str:
+    """``exit status 7`` or ``signal 9 (SIGKILL)`` for a process's return code."""
+    if returncode is None:
+        return "unknown status"
+    if returncode < 0:
+        try:
+            name = signal.Signals(-returncode).name
+        except ValueError:
+            name = "?"
+        return f"signal {-returncode} ({name})"
+    return f"exit status {returncode}"
+
+
+# ------------------------------------------------------------------ pipes
+def read_exact(fd, n, deadline) -> bytes:
+    """Exactly ``n`` bytes from pipe ``fd`` before ``deadline`` (POSIX,
+    ``select``): :class:`TimeoutError` past it, :class:`EOFError` at the
+    end. Windows has no ``select`` on pipes: the sandbox reads there with a
+    thread instead."""
+    import select
+    buf = bytearray()
+    while len(buf) < n:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([fd], [], [], left)[0]:
+            raise TimeoutError("no data before the deadline")
+        chunk = os.read(fd, min(n - len(buf), 1 << 20))
+        if not chunk:
+            raise EOFError
+        buf += chunk
+    return bytes(buf)
+
+
+def write_all(fd, data, deadline):
+    """Write all of ``data`` to pipe ``fd`` before ``deadline`` (a
+    ``time.monotonic()`` value); :class:`TimeoutError` when the reader does
+    not take it in time (a child that stopped reading), :class:`OSError`
+    when it is gone. POSIX: a non-blocking write and ``select``; elsewhere
+    a writer thread that is given up on at the deadline."""
+    view = memoryview(data)
+    if not IS_WINDOWS and enabled("select"):
+        import select
+        os.set_blocking(fd, False)
+        while view:
+            try:
+                n = os.write(fd, view[:1 << 20])
+                view = view[n:]
+                continue
+            except BlockingIOError:
+                pass
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError("the student's process did not read its input")
+            select.select([], [fd], [], min(left, 1.0))
+        return
+    box: list = []
+
+    def writer():
+        try:
+            with contextlib.suppress(OSError, AttributeError):   # Windows before 3.12
+                os.set_blocking(fd, True)
+            mv = view
+            while mv:
+                n = os.write(fd, mv)
+                mv = mv[n:]
+            box.append(None)
+        except OSError as e:
+            box.append(e)
+
+    th = threading.Thread(target=writer, daemon=True, name="avblocks-lab-writer")
+    th.start()
+    th.join(max(0.0, deadline - time.monotonic()))
+    if th.is_alive():
+        raise TimeoutError("the student's process did not read its input")
+    if box and box[0] is not None:
+        raise box[0]
+
+
+# ------------------------------------------------------------------ supervised commands
+def full_isolation() -> bool:
+    """True where a student's process can reach no other process (Landlock
+    ABI 6+: no signal, no ptrace, no write outside its folder) and a
+    supervisor collects everything it starts: only then may the grader start
+    the next student's process while one still runs."""
+    return (IS_LINUX and enabled("supervisor") and enabled("subreaper")
+            and landlock_abi() >= 6)
+
+
+class Supervised:
+    """``cmd`` run under the supervisor (:func:`supervise`) where the
+    platform has one: the command and everything it starts die when
+    :meth:`kill` is called *or when this process ends in any way*, even by
+    SIGKILL (the supervisor sees its control socket close). Without a
+    supervisor (Windows, or switched off) ``cmd`` runs directly in a
+    session of its own and :meth:`kill` ends its tree.
+
+    ``popen`` keywords go to :class:`subprocess.Popen` (stdin, stdout, env,
+    cwd); ``cleanup``, a folder the supervisor removes once everything is
+    dead (the student's temporary folder, also when the grader was killed).
+    """
+
+    def __init__(self, cmd, cleanup=None, **popen):
+        self.ctrl = None
+        self._pid = None
+        self._code = None
+        self._ended = False
+        if IS_WINDOWS or not enabled("supervisor"):
+            env = dict(popen.pop("env", None) or os.environ)
+            if off():
+                env["AVBLOCKS_LAB_DISABLE"] = ",".join(off())
+            self.proc = subprocess.Popen(cmd, env=env, **popen, **popen_options())
+            self._pid = self.proc.pid
+            return
+        import socket
+        mine, theirs = socket.socketpair()
+        sup = [sys.executable, "-I", "-S", "-B", os.path.abspath(__file__), "supervise",
+               ",".join(off()) or "-", str(theirs.fileno()), str(cleanup or "-"), "--", *cmd]
+        try:
+            self.proc = subprocess.Popen(sup, pass_fds=(theirs.fileno(),), **popen)
+        except BaseException:
+            mine.close()
+            raise
+        finally:
+            theirs.close()
+        self.ctrl = mine
+
+    @property
+    def supervised(self) -> bool:
+        return self.ctrl is not None
+
+    def _line(self, timeout):
+        self.ctrl.settimeout(max(0.001, timeout))
+        buf = b""
+        try:
+            while not buf.endswith(b"\n") and len(buf) < 200:
+                chunk = self.ctrl.recv(1)
+                if not chunk:
+                    return None
+                buf += chunk
+        except OSError:
+            return None
+        return buf.decode("ascii", "replace").strip()
+
+    def _until(self, prefix, timeout):
+        end = time.monotonic() + timeout
+        while True:
+            line = self._line(end - time.monotonic())
+            if line is None:
+                return None
+            if line.startswith("pid "):
+                with contextlib.suppress(ValueError, IndexError):
+                    self._pid = int(line.split()[1])
+            elif line.startswith("exit "):
+                with contextlib.suppress(ValueError):
+                    self._code = int(line[5:])
+                self._ended = True
+            if line.startswith(prefix):
+                return line
+            if time.monotonic() >= end:
+                return None
+
+    def pid(self, timeout=30.0):
+        """The command's process id (not the supervisor's)."""
+        if self._pid is None and self.ctrl is not None:
+            self._until("pid ", timeout)
+        return self._pid
+
+    def exit_code(self, timeout=5.0):
+        """The command's return code once it ended by itself (None if unknown)."""
+        if self.ctrl is None:
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                return self.proc.wait(timeout)
+            return None
+        if not self._ended:
+            self._until("exit ", timeout)
+        return self._code
+
+    def terminate(self, timeout=10.0):
+        """Ask the command to stop (SIGTERM; Windows: CTRL_BREAK) and wait
+        for it up to ``timeout``; True when it ended."""
+        pid = self.pid()
+        if pid is None:
+            return True
+        with contextlib.suppress(OSError):
+            if IS_WINDOWS:
+                os.kill(pid, signal.CTRL_BREAK_EVENT)
+            else:
+                os.kill(pid, signal.SIGTERM)
+        if self.ctrl is None:
+            try:
+                self.proc.wait(timeout)
+                return True
+            except subprocess.TimeoutExpired:
+                return False
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with contextlib.suppress(OSError):
+                os.kill(pid, 0)
+                time.sleep(0.05)
+                continue
+            return True
+        return False
+
+    def kill(self, timeout=10.0):
+        """Kill the command with everything it started; its return code when
+        it had ended by itself."""
+        if self.ctrl is not None:
+            with contextlib.suppress(OSError):
+                self.ctrl.sendall(b"kill\n")
+            if not self._ended:
+                self._until("exit ", timeout)
+            if not self._ended and self._pid:   # the supervisor is gone: do its work
+                kill_tree(self._pid)
+            with contextlib.suppress(OSError):
+                self.ctrl.close()
+        else:
+            kill_tree(self.proc.pid)
+        try:
+            self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+        if self.ctrl is None:
+            return self.proc.returncode
+        return self._code
+
+
+# ------------------------------------------------------------------ the supervisor
+def supervise(argv):
+    """The supervisor (POSIX): ``oscalls.py supervise OFF CTRL_FD CLEANUP -- CMD...``.
+
+    It becomes the subreaper of what it starts (Linux), starts ``CMD`` (the
+    student's process) in a new session with its own stdin/stdout (the
+    grader's pipes), gives up its copies of them, tells the grader ``pid N``
+    on the control socket ``CTRL_FD``, then waits. When the child ends by
+    itself, or the grader writes ``kill`` or goes away (end of file), it
+    kills the child's session and every descendant it can find (orphans
+    come back to it as the subreaper), reaps them, removes the folder
+    ``CLEANUP`` (``-``: none), writes ``exit <code>`` (the child's return
+    code) and exits."""
+    disabled_names, ctrl_fd, cleanup = argv[0], int(argv[1]), argv[2]
+    cmd = argv[4:]
+    set_off([n for n in disabled_names.split(",") if n and n != "-"])
+    import socket
+    ctrl = socket.socket(fileno=ctrl_fd)
+    sub = become_subreaper()
+    # the grader's end going away must not kill us by SIGPIPE before we clean up
+    signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_IGN)
+    devnull = os.open(os.devnull, os.O_RDWR)
+    try:
+        child = subprocess.Popen(cmd, stdin=0, stdout=1, stderr=devnull, close_fds=True,
+                                 **popen_options())
+    except OSError as e:
+        with contextlib.suppress(OSError):
+            ctrl.sendall(f"error {e}\n".encode())
+        return 3
+    os.dup2(devnull, 0)
+    os.dup2(devnull, 1)
+    with contextlib.suppress(OSError):
+        ctrl.sendall(f"pid {child.pid} subreaper {int(sub)}\n".encode())
+    import select
+    ctrl.setblocking(False)
+    code = None
+    while code is None:
+        try:
+            r, _, _ = select.select([ctrl], [], [], 0.05)
+        except InterruptedError:
+            r = []
+        if r:
+            try:
+                msg = ctrl.recv(64)
+            except BlockingIOError:
+                msg = b"?"
+            except OSError:
+                msg = b""
+            if not msg or b"kill" in msg:
+                break
+        code = child.poll()
+    kill_tree(child.pid, mine=sub)
+    if code is None:
+        with contextlib.suppress(Exception):
+            child.wait(5)
+        code = child.returncode
+    if cleanup != "-":
+        import shutil
+        shutil.rmtree(cleanup, ignore_errors=True)
+    reap()
+    with contextlib.suppress(OSError):
+        ctrl.setblocking(True)
+        ctrl.sendall(f"exit {code}\n".encode())
+    return 0
+
+
+if __name__ == "__main__":                       # the supervisor, run as a script
+    if len(sys.argv) > 5 and sys.argv[1] == "supervise" and sys.argv[5] == "--":
+        sys.exit(supervise(sys.argv[2:]))
+    sys.exit(f"usage: {sys.argv[0]} supervise OFF CTRL_FD CLEANUP -- CMD...")

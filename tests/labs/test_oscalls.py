@@ -1,0 +1,249 @@
+"""The grader's platform calls (``avblocks.labs.oscalls``) and their fallbacks.
+
+Each fallback is forced with ``oscalls.disabled(...)`` (what a platform
+without the feature would take) and checked against an independent view
+of the system: psutil for process trees and liveness, ``resource`` read
+back in the limited process, the file system for Landlock. The whole
+grader is then run with every feature off: the path Windows and old
+kernels take, minus the Windows-only calls (``taskkill``,
+``CREATE_NEW_PROCESS_GROUP``), which cannot run here."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import psutil
+import pytest
+
+from avblocks.labs import get, oscalls, run_checks
+
+HERE = Path(__file__).resolve().parent
+SRC = HERE.parents[1] / "src"
+SOLUTION = HERE / "solutions" / "lab1_kinematics.py"
+posix = pytest.mark.skipif(os.name != "posix", reason="POSIX process calls")
+
+
+def _tree(token):
+    """A process with a child and a grandchild, all sleeping with ``token``."""
+    code = ("import subprocess, sys, time\n"
+            "subprocess.Popen([sys.executable, '-c', 'import subprocess, sys, time; "
+            "subprocess.Popen([sys.executable, \"-c\", \"import time; time.sleep(60)\", "
+            f"\"{token}\"]); time.sleep(60)', '{token}'])\n"
+            "time.sleep(60)\n")
+    p = subprocess.Popen([sys.executable, "-c", code, token], start_new_session=True)
+    end = time.monotonic() + 30
+    while time.monotonic() < end:
+        kids = psutil.Process(p.pid).children(recursive=True)
+        if len(kids) >= 2:
+            return p
+        time.sleep(0.05)
+    raise AssertionError("the tree did not start")
+
+
+def _alive(pids):
+    out = []
+    for pid in pids:
+        try:
+            if psutil.Process(pid).status() != psutil.STATUS_ZOMBIE:
+                out.append(pid)
+        except psutil.NoSuchProcess:
+            pass
+    return out
+
+
+def test_status_text():
+    assert oscalls.status_text(7) == "exit status 7"
+    assert oscalls.status_text(-signal.SIGKILL) == "signal 9 (SIGKILL)"
+    assert oscalls.status_text(None) == "unknown status"
+
+
+@posix
+@pytest.mark.parametrize("off", [(), ("proc",), ("proc", "psutil")])
+def test_descendants_by_every_path_agree_with_psutil(off):
+    p = _tree(uuid.uuid4().hex)
+    try:
+        truth = sorted(c.pid for c in psutil.Process(p.pid).children(recursive=True))
+        with oscalls.disabled(*off):
+            assert sorted(oscalls.descendants(p.pid)) == truth
+    finally:
+        oscalls.kill_tree(p.pid)
+        p.wait(10)
+
+
+@posix
+@pytest.mark.parametrize("off", [(), ("killpg",), ("killpg", "proc", "psutil")])
+def test_kill_tree_leaves_nothing(off):
+    p = _tree(uuid.uuid4().hex)
+    everyone = [p.pid] + [c.pid for c in psutil.Process(p.pid).children(recursive=True)]
+    with oscalls.disabled(*off):
+        oscalls.kill_tree(p.pid)
+    p.wait(10)
+    end = time.monotonic() + 10
+    while _alive(everyone) and time.monotonic() < end:
+        time.sleep(0.05)
+    assert _alive(everyone) == []
+
+
+@pytest.mark.parametrize("off", [(), ("select",)])
+def test_write_all_gives_up_on_a_reader_that_does_not_read(off):
+    r, w = os.pipe()
+    try:
+        with oscalls.disabled(*off):
+            oscalls.write_all(w, b"x" * 100, time.monotonic() + 5)      # fits in the pipe
+            assert os.read(r, 1000) == b"x" * 100
+            t0 = time.monotonic()
+            with pytest.raises(TimeoutError):
+                oscalls.write_all(w, b"y" * (4 << 20), time.monotonic() + 0.5)
+            assert time.monotonic() - t0 < 5
+    finally:
+        os.close(r)
+        os.close(w)
+
+
+def test_limits_without_setrlimit_are_reported_not_set():
+    with oscalls.disabled("resource"):
+        got = oscalls.apply_limits(memory_mb=512, cpu_s=10, processes=8, files=64, file_mb=1)
+    assert got == {k: "not set: setrlimit switched off"
+                   for k in ("memory", "cpu", "processes", "files", "file_size")}
+
+
+def _in_child(code):
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": str(SRC)})
+    assert p.returncode == 0, p.stderr
+    lines = [ln for ln in p.stdout.splitlines() if ln.startswith("RESULT ")]
+    assert len(lines) == 1, (p.stdout, p.stderr)
+    return json.loads(lines[0][7:])
+
+
+@posix
+def test_limits_are_set_as_reported():
+    out = _in_child(
+        "import json, resource\n"
+        "from avblocks.labs import oscalls\n"
+        "said = oscalls.apply_limits(memory_mb=3000, cpu_s=77, files=99, file_mb=5)\n"
+        "got = {k: resource.getrlimit(getattr(resource, k))[0] for k in "
+        "('RLIMIT_AS', 'RLIMIT_CPU', 'RLIMIT_NOFILE', 'RLIMIT_FSIZE', 'RLIMIT_CORE')}\n"
+        "print('RESULT ' + json.dumps([said, got]))\n")
+    said, got = out
+    assert got == {"RLIMIT_AS": 3000 * 2 ** 20, "RLIMIT_CPU": 77, "RLIMIT_NOFILE": 99,
+                   "RLIMIT_FSIZE": 5 * 2 ** 20, "RLIMIT_CORE": 0}
+    assert said["memory"].startswith("3000 MiB") and said["cpu"] == "77 s of CPU time " \
+        "(RLIMIT_CPU)" and said["files"] == "99 open files (RLIMIT_NOFILE)"
+
+
+def test_landlock_switched_off_is_reported(tmp_path):
+    with oscalls.disabled("landlock"):
+        assert oscalls.landlock_abi() == 0
+        got = oscalls.restrict_writes(tmp_path)
+    assert set(got.values()) == {"not restricted: Landlock switched off"}
+
+
+@pytest.mark.skipif(oscalls.landlock_abi() < 1, reason="needs Landlock (Linux 5.13+)")
+def test_landlock_allows_writes_only_in_the_folder(tmp_path):
+    inside, outside = tmp_path / "in", tmp_path / "out"
+    inside.mkdir()
+    outside.mkdir()
+    (outside / "old.txt").write_text("old")
+    out = _in_child(
+        "import json, os\n"
+        "from avblocks.labs import oscalls\n"
+        f"said = oscalls.restrict_writes({str(inside)!r})\n"
+        "res = {}\n"
+        f"for name, path in (('in', {str(inside / 'a.txt')!r}), "
+        f"('out', {str(outside / 'b.txt')!r}), ('old', {str(outside / 'old.txt')!r}), "
+        "('null', os.devnull)):\n"
+        "    try:\n"
+        "        open(path, 'w').write('x'); res[name] = 'written'\n"
+        "    except OSError as e:\n"
+        "        res[name] = type(e).__name__\n"
+        "try:\n"
+        "    os.kill(os.getppid(), 0); res['signal'] = 'sent'\n"
+        "except OSError as e:\n"
+        "    res['signal'] = type(e).__name__\n"
+        "print('RESULT ' + json.dumps([said, res]))\n")
+    said, res = out
+    assert said["files"].startswith("writes only inside its own temporary folder")
+    assert res["in"] == res["null"] == "written"
+    assert res["out"] == res["old"] == "PermissionError"
+    assert (outside / "old.txt").read_text() == "old" and not (outside / "b.txt").exists()
+    if oscalls.landlock_abi() >= 6:
+        assert res["signal"] == "PermissionError"
+
+
+@posix
+@pytest.mark.parametrize("off", [(), ("supervisor",)])
+def test_supervised_commands_die_with_everything_they_started(off):
+    token = uuid.uuid4().hex
+    code = ("import os, subprocess, sys, time\n"
+            f"T = {token!r}\n"
+            "subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)', T])\n"
+            "if os.fork() == 0:\n"                     # a daemon, out of the session
+            "    os.setsid()\n"
+            "    if os.fork() == 0:\n"
+            "        os.execv(sys.executable, [sys.executable, '-c', "
+            "'import time; time.sleep(60)', T])\n"
+            "    os._exit(0)\n"
+            "time.sleep(60)\n")
+    with oscalls.disabled(*off):
+        run = oscalls.Supervised([sys.executable, "-c", code, token],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        end = time.monotonic() + 30
+        while len(_marked(token)) < 3 and time.monotonic() < end:
+            time.sleep(0.05)
+        assert len(_marked(token)) >= 3     # itself, its subprocess, the daemon
+        time.sleep(0.3)                      # the daemon's parent has exited
+        run.kill()
+    time.sleep(0.3)
+    left = _marked(token)
+    try:
+        if off:             # without a subreaper, the double-forked daemon escapes
+            assert len(left) <= 1
+        else:
+            assert left == []
+    finally:
+        for pid in left:
+            psutil.Process(pid).kill()
+
+
+def _marked(token):
+    out = []
+    for p in psutil.process_iter(["cmdline", "status"]):
+        if p.info["status"] != psutil.STATUS_ZOMBIE and token in (p.info["cmdline"] or []):
+            out.append(p.pid)
+    return out
+
+
+FORKS = ("\nimport os as _os, sys as _sys\n"
+         "if _os.fork() == 0:\n"
+         "    _os.execv(_sys.executable, [_sys.executable, '-c', 'import time; "
+         "time.sleep(60)', 'TOKEN'])\n")
+
+
+@posix
+def test_the_grader_with_every_feature_off(tmp_path):
+    """The fallbacks together: no supervisor (the child started directly,
+    in no session of its own), no setrlimit, no Landlock, no select (reader
+    and writer threads), no killpg, no /proc: an honest file still passes,
+    a wrong one fails with its message, the report says what was not set,
+    and a forked grandchild is still killed (found in the process tree)."""
+    token = uuid.uuid4().hex
+    f = tmp_path / "forks.py"
+    f.write_text(SOLUTION.read_text() + FORKS.replace("TOKEN", token))
+    w = tmp_path / "wrong.py"
+    w.write_text(SOLUTION.read_text().replace("v * xp.sin(th), w]", "v * xp.sin(th), -w]"))
+    with oscalls.disabled(*oscalls.FEATURES):
+        good = run_checks(get(1), f, timeout=30)
+        bad = run_checks(get(1), w, timeout=30)
+    assert good.passed, good.text()
+    assert good.limits["memory"] == "not set: setrlimit switched off"
+    assert good.limits["files"] == "not restricted: Landlock switched off"
+    assert not bad.passed and "port `pose (its rate, derivative)`" in bad.text()
+    assert _marked(token) == []

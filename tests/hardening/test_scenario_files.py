@@ -113,6 +113,23 @@ def test_movie_background_must_lie_under_the_scenario_folder(tmp_path):
     assert sc.movie_options()["background"] == (sub / "bg.png").resolve()
 
 
+@pytest.mark.parametrize("bad", ["p\x00.npz", "\u00e9\x00", "a" * 5000])
+def test_a_path_value_that_cannot_name_a_file_is_one_clean_line(tmp_path, bad):
+    """A file path in a scenario file holding a NUL or longer than PATH_MAX:
+    one ScenarioError naming the entry (the schema fuzz found 'é\\x00' as
+    navigation's policy path ending in os.path.realpath's ValueError)."""
+    import yaml
+
+    from avblocks.scenarios.loader import builtin_scenarios
+    data = yaml.safe_load(builtin_scenarios()["navigation"].read_text())
+    data["blocks"]["command"]["policy"] = bad
+    f = tmp_path / "nav.yaml"
+    f.write_text(yaml.safe_dump(data))
+    with pytest.raises(ScenarioError, match="is not a file path") as e:
+        load_scenario(f).build(output_dir=tmp_path / "out")
+    assert "blocks.command" in str(e.value) and len(str(e.value)) < 400
+
+
 def test_world_files_must_lie_under_the_scenario_folder(tmp_path):
     from PIL import Image
     img = np.full((20, 20), 255, np.uint8)

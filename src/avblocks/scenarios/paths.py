@@ -15,7 +15,12 @@ from ..core.errors import ScenarioError
 
 def inside(path, folder, *, what, source=None, must_exist=False) -> Path:
     """``path`` resolved against ``folder``; a :class:`ScenarioError` when it
-    leaves ``folder`` (absolute elsewhere, ``..``, a symbolic link out)."""
+    leaves ``folder`` (absolute elsewhere, ``..``, a symbolic link out), or
+    cannot name a file at all (a NUL character, longer than ``PATH_MAX``)."""
+    text = str(path)
+    if "\x00" in text or len(text) > 4096:
+        raise ScenarioError(f"{text[:80]!r} is not a file path (a NUL character, or longer "
+                            "than 4096 characters)", file=source, entry=what)
     folder = Path(folder).resolve()
     p = Path(os.path.expanduser(str(path))) if str(path).startswith("~") else Path(str(path))
     full = (folder / p).resolve()

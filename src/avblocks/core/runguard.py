@@ -41,6 +41,19 @@ def finite_number(v, name):
     return f
 
 
+def major_step(dt):
+    """``dt`` as a float: a major step is a finite number > 0 (every engine's
+    check, and the editor's on the field)."""
+    try:
+        f = float(dt) if not isinstance(dt, (bool, np.bool_, str, bytes)) else math.nan
+    except (TypeError, ValueError, OverflowError):
+        f = math.nan
+    if not (math.isfinite(f) and f > 0):
+        raise ParameterError("major step must be a positive number",
+                             param="dt", expected="> 0", found=dt)
+    return f
+
+
 def whole_steps(t0, t_final, dt):
     """Number of major steps from ``t0`` to ``t_final``; a
     :class:`ParameterError` unless ``t_final - t0`` is a whole number of

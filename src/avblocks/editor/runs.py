@@ -137,6 +137,9 @@ class Run:
             # stopped) between them: core.compiled.segments
             sim["backend"] = "jax"
         sim["progress"] = self._tick
+        if self.cancelled:            # cancelled while it was being built
+            self.status = "cancelled"
+            return
         try:
             res = simulate(d, **sim)
         except SimulationError as e:

@@ -118,12 +118,13 @@ class EditorService:
         scenario_data(document)
         if origin is not None and not isinstance(origin, str):
             raise EditorError("origin is a built-in name or a path", kind="BadRequest")
-        if not draft:
-            errors, _signals, _built = self.check(document, path=path)
-            if errors:
-                raise EditorError("the diagram has errors; save it as a draft to keep "
-                                  "it as it is", kind="InvalidDiagram", errors=errors)
-        return self.folder.save(full, document, revision=revision, origin=origin)
+        errors, _signals, _built = self.check(document, path=path)
+        if errors and not draft:
+            raise EditorError("the diagram has errors; save it as a draft to keep "
+                              "it as it is", kind="InvalidDiagram", errors=errors)
+        saved = self.folder.save(full, document, revision=revision, origin=origin)
+        saved["draft"] = bool(errors)       # a draft is a file `avblocks run` refuses
+        return saved
 
     # ------------------------------------------------------- validation
     def _source(self, path=None) -> str:

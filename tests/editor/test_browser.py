@@ -145,6 +145,16 @@ def until(check, timeout=10.0):
         time.sleep(0.05)
 
 
+def show_everything(pg, n_blocks):
+    """Zoom out (the zoom buttons) until all ``n_blocks`` blocks are drawn."""
+    for _ in range(12):
+        if pg.locator(".react-flow__node-block").count() >= n_blocks:
+            break
+        pg.locator(".react-flow__controls-zoomout").click()
+        pg.wait_for_timeout(120)
+    assert pg.locator(".react-flow__node-block").count() == n_blocks
+
+
 def blocks_on_canvas(pg):
     return sorted(pg.eval_on_selector_all(".react-flow__node-block",
                                           "ns => ns.map(n => n.dataset.id)"))
@@ -351,6 +361,8 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
     pg.wait_for_selector('.react-flow__node[data-id="supervisor"]')
     wait_checked(pg)
     assert pg.get_by_test_id("check").inner_text().startswith("✓")
+    # fitted at a readable zoom, it does not all fit at 1440 x 880: zoomed out, it is all there
+    show_everything(pg, 6)
     assert blocks_on_canvas(pg) == ["collision", "drive", "fleet", "lf", "morph", "supervisor"]
     boxes = pg.eval_on_selector_all(
         ".react-flow__node-block",
@@ -429,11 +441,13 @@ def test_help_overlay_and_python_export(page, editor_server):
     wire(pg, "unicycle.pose", "point_to_point.pose")
     wire(pg, "point_to_point.cmd", "unicycle.cmd")
     wait_checked(pg)
+    # (saved first: a new diagram saved as exported.yaml is named after it)
+    doc = current_document(pg, editor_server, "exported.yaml")
+    assert doc["name"] == "exported"
     pg.get_by_label("Export").select_option("python")
     code = pg.locator("pre.code")
     code.wait_for()
     shown = code.inner_text()
-    doc = current_document(pg, editor_server, "exported.yaml")
     status, r = editor_server.post("export", {"document": doc, "format": "python"})
     assert status == 200
     assert shown.strip() == r["text"].strip()

@@ -162,8 +162,10 @@ class EditorService:
         return self._checker.build(document, self._source(path), fresh=fresh)
 
     # -------------------------------------------------------------- runs
-    def run(self, document, backend="numpy", t_final=None, dt=None, path=None) -> dict:
-        """Start a run of the document in a background thread; ``{run}``."""
+    def run(self, document, backend="numpy", t_final=None, dt=None, path=None,
+            figures=True) -> dict:
+        """Start a run of the document in a background thread; ``{run}``
+        (``figures=False``: no figures drawn, a quick re-run)."""
         if backend not in ("numpy", "jax"):
             raise EditorError("backend is 'numpy' or 'jax'", kind="BadRequest")
         if backend == "jax":
@@ -177,6 +179,10 @@ class EditorService:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                     raise EditorError(f"{key} must be a number > 0", kind="BadRequest")
                 overrides[key] = float(v)
+        if not isinstance(figures, bool):
+            raise EditorError("figures is true or false", kind="BadRequest")
+        if not figures:
+            overrides["figures"] = False
         self.build(document, path)
         data = copy.deepcopy(scenario_data(document))
         rid = self._runs.start(data, self._source(path), backend, overrides,

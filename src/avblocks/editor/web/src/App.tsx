@@ -620,10 +620,10 @@ function Editor({ transport }: { transport: Transport }) {
   const tuneRun = useCallback(
     (d: Doc) => {
       if (tuneTimer.current) clearTimeout(tuneTimer.current);
+      setTuneNote('running…');
       tuneTimer.current = window.setTimeout(async () => {
         if (runs.running) return tuneRun(d);
         const t0 = performance.now();
-        setTuneNote('running…');
         const ok = await runs.start({ document: d, backend: 'jax', figures: false, path: file.path }, [...unreadErrors], {
           quiet: true,
           onEnd: (s) => setTuneNote(s.status === 'done' ? `ran again in ${((performance.now() - t0) / 1000).toFixed(2)} s: ${s.outcome ?? 'done'}` : `${s.status}: ${typeof s.error === 'string' ? s.error : (s.error?.message ?? '')}`),

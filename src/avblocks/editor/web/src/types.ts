@@ -131,6 +131,7 @@ export interface Loaded {
 }
 
 export interface RunStatus {
+  run?: string;
   status: 'running' | 'done' | 'failed' | 'cancelled';
   progress: number;
   t?: number;

@@ -26,6 +26,7 @@ export function useRun({ api, toast, highlight }: { api: Api; toast: (t: string,
   const [agent, setAgent] = useState(0);
   const poll = useRef<number | null>(null);
   const plotRef = useRef<Plotted[] | null>(null);
+  const stopping = useRef(false);
   plotRef.current = plot;
   const cursor = useRef<number | null>(null);
   const running = status?.status === 'running';
@@ -61,6 +62,7 @@ export function useRun({ api, toast, highlight }: { api: Api; toast: (t: string,
         return false;
       }
       setRefused(null);
+      stopping.current = false;
       if (!opts.quiet) setStatus({ status: 'running', progress: 0 });
       try {
         const { run: id } = await api.run(args);
@@ -71,7 +73,8 @@ export function useRun({ api, toast, highlight }: { api: Api; toast: (t: string,
             const s = await api.runStatus(id);
             setStatus(s);
             if (s.status === 'running') {
-              poll.current = window.setTimeout(follow, opts.quiet ? 120 : 250);
+              // after Stop: ask often, so the page shows the end as soon as it comes
+              poll.current = window.setTimeout(follow, stopping.current ? 40 : opts.quiet ? 120 : 250);
               return;
             }
             if (s.status === 'done' && !opts.quiet) toast(s.outcome ?? 'run finished');
@@ -101,7 +104,9 @@ export function useRun({ api, toast, highlight }: { api: Api; toast: (t: string,
   );
 
   const stop = useCallback(() => {
-    if (runId) api.cancel(runId).catch((e) => toast((e as Error).message, 'error'));
+    if (!runId) return;
+    stopping.current = true;
+    api.cancel(runId).catch((e) => toast((e as Error).message, 'error'));
   }, [api, runId, toast]);
 
   /** Plot a wire's signal (`add`: beside those plotted). */

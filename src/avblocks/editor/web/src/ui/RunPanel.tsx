@@ -32,7 +32,7 @@ export function RunResults({
   const partial = status.status === 'cancelled' && (status.signals ?? []).length > 0;
   return (
     <div className="run-results">
-      <div className={`run-state ${status.status}`} data-testid="run-state">
+      <div className={`run-state ${status.status}`} data-testid="run-state" data-run={status.run ?? ''}>
         {status.status === 'cancelled' ? 'stopped' : status.status}
         {status.status === 'running' ? ` ${Math.round(100 * status.progress)} %` : ''}
         {status.status === 'cancelled' && status.t !== undefined ? ` at t = ${+status.t.toPrecision(6)} s` : ''}

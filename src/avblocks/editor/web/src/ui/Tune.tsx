@@ -119,7 +119,7 @@ export function TunePanel({
                   value={k.value}
                   aria-label={k.key}
                   data-testid={`knob-${k.key}`}
-                  onChange={(e) => onSet(k.key, Number(e.target.value))}
+                  onChange={(e) => onSet(k.key, Number(Number(e.target.value).toPrecision(10)))}
                 />
                 {err.map((e, i) => (
                   <div key={i} className="vf-err">

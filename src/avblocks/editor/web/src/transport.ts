@@ -19,8 +19,11 @@ export class ApiError extends Error {
  * reads from `.nan` or `1e999`) is written as Python's json module reads it (NaN,
  * Infinity, -Infinity), so the library judges the value typed instead of a null. */
 export function toJson(v: unknown): string {
-  const s = JSON.stringify(v, (_k, x) => (typeof x === 'number' && !Number.isFinite(x) ? `\u0000${Number.isNaN(x) ? 'NaN' : x > 0 ? 'Infinity' : '-Infinity'}` : x));
-  return s.replace(/"\\u0000(NaN|Infinity|-Infinity)"/g, '$1');
+  // a marker no text typed holds (a random tag per request)
+  const tag = `\u0000${Math.random().toString(36).slice(2)}:`;
+  const s = JSON.stringify(v, (_k, x) => (typeof x === 'number' && !Number.isFinite(x) ? `${tag}${Number.isNaN(x) ? 'NaN' : x > 0 ? 'Infinity' : '-Infinity'}` : x));
+  const quoted = JSON.stringify(tag).slice(1, -1).replace(/[\\^$.*+?()[\]{}|]/g, '\\$&');
+  return s.replace(new RegExp(`"${quoted}(NaN|Infinity|-Infinity)"`, 'g'), '$1');
 }
 
 export interface Transport {

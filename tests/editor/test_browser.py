@@ -422,6 +422,11 @@ def test_formation_load_save_run_same_summary(page, editor_server, tmp_path_fact
     click_empty(pg)
     pg.get_by_test_id("dparam-gain").fill("1.4")
     pg.keyboard.press("Control+s")
+    # in plain words: what each choice does to the file and to the changes made here
+    choices = pg.get_by_role("dialog", name="The file changed on disk").inner_text()
+    assert "Save my diagram over it (its changes are lost)" in choices
+    assert "Open the file as it is now (my changes are lost)" in choices
+    assert "drop my changes" not in choices
     pg.get_by_test_id("overwrite").click()
     pg.wait_for_selector(".modal", state="detached")
     pg.get_by_test_id("toast").filter(has_text="saved formation.yaml").last.wait_for()
@@ -1191,6 +1196,7 @@ def test_sliders_rerun_on_the_compiled_engine_with_the_value(page, editor_server
                              timeout=180_000)
         notes.append(pg.get_by_test_id("tune-note").inner_text())
     print("\n" + "\n".join(notes))
+    shot(pg, "tune")
     pg.get_by_test_id("tab-run").click()
     rid = _run_id(pg)
     status, st = editor_server.get(f"run/{rid}")

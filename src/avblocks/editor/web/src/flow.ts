@@ -372,6 +372,8 @@ function sameNode(a: FlowNode, b: FlowNode): boolean {
 }
 
 function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
+  const da = a.data;
+  const db = b.data;
   return (
     a.source === b.source &&
     a.target === b.target &&
@@ -379,7 +381,12 @@ function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
     a.targetHandle === b.targetHandle &&
     !!a.selected === !!b.selected &&
     a.className === b.className &&
-    sameJson(a.data, b.data)
+    // a route is compared by identity (routed() keeps the object of one that did not change)
+    da.route === db.route &&
+    da.shape === db.shape &&
+    da.wire[0] === db.wire[0] &&
+    da.wire[1] === db.wire[1] &&
+    sameJson(da.errors, db.errors)
   );
 }
 
@@ -451,13 +458,19 @@ function routeView(r: Route): WireRoute {
   return { d: r.d, dots: r.dots, mid, box: [x0, y0, x1, y1], how: r.how };
 }
 
-/** The flow with each wire's route (a wire whose ports are not drawn keeps none). */
+const views = new WeakMap<Route, WireRoute>();
+
+/** The flow with each wire's route (a wire whose ports are not drawn keeps none). A route
+ * that did not change keeps its view object, which tells stableFlow the wire is the same. */
 export function routed(flow: { nodes: FlowNode[]; edges: FlowEdge[] }, wiring: Wiring): { nodes: FlowNode[]; edges: FlowEdge[] } {
   const { boxes, wires } = routeInputs(flow.nodes, flow.edges);
   const routes = wiring.update(boxes, wires);
-  const edges = flow.edges.map((e) => {
+  for (const e of flow.edges) {
     const r = routes.get(e.id);
-    return r ? { ...e, data: { ...e.data, route: routeView(r) } } : e;
-  });
-  return { nodes: flow.nodes, edges };
+    if (!r) continue;
+    let v = views.get(r);
+    if (!v) views.set(r, (v = routeView(r)));
+    e.data.route = v; // (toFlow's objects are new: set in place)
+  }
+  return flow;
 }

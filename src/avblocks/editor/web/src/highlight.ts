@@ -24,6 +24,7 @@ const NONE: WireMark = { lit: false, hovered: false, value: null };
 
 export class Highlight {
   private wires: WireKey[] = [];
+  private byId = new Map<string, WireKey>();
   private marks = new Map<string, WireMark>();
   private subs = new Map<string, Set<() => void>>();
   private hoveredWire: string | null = null;
@@ -32,7 +33,9 @@ export class Highlight {
 
   setWires(wires: WireKey[]) {
     this.wires = wires;
-    this.recompute();
+    this.byId = new Map(wires.map((w) => [w.id, w]));
+    // (nothing lit, hovered or valued: nothing to redo; a drag changes wires every frame)
+    if (this.marks.size || this.hoveredWire || this.hoveredPort || this.values.size) this.recompute();
   }
 
   hoverWire(id: string | null) {
@@ -67,7 +70,7 @@ export class Highlight {
     const lit = new Set<string>();
     const nets = new Set<string>();
     if (this.hoveredWire) {
-      const w = this.wires.find((x) => x.id === this.hoveredWire);
+      const w = this.byId.get(this.hoveredWire);
       if (w) nets.add(this.netOf(w));
     }
     const p = this.hoveredPort;

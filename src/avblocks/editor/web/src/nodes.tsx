@@ -38,7 +38,9 @@ function Port({ p, side, index, node }: { p: PortView; side: 'in' | 'out'; index
   return (
     <>
       <Handle
-        onMouseEnter={() => h.hoverPort({ node, handle: p.id, side })}
+        onMouseEnter={(e) => {
+          if (!e.buttons) h.hoverPort({ node, handle: p.id, side });
+        }}
         onMouseLeave={() => h.hoverPort(null)}
         type={side === 'in' ? 'target' : 'source'}
         position={side === 'in' ? Position.Left : Position.Right}

@@ -112,6 +112,7 @@ interface Cached {
 export class Wiring {
   private cache = new Map<string, Cached>();
   private boxes = new Map<string, Box>();
+  private last = new Map<string, Route>();
   opts: RouterOptions;
   /** Wires routed anew by the last update (the others reused their route). */
   rerouted = 0;
@@ -176,10 +177,19 @@ export class Wiring {
     for (const r of raw) {
       const h = hops.get(r.w.id) ?? [];
       const dd = dots.get(r.w.id) ?? [];
-      out.set(r.w.id, { id: r.w.id, net: r.w.net, points: r.points, hops: h, dots: dd, how: r.how, d: pathOf(r.points, h) });
+      const d = pathOf(r.points, h);
+      // the same route object when nothing about it changed (what is drawn from it is kept)
+      const was = this.last.get(r.w.id);
+      if (was && was.d === d && was.net === r.w.net && was.how === r.how && sameDots(was.dots, dd)) out.set(r.w.id, was);
+      else out.set(r.w.id, { id: r.w.id, net: r.w.net, points: r.points, hops: h, dots: dd, how: r.how, d });
     }
+    this.last = out;
     return out;
   }
+}
+
+function sameDots(a: Pt[], b: Pt[]): boolean {
+  return a.length === b.length && a.every((p, i) => p[0] === b[i][0] && p[1] === b[i][1]);
 }
 
 // ------------------------------------------------------------------ nudging

@@ -46,7 +46,8 @@ COUNT = """() => { window.__frames = 0; const f = () => { window.__frames++;
 
 #: every block drawn inside the canvas, with room for the pan's strokes (150 px across,
 #: 45 down) on every side: all of it stays drawn while the view is dragged to and fro
-ALL_IN_VIEW = """n => { const p = document.querySelector('.react-flow__pane').getBoundingClientRect();
+ALL_IN_VIEW = """n => {
+  const p = document.querySelector('.react-flow__pane').getBoundingClientRect();
   const ns = [...document.querySelectorAll('.react-flow__node-block')];
   return ns.length >= n && ns.every(e => { const r = e.getBoundingClientRect();
     return r.left >= p.left + 160 && r.right <= p.right - 160 && r.top >= p.top + 50

@@ -145,10 +145,12 @@ def until(check, timeout=10.0):
         time.sleep(0.05)
 
 
-ALL_IN_VIEW = """n => { const p = document.querySelector('.react-flow__pane').getBoundingClientRect();
+ALL_IN_VIEW = """n => {
+  const p = document.querySelector('.react-flow__pane').getBoundingClientRect();
   const ns = [...document.querySelectorAll('.react-flow__node-block')];
   return ns.length >= n && ns.every(e => { const r = e.getBoundingClientRect();
-    return r.left >= p.left && r.right <= p.right - 10 && r.top >= p.top && r.bottom <= p.bottom; }); }"""
+    return r.left >= p.left && r.right <= p.right - 10 && r.top >= p.top
+      && r.bottom <= p.bottom; }); }"""
 
 
 def show_everything(pg, n_blocks):

@@ -40,12 +40,14 @@ def constructor_arguments(block) -> dict:
     return out
 
 
-def _guard_init(cls, init):
+def _guard_init(cls, init, before=None):
     """Wrap a block constructor so that a plain Python/NumPy error raised on
     the user's arguments (a bare ``int()`` of a string, a negative size, an
     overflow) becomes a :class:`ParameterError` naming the block, instead
     of leaking from deep inside. A ``TypeError`` stays a ``TypeError`` too
-    (``ParameterTypeError``), so unknown keywords are still TypeErrors."""
+    (``ParameterTypeError``), so unknown keywords are still TypeErrors.
+    ``before(cls, arguments)``, when given, checks the bound arguments
+    (``{name: value}``) before the constructor runs."""
     import functools
 
     from .errors import AvError, ParameterError, ParameterTypeError
@@ -58,7 +60,10 @@ def _guard_init(cls, init):
         except TypeError:                       # a block that cannot be weakly referenced
             pass
         try:
-            _check_agent_count(cls, init, self, args, kwargs)
+            if before is not None and (args or kwargs):
+                bound = _bound(init, self, args, kwargs)
+                if bound is not None:
+                    before(cls, bound)
             init(self, *args, **kwargs)
         except AvError:
             raise
@@ -91,20 +96,6 @@ def _bound(init, self, args, kwargs):
         return inspect.signature(init).bind(self, *args, **kwargs).arguments
     except (TypeError, ValueError):
         return None
-
-
-def _check_agent_count(cls, init, self, args, kwargs):
-    """A block's ``n`` is its number of agents: a whole number >= 1 (the
-    declaration every block shares, :func:`~avblocks.core.declarations.constructor_parameters`),
-    checked before the constructor runs, so that ``n = -3`` is reported on
-    ``n`` and not on whatever array it would have sized."""
-    if "n" not in kwargs and not args:
-        return
-    bound = _bound(init, self, args, kwargs)
-    if bound is None or bound.get("n") is None:
-        return
-    from .params import integer
-    integer(bound["n"], cls.__name__, "n", lo=1)
 
 
 def _empty_argument(init, self, args, kwargs):

@@ -27,6 +27,12 @@ def _seed(seed):
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
 
 
+def seed_value(seed):
+    """``seed`` as a Python int: a whole number in ``[0, 2**64 - 1]`` (every
+    engine's check, and the editor's on the field)."""
+    return _seed(seed)
+
+
 def finite_number(v, name):
     ok = not isinstance(v, (bool, np.bool_, str, bytes))
     f = math.nan

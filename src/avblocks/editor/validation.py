@@ -289,7 +289,7 @@ def check_settings(sim) -> list:
     and a decimation that are whole numbers. What ``avblocks run`` would
     refuse only when it starts is shown on the field as the page draws."""
     from ..core.params import integer
-    from ..core.runguard import _seed, finite_number, major_step, whole_steps
+    from ..core.runguard import finite_number, major_step, seed_value, whole_steps
     from ..core.solvers import make_solver
     errors = []
 
@@ -310,7 +310,7 @@ def check_settings(sim) -> list:
     if "solver" in sim:
         check("solver", lambda: make_solver(sim["solver"]))
     if "seed" in sim:
-        check("seed", lambda: _seed(sim["seed"]))
+        check("seed", lambda: seed_value(sim["seed"]))
     if "log_every" in sim and sim["log_every"] is not None:
         check("log_every", lambda: integer(sim["log_every"], None, "log_every", lo=1))
     return errors
@@ -318,9 +318,8 @@ def check_settings(sim) -> list:
 
 def _reference(value):
     """The diagram parameter (name without ``$``) a value is a reference to, else None."""
-    from ..scenarios.loader import _REF
-    m = _REF.match(value.strip()) if isinstance(value, str) else None
-    return m.group(1) if m else None
+    from ..scenarios.loader import parameter_reference
+    return parameter_reference(value)
 
 
 def _references(value, message) -> list:

@@ -26,6 +26,34 @@ export function toJson(v: unknown): string {
   return s.replace(new RegExp(`"${quoted}(NaN|Infinity|-Infinity)"`, 'g'), '$1');
 }
 
+/** A JSON answer, where a number JSON has no word for may come as Python's json module
+ * writes it (NaN, Infinity, -Infinity: a draft file holding `.nan`). */
+export function fromJson(text: string): unknown {
+  try {
+    return JSON.parse(text);
+  } catch (e) {
+    if (!/NaN|Infinity/.test(text)) throw e;
+  }
+  const marks: number[] = [];
+  // outside strings only: a string is skipped whole, a bare token becomes a marker
+  const t = text.replace(/("(?:[^"\\]|\\.)*")|(-?Infinity|NaN)/g, (m, str, tok) => {
+    if (str) return str;
+    marks.push(tok === 'NaN' ? NaN : tok.startsWith('-') ? -Infinity : Infinity);
+    return `{"\\u0000": ${marks.length - 1}}`;
+  });
+  const unmark = (v: unknown): unknown => {
+    if (Array.isArray(v)) return v.map(unmark);
+    if (v && typeof v === 'object') {
+      const o = v as Record<string, unknown>;
+      const keys = Object.keys(o);
+      if (keys.length === 1 && keys[0] === '\u0000') return marks[o['\u0000'] as number];
+      return Object.fromEntries(keys.map((k) => [k, unmark(o[k])]));
+    }
+    return v;
+  };
+  return unmark(JSON.parse(t));
+}
+
 export interface Transport {
   call<T>(op: string, args?: Record<string, unknown>, method?: 'GET' | 'POST'): Promise<T>;
   /** A URL (or data URL) the page can show for a figure the server returned. */
@@ -61,7 +89,7 @@ export class HttpTransport implements Transport {
     }
     let body: unknown = null;
     try {
-      body = await res.json();
+      body = fromJson(await res.text());
     } catch {
       body = null;
     }

@@ -1,7 +1,7 @@
 // Fitting the view: into what the canvas shows, never below a readable zoom.
 import { describe, expect, it } from 'vitest';
 import { fitViewport, READABLE_ZOOM, visibleArea } from '../src/hooks/useViewMoves';
-import { toJson } from '../src/transport';
+import { fromJson, toJson } from '../src/transport';
 
 describe('fit view', () => {
   it('keeps clear of the minimap corner, the zoom buttons and the breadcrumb', () => {
@@ -40,6 +40,14 @@ describe('fit view', () => {
     expect(READABLE_ZOOM * 12).toBeCloseTo(10); // a block's name (12 px) at 10 px
     expect(-200 * v.zoom + v.x).toBeCloseTo(area.x + 24);
     expect(100 * v.zoom + v.y).toBeCloseTo(area.y + 24);
+  });
+});
+
+describe('answers', () => {
+  it('read the numbers Python writes for NaN and the infinities, outside strings', () => {
+    expect(fromJson('{"a": 1}')).toEqual({ a: 1 });
+    expect(fromJson('{"gain": NaN, "v": [Infinity, -Infinity], "s": "NaN Infinity"}')).toEqual({ gain: NaN, v: [Infinity, -Infinity], s: 'NaN Infinity' });
+    expect(() => fromJson('{oops')).toThrow();
   });
 });
 

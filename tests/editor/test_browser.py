@@ -153,13 +153,20 @@ ALL_IN_VIEW = """n => {
       && r.bottom <= p.bottom; }); }"""
 
 
+VIEWPORT = "document.querySelector('.react-flow__viewport').style.transform"
+
+
 def show_everything(pg, n_blocks):
-    """Zoom out (the zoom buttons) until all ``n_blocks`` blocks are drawn, inside the canvas."""
-    for _ in range(14):
+    """Zoom out (the zoom buttons) until all ``n_blocks`` blocks are drawn, inside the
+    canvas (each click waited for: on a loaded machine the page takes its time)."""
+    for _ in range(20):
         if pg.evaluate(ALL_IN_VIEW, n_blocks):
             break
+        before = pg.evaluate(VIEWPORT)
         pg.locator(".react-flow__controls-zoomout").click()
-        pg.wait_for_timeout(150)
+        pg.wait_for_function(f"t => {VIEWPORT} !== t", arg=before, timeout=10_000)
+        pg.wait_for_timeout(100)
+    pg.wait_for_function(ALL_IN_VIEW, arg=n_blocks, timeout=10_000)
     assert pg.locator(".react-flow__node-block").count() == n_blocks
 
 

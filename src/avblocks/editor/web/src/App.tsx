@@ -59,6 +59,10 @@ function Editor({ transport }: { transport: Transport }) {
   const [palette, setPalette] = useState<Palette | null>(null);
   const [hist, setHist] = useState<M.History>(() => M.history(M.emptyDocument()));
   const doc = hist.present;
+  // the document the page starts with, until the server's new one (or the file) comes
+  const first = useRef(doc);
+  const current = useRef(doc);
+  current.current = doc;
   const [path, setPath] = useState<string[]>([]);
   const level = path.length ? path[path.length - 1] : null;
   const [selected, setSelected] = useState<Set<string>>(new Set());
@@ -170,7 +174,8 @@ function Editor({ transport }: { transport: Transport }) {
         const fl = await api.files();
         files.setFiles(fl);
         const loaded: Loaded = fl.initial ? await api.load(fl.initial) : await api.newDocument();
-        await files.openDoc(loaded, pal);
+        // (a new diagram the user has started drawing meanwhile is kept: it is one already)
+        if (fl.initial || current.current === first.current) await files.openDoc(loaded, pal);
       } catch (e) {
         toast((e as Error).message, 'error');
       }

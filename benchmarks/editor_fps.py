@@ -14,7 +14,9 @@ Debian's Chromium (headless, no GPU: software rendering). The script measures
   edit of the document: the page recomputes the canvas's nodes and wires);
 - idle: frames/s with nothing happening (the browser's ceiling here);
 
-each at the whole diagram in view (zoomed out: every node drawn) and at zoom 1
+each at the whole diagram in view (zoomed out with the page's zoom buttons until every
+block is drawn inside the canvas with room for the pan's strokes on every side: the page's
+own fit stops at a readable zoom) and at zoom 1
 (only what is on screen is drawn). With ``--cpu``, the pan and zoom phases are
 also traced (Chromium's timeline) and the renderer main thread's CPU time per
 frame is printed: frames/s on a loaded shared machine mostly measure the CPU
@@ -40,6 +42,16 @@ ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-net
 
 COUNT = """() => { window.__frames = 0; const f = () => { window.__frames++;
   window.__raf = requestAnimationFrame(f); }; window.__raf = requestAnimationFrame(f); }"""
+
+
+#: every block drawn inside the canvas, with room for the pan's strokes (150 px across,
+#: 45 down) on every side: all of it stays drawn while the view is dragged to and fro
+ALL_IN_VIEW = """n => {
+  const p = document.querySelector('.react-flow__pane').getBoundingClientRect();
+  const ns = [...document.querySelectorAll('.react-flow__node-block')];
+  return ns.length >= n && ns.every(e => { const r = e.getBoundingClientRect();
+    return r.left >= p.left + 160 && r.right <= p.right - 160 && r.top >= p.top + 50
+      && r.bottom <= p.bottom - 50; }); }"""
 
 
 def fps_during(pg, seconds, action):
@@ -94,6 +106,14 @@ def measure(browser, url, seconds, n_blocks, cpu=False):
     cx, cy = pane["x"] + pane["width"] / 2, pane["y"] + pane["height"] / 2
     rows = []
     for view in ("all in view", "zoom 1"):
+        if view == "all in view":
+            # the page fits the view no further out than a readable zoom (issue 44): zoom out
+            # with its own buttons until every block is drawn inside the canvas, as before
+            for _ in range(20):
+                if pg.evaluate(ALL_IN_VIEW, n_blocks):
+                    break
+                pg.locator(".react-flow__controls-zoomout").click()
+                pg.wait_for_timeout(150)
         if view == "zoom 1":
             pg.mouse.move(cx, cy)
             for _ in range(12):

@@ -49,16 +49,52 @@ def test_edit_prints_a_tokened_url_and_stops_on_ctrl_c(tmp_path, need_editor_ext
     assert "Traceback" not in err and "stopped" in err
 
 
-def test_edit_refuses_a_file_outside_its_folder(tmp_path, need_editor_extra):
+def test_edit_opens_a_file_in_another_folder_and_works_there(tmp_path, need_editor_extra):
+    """``avblocks edit ../x.yaml`` opens it (no need to cd first): the editor's
+    folder is that file's own, and the confinement holds there (a file
+    beside that folder's parent is refused, by the server's own check)."""
     need_editor_extra("starlette", "uvicorn")
-    inner = tmp_path / "inner"
+    work = tmp_path / "work"
+    inner = tmp_path / "elsewhere"
+    work.mkdir()
     inner.mkdir()
-    (tmp_path / "x.yaml").write_text("name: x\n")
-    r = subprocess.run([sys.executable, "-m", "avblocks", "edit", "../x.yaml",
-                        "--no-browser"], cwd=inner, capture_output=True, text=True,
+    (work / "x.yaml").write_text((SRC / "avblocks/scenarios/swap.yaml").read_text())
+    (tmp_path / "secret.yaml").write_text("name: secret\n")
+    p, line = _start(["../work/x.yaml", "--no-browser"], inner)
+    try:
+        m = re.match(r"avblocks editor: (http://127\.0\.0\.1:\d+/[\w-]+/)$", line.strip())
+        assert m, line
+        url = m.group(1)
+        with urllib.request.urlopen(url + "api/files", timeout=30) as r:
+            files = json.loads(r.read())
+        assert files["root"] == str(work.resolve())
+        assert files["initial"] == {"path": "x.yaml"}
+        assert [f["path"] for f in files["files"]] == ["x.yaml"]
+        req = urllib.request.Request(url + "api/load", method="POST",
+                                     data=json.dumps({"path": "x.yaml"}).encode(),
+                                     headers={"content-type": "application/json"})
+        with urllib.request.urlopen(req, timeout=30) as r:
+            assert json.loads(r.read())["document"]["name"] == "swap"
+        req = urllib.request.Request(url + "api/load", method="POST",
+                                     data=json.dumps({"path": "../secret.yaml"}).encode(),
+                                     headers={"content-type": "application/json"})
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(req, timeout=30)
+        assert e.value.code == 400
+        assert json.loads(e.value.read())["error"]["kind"] == "OutsideFolder"
+    finally:
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    assert p.returncode == 0, err
+
+
+def test_edit_of_a_name_that_is_neither_a_file_nor_a_case_study(tmp_path, need_editor_extra):
+    need_editor_extra("starlette", "uvicorn")
+    r = subprocess.run([sys.executable, "-m", "avblocks", "edit", "../nothing.yaml",
+                        "--no-browser"], cwd=tmp_path, capture_output=True, text=True,
                        env={**os.environ, "PYTHONPATH": str(SRC)}, timeout=60)
     assert r.returncode == 2
-    assert "outside the editor's folder" in r.stderr
+    assert "no scenario file or built-in case study '../nothing.yaml'" in r.stderr
 
 
 def test_a_missing_extra_names_the_install_command(tmp_path):

@@ -2,13 +2,15 @@
 
     avblocks edit                      # an empty diagram
     avblocks edit formation            # a built-in case study
-    avblocks edit my_scenario.yaml     # a scenario file under this folder
+    avblocks edit my_scenario.yaml     # a scenario file
+    avblocks edit ../other/x.yaml      # anywhere: the editor works in that file's folder
     avblocks edit --no-browser --port 8765 --blocks mypackage.blocks
 
 Serves the editor (:mod:`avblocks.editor.server`) on 127.0.0.1 with a
 random token in the URL, prints the URL, opens it in the browser unless
 ``--no-browser``, and runs until Ctrl-C. The editor reads and writes files
-only under the folder it was started in.
+only under one folder: that of the file it opens, else the folder it was
+started in.
 """
 
 from __future__ import annotations
@@ -36,16 +38,20 @@ def add_parser(sub):
 def cmd_edit(args):
     from ..editor.server import EditorServer
     from ..editor.service import EditorError, EditorService
-    service = EditorService(Path.cwd(), extra_modules=args.blocks)
+    root = Path.cwd()
+    target = Path(args.target) if args.target else None
+    if target is not None and target.is_file():
+        # a file anywhere the user can name: the editor's folder is that file's
+        # own (it reads and writes only there, as it would in this folder)
+        root = target.resolve().parent
+    service = EditorService(root, extra_modules=args.blocks)
     server = None
     with _StopSignals() as signals:
         try:
             if args.target:
                 from ..scenarios.loader import builtin_scenarios
-                p = Path(args.target)
-                if p.is_file():
-                    rel = service._path(str(p.resolve()))      # refused outside the folder
-                    service.initial = {"path": service._rel(rel)}
+                if target.is_file():
+                    service.initial = {"path": target.resolve().name}
                 elif args.target in builtin_scenarios():
                     service.load(builtin=args.target)          # a Python-only one is refused
                     service.initial = {"builtin": args.target}

@@ -44,10 +44,20 @@ import numpy as np
 
 from .errors import ParameterError
 from .guarded import _guard_init
-from .params import Param
+from .params import Param, integer
 from .ports import Port
 from .sample_times import CONTINUOUS, INHERITED, Continuous, Inherited, Periodic  # noqa: F401
 
+
+def _check_arguments(cls, arguments):
+    """What every block's constructor arguments must be, checked before it
+    runs (:func:`~avblocks.core.guarded._guard_init`): ``n`` is the number of
+    agents, a whole number >= 1 (so ``n = -3`` is reported on ``n``, not on an
+    array it would have sized; declared so by
+    :func:`~avblocks.core.declarations.constructor_parameters`)."""
+    n = arguments.get("n")
+    if n is not None:
+        integer(n, cls.__name__, "n", lo=1)
 
 class Block:
     """Base class of every block. See the module docstring for the contract.
@@ -100,7 +110,7 @@ class Block:
     def __init_subclass__(cls, **kw):
         super().__init_subclass__(**kw)
         if "__init__" in cls.__dict__ and not getattr(cls.__init__, "_av_guarded", False):
-            cls.__init__ = _guard_init(cls, cls.__dict__["__init__"])
+            cls.__init__ = _guard_init(cls, cls.__dict__["__init__"], _check_arguments)
 
     def __getattr__(self, name):
         # only reached when normal lookup fails: a port name gets a clear hint

@@ -197,6 +197,8 @@ def constructor_parameters(cls) -> list[ParameterDecl]:
         decl = ParameterDecl(name, kind, shape, _plain_default(default),
                              p.default is p.empty, [None, None],
                              um.group(1) if um else "", desc, choices, False, typ)
+        if name == "n":     # every block's n is its number of agents (core.block checks it)
+            decl.kind, decl.shape, decl.bounds = "int", "()", [1, None]
         for k, v in (info.get(name) or {}).items():
             setattr(decl, k, list(v) if k == "bounds" else v)
         out.append(decl)

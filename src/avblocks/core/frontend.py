@@ -132,11 +132,13 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
     progress : bool or callable, optional
         Progress bar (default: only when stderr is a terminal and not in CI),
         or ``progress(step, steps)`` called about 100 times a run by the
-        NumPy engine (raising ``KeyboardInterrupt`` there stops the run as
-        Ctrl-C does: the results so far come back, marked interrupted).
+        NumPy engine, and at least every 0.05 s of wall time (raising
+        ``KeyboardInterrupt`` there stops the run as Ctrl-C does: the
+        results so far come back, marked interrupted).
         ``backend="jax"`` with a callable or ``True`` runs the compiled
         program in segments and does the same between them (up to 50
-        times a run; :mod:`avblocks.core.compiled.segments`); without
+        times a run, and segments of a slow run sized to take about 0.1 s
+        each; :mod:`avblocks.core.compiled.segments`); without
         ``progress`` it runs in one call.
     check_finite : bool
         Stop at the first NaN/inf, naming the block and port.

@@ -40,12 +40,14 @@ def constructor_arguments(block) -> dict:
     return out
 
 
-def _guard_init(cls, init):
+def _guard_init(cls, init, before=None):
     """Wrap a block constructor so that a plain Python/NumPy error raised on
     the user's arguments (a bare ``int()`` of a string, a negative size, an
     overflow) becomes a :class:`ParameterError` naming the block, instead
     of leaking from deep inside. A ``TypeError`` stays a ``TypeError`` too
-    (``ParameterTypeError``), so unknown keywords are still TypeErrors."""
+    (``ParameterTypeError``), so unknown keywords are still TypeErrors.
+    ``before(cls, arguments)``, when given, checks the bound arguments
+    (``{name: value}``) before the constructor runs."""
     import functools
 
     from .errors import AvError, ParameterError, ParameterTypeError
@@ -58,6 +60,10 @@ def _guard_init(cls, init):
         except TypeError:                       # a block that cannot be weakly referenced
             pass
         try:
+            if before is not None and (args or kwargs):
+                bound = _bound(init, self, args, kwargs)
+                if bound is not None:
+                    before(cls, bound)
             init(self, *args, **kwargs)
         except AvError:
             raise
@@ -71,12 +77,45 @@ def _guard_init(cls, init):
                                  hint="use fewer agents or smaller sizes") from None
         except (ValueError, OverflowError, ZeroDivisionError, IndexError, KeyError,
                 FloatingPointError) as e:
-            raise ParameterError(_ctor_msg(e), block=cls.__name__,
-                                 param=_culprit(init, self, args, kwargs, e),
+            param = _culprit(init, self, args, kwargs, e)
+            empty = None if param is not None else _empty_argument(init, self, args, kwargs)
+            if empty is not None:       # NumPy's words for it ("zero-size array ...") say less
+                raise ParameterError("is empty", block=cls.__name__, param=empty[0],
+                                     expected="at least one entry (one per agent)",
+                                     found=f"shape {empty[1]}") from e
+            raise ParameterError(_ctor_msg(e), block=cls.__name__, param=param,
                                  hint=_ctor_hint(init)) from e
 
     __init__._av_guarded = True
     return __init__
+
+
+def _bound(init, self, args, kwargs):
+    import inspect
+    try:
+        return inspect.signature(init).bind(self, *args, **kwargs).arguments
+    except (TypeError, ValueError):
+        return None
+
+
+def _empty_argument(init, self, args, kwargs):
+    """``(name, shape)`` of the one array argument that is empty (the agent
+    count 0 makes per-agent arrays empty), else None."""
+    import numpy as np
+    bound = _bound(init, self, args, kwargs)
+    if bound is None:
+        return None
+    hits = []
+    for k, v in bound.items():
+        if k == "self" or not isinstance(v, (list, tuple, np.ndarray)):
+            continue
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            continue
+        if a.size == 0:
+            hits.append((k, a.shape))
+    return hits[0] if len(hits) == 1 else None
 
 
 def _culprit(init, self, args, kwargs, e):

@@ -29,6 +29,10 @@ from .runguard import (
 )
 from .simulator import Simulator
 
+#: a ``progress(step, steps)`` callback is called about 100 times a run and
+#: at least this often (wall seconds) in a long one
+REPORT_SECONDS = 0.05
+
 
 def run(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None, seed=0,
         t0=0.0, realtime=None, progress=None, check_finite=True,
@@ -161,6 +165,9 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
             # pace from the end of init: on_start may connect to robots first
             pace0 = _time.perf_counter()
             tick = max(1, nsteps // 100)
+            # ... and at least every REPORT_SECONDS of wall time: a stop
+            # raised from the callback lands that soon in a long run
+            next_report = _time.perf_counter() + REPORT_SECONDS
             for k in range(nsteps):
                 sim.step()
                 if (k + 1) % log_every == 0:
@@ -180,6 +187,10 @@ def run_loop(sim, t_final, log, log_every, realtime, progress, max_log_bytes, pa
                         bar.update(tick)
                     if report is not None:
                         report(k + 1, nsteps)
+                        next_report = _time.perf_counter() + REPORT_SECONDS
+                elif report is not None and _time.perf_counter() >= next_report:
+                    report(k + 1, nsteps)
+                    next_report = _time.perf_counter() + REPORT_SECONDS
         except SimulationError as e:
             failure = e
         except KeyboardInterrupt as e:

@@ -27,6 +27,12 @@ def _seed(seed):
     return integer(seed, None, "seed", lo=0, hi=2**64 - 1)
 
 
+def seed_value(seed):
+    """``seed`` as a Python int: a whole number in ``[0, 2**64 - 1]`` (every
+    engine's check, and the editor's on the field)."""
+    return _seed(seed)
+
+
 def finite_number(v, name):
     ok = not isinstance(v, (bool, np.bool_, str, bytes))
     f = math.nan
@@ -38,6 +44,19 @@ def finite_number(v, name):
     if not (ok and math.isfinite(f)):
         raise ParameterError("must be a finite number", param=name,
                              expected="a number", found=repr(v)[:60])
+    return f
+
+
+def major_step(dt):
+    """``dt`` as a float: a major step is a finite number > 0 (every engine's
+    check, and the editor's on the field)."""
+    try:
+        f = float(dt) if not isinstance(dt, (bool, np.bool_, str, bytes)) else math.nan
+    except (TypeError, ValueError, OverflowError):
+        f = math.nan
+    if not (math.isfinite(f) and f > 0):
+        raise ParameterError("major step must be a positive number",
+                             param="dt", expected="> 0", found=dt)
     return f
 
 

@@ -52,6 +52,7 @@ from .runguard import (  # noqa: F401  (default_log, initial_values: importable 
     finite_number,
     initial_values,
     log_every_that_fits,
+    major_step,
 )
 from .solvers import make_solver
 
@@ -105,14 +106,7 @@ class Simulator:
             raise ParameterError("simulate needs a Diagram", param="diagram",
                                  expected="Diagram", found=type(diagram).__name__)
         self.compiled = diagram
-        try:
-            dt = float(dt)
-        except (TypeError, ValueError):
-            dt = float("nan")
-        if not (math.isfinite(dt) and dt > 0):
-            raise ParameterError("major step must be a positive number",
-                                 param="dt", expected="> 0", found=dt)
-        self.dt = dt
+        self.dt = major_step(dt)
         self.solver = make_solver(solver)
         self.seed = _seed(seed)
         self.t0 = finite_number(t0, "t0")

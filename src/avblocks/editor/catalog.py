@@ -54,6 +54,34 @@ def _jsonable(v):
     return None
 
 
+_ROLE = None
+
+
+def plain(text):
+    """reStructuredText's inline markup as the page shows it: roles
+    (``:class:`~avblocks.environment.World```) become their target's short
+    name in single backticks, double-backtick literals single-backtick ones
+    (the page draws `x` as code); anything else is kept as written."""
+    import re
+    global _ROLE
+    if not isinstance(text, str) or "`" not in text:
+        return text
+    if _ROLE is None:
+        _ROLE = re.compile(r":[A-Za-z][\w:+.-]*:`([^`]+)`")
+
+    def role(m):
+        t = m.group(1).strip()
+        label = re.match(r"^(.*?)\s*<[^<>]+>$", t)
+        if label:                       # :ref:`the title <target>`
+            return f"`{label.group(1)}`"
+        if t.startswith("~"):           # :class:`~a.b.World` shows World
+            t = t[1:].rsplit(".", 1)[-1]
+        return f"`{t}`"
+
+    text = _ROLE.sub(role, text)
+    return re.sub(r"``([^`]+)``", r"`\1`", text)
+
+
 def _summary(cls) -> str:
     """The docstring's first sentence (a full stop followed by a capital
     letter ends it; "eq. 1" does not)."""
@@ -107,7 +135,7 @@ def describe(cls, typ) -> dict:
     """One block's palette entry (see API.md)."""
     params = constructor_parameters(cls)
     template = template_of(cls)
-    entry = {"type": typ, "name": cls.__name__, "summary": _summary(cls),
+    entry = {"type": typ, "name": cls.__name__, "summary": plain(_summary(cls)),
              "doc": inspect.cleandoc(cls.__doc__ or ""), "inputs": [], "outputs": [],
              "params": [], "template": template, "ports_depend_on": [], "error": None}
     block = None
@@ -141,6 +169,8 @@ def describe(cls, typ) -> dict:
     entry["ports_depend_on"] = sorted(k for k, v in (template or {}).items()
                                       if "$agents" in json.dumps(v))
     entry["params"] = [_jsonable(d.to_dict()) for d in params]
+    for row in [*entry["params"], *entry["inputs"], *entry["outputs"]]:
+        row["doc"] = plain(row.get("doc"))
     return entry
 
 

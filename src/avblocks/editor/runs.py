@@ -276,7 +276,9 @@ class Run:
         sc = Scenario(self.data, self.source, modules=self.modules)
         d, sim = sc.build(output_dir=self.folder / "files")
         hooks, movie = sc.hooks(d, sim), sc.movie()
-        sim.update(self.overrides)
+        overrides = dict(self.overrides)
+        figures = overrides.pop("figures", True)
+        sim.update(overrides)
         sim.setdefault("t_final", 10.0)
         self.t_final = float(sim["t_final"])
         if self.backend == "jax":
@@ -284,6 +286,9 @@ class Run:
             # stopped) between them: core.compiled.segments
             sim["backend"] = "jax"
         sim["progress"] = self._tick
+        if self.cancelled:            # cancelled while it was being built
+            self.status = "cancelled"
+            return
         try:
             res = simulate(d, **sim)
         except SimulationError as e:
@@ -302,6 +307,9 @@ class Run:
             self.outcome, numbers = default_outcome(res)
         from ..scenarios.report import jsonable
         self.numbers = jsonable(numbers)
+        if not figures:             # a quick re-run (the page's sliders)
+            self.status = "done"
+            return
         figs = self.folder / "figures"
         figs.mkdir(exist_ok=True)
         with MPL_LOCK:

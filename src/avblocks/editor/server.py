@@ -244,11 +244,11 @@ def parse_body(raw: bytes) -> dict:
         raise EditorError(f"the body holds more than {MAX_JSON_VALUES:,} values",
                           kind="BadRequest")
 
-    def constant(name):
-        raise ValueError(f"{name} is not JSON")
-
     try:
-        data = json.loads(raw, parse_constant=constant)
+        # NaN and Infinity are read as Python's json writes them: a field
+        # where `.nan` or `1e999` is typed sends that number, and the library
+        # judges it (its message comes back on that field)
+        data = json.loads(raw)
     except (ValueError, RecursionError) as e:
         raise EditorError(f"the body is not JSON: {str(e)[:200]}", kind="BadRequest"
                           ) from None
@@ -291,9 +291,18 @@ def make_app(service: EditorService, token: str, port=None, names=()):
     _imports()
     from starlette.applications import Starlette
     from starlette.exceptions import HTTPException
-    from starlette.responses import FileResponse, HTMLResponse, JSONResponse, Response
+    from starlette.responses import FileResponse, HTMLResponse, Response
+    from starlette.responses import JSONResponse as _JSONResponse
     from starlette.routing import Mount, Route
     from starlette.staticfiles import StaticFiles
+
+    class JSONResponse(_JSONResponse):
+        """JSON as Python writes it: a draft saved with ``.nan`` comes back
+        with ``NaN`` (the page reads it outside strings)."""
+
+        def render(self, content) -> bytes:
+            return json.dumps(content, ensure_ascii=False, allow_nan=True,
+                              separators=(",", ":")).encode("utf-8")
 
     def failed(e: BaseException):
         status, body = error_json(e)

@@ -228,13 +228,14 @@ class EditorService:
         scenario_data(document)
         if origin is not None and not isinstance(origin, str):
             raise EditorError("origin is a built-in name or a path", kind="BadRequest")
-        if not draft:
-            errors, _signals, _built = self.check(document, path=path)
-            if errors:
-                raise EditorError("the diagram has errors; save it as a draft to keep "
-                                  "it as it is", kind="InvalidDiagram", errors=errors)
-        return self.folder.save(parts, document, revision=revision, origin=origin,
-                                create=bool(create))
+        errors, _signals, _built = self.check(document, path=path)
+        if errors and not draft:
+            raise EditorError("the diagram has errors; save it as a draft to keep "
+                              "it as it is", kind="InvalidDiagram", errors=errors)
+        saved = self.folder.save(parts, document, revision=revision, origin=origin,
+                                 create=bool(create))
+        saved["draft"] = bool(errors)       # a draft is a file `avblocks run` refuses
+        return saved
 
     # ------------------------------------------------------- validation
     def _source(self, path=None) -> str:
@@ -272,8 +273,10 @@ class EditorService:
         return self._checker.build(document, self._source(path), fresh=fresh)
 
     # -------------------------------------------------------------- runs
-    def run(self, document, backend="numpy", t_final=None, dt=None, path=None) -> dict:
-        """Start a run of the document in a background thread; ``{run}``."""
+    def run(self, document, backend="numpy", t_final=None, dt=None, path=None,
+            figures=True) -> dict:
+        """Start a run of the document in a background thread; ``{run}``
+        (``figures=False``: no figures drawn, a quick re-run)."""
         if backend not in ("numpy", "jax"):
             raise EditorError("backend is 'numpy' or 'jax'", kind="BadRequest")
         if backend == "jax":
@@ -287,6 +290,10 @@ class EditorService:
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not v > 0:
                     raise EditorError(f"{key} must be a number > 0", kind="BadRequest")
                 overrides[key] = float(v)
+        if not isinstance(figures, bool):
+            raise EditorError("figures is true or false", kind="BadRequest")
+        if not figures:
+            overrides["figures"] = False
         self.build(document, path)
         data = copy.deepcopy(scenario_data(document))
         rid = self._runs.start(data, self._source(path), backend, overrides,

@@ -67,6 +67,8 @@ def error_record(e: AvError, *, block=None, port=None, param=None, wire=None,
         "param": param or getattr(src, "param", None) or ep,
         "wire": wire,
         "cycle": cycle,
+        "field": None,
+        "refs": [],
     }
     if ew is not None and rec["wire"] is None:
         rec["wire"] = ew
@@ -228,25 +230,43 @@ def check_document(data, source, out, modules=()):
         # an empty drawing is not an error to mark on anything, but it does not run
         return ([{"message": "the diagram has no blocks yet", "kind": "ScenarioError",
                   "block": None, "port": None, "param": None, "wire": None,
-                  "cycle": None}], {}, None)
+                  "cycle": None, "field": None, "refs": []}], {}, None)
     sc = Scenario(data, source, modules=tuple(modules))
     try:
         sc.validate()
     except AvError as e:
-        return [error_record(e)], {}, None
-    # the loader builds it as `avblocks run` would: when that passes, done
+        return _fields([error_record(e)], data), {}, None
+    # the loader builds it as `avblocks run` would: when that passes, the
+    # run's settings are checked as the engines check them
     try:
         d, sim = sc.build(output_dir=out)
     except AvError as e:
         whole = e
     else:
-        return [], _signals((n, h.block) for n, h in d.blocks.items()), (d, sim, sc)
+        signals = _signals((n, h.block) for n, h in d.blocks.items())
+        errors = check_settings(sim)
+        try:        # the outcome line and figures name logged signals
+            sc.hooks(d, sim)
+        except AvError as e:
+            rec = error_record(e)
+            entry = getattr(e, "entry", None) or ""
+            rec["field"] = entry.split("[")[0].split(".")[0] or None
+            errors.append(rec)
+        errors = _fields(errors, data)
+        return errors, signals, (None if errors else (d, sim, sc))
     # it failed: piece by piece, to find every error (not only the first)
     c = _Collector(data, source, out, modules)
+    c.errors.extend(check_counts(data))
     d = c.blocks()
     c.wires(d)
+    drawn = {w[1] for w in data.get("wires") or []
+             if isinstance(w, list) and len(w) == 2 and isinstance(w[1], str)}
     for path in d.unconnected_inputs():
         b, _, p = path.rpartition(".")
+        if path in drawn:
+            # a wire is drawn to it: what failed is its source block or the
+            # wire itself, and that has its own error (never blame the input)
+            continue
         if not any(r["block"] == b and r["port"] == p for r in c.errors):
             c.add(_unconnected(b, p), block=b, port=p)
     errors = c.errors
@@ -258,7 +278,137 @@ def check_document(data, source, out, modules=()):
     signals = _signals((n, h.block) for n, h in d.blocks.items())
     if not errors:             # only the whole diagram is wrong (a loop, params...)
         errors = [_whole(whole, data)]
-    return errors, signals, None
+    return _fields(errors, data), signals, None
+
+
+def check_settings(sim) -> list:
+    """Error records of a scenario's run settings (``simulation:``, its
+    ``$references`` resolved), checked by the functions every engine checks
+    its arguments with (:mod:`avblocks.core.runguard`): a finite end time
+    that is a whole number of positive major steps, a known solver, a seed
+    and a decimation that are whole numbers. What ``avblocks run`` would
+    refuse only when it starts is shown on the field as the page draws."""
+    from ..core.params import integer
+    from ..core.runguard import finite_number, major_step, seed_value, whole_steps
+    from ..core.solvers import make_solver
+    errors = []
+
+    def check(setting, fn):
+        try:
+            return fn()
+        except AvError as e:
+            rec = error_record(e)
+            rec["param"], rec["field"] = setting, f"simulation.{setting}"
+            errors.append(rec)
+            return None
+
+    t_final = check("t_final", lambda: finite_number(sim["t_final"], "t_final")
+                    ) if "t_final" in sim else None
+    dt = check("dt", lambda: major_step(sim["dt"])) if "dt" in sim else None
+    if t_final is not None:
+        check("t_final", lambda: whole_steps(0.0, t_final, 0.01 if dt is None else dt))
+    if "solver" in sim:
+        check("solver", lambda: make_solver(sim["solver"]))
+    if "seed" in sim:
+        check("seed", lambda: seed_value(sim["seed"]))
+    if "log_every" in sim and sim["log_every"] is not None:
+        check("log_every", lambda: integer(sim["log_every"], None, "log_every", lo=1))
+    return errors
+
+
+def _reference(value):
+    """The diagram parameter (name without ``$``) a value is a reference to, else None."""
+    from ..scenarios.loader import parameter_reference
+    return parameter_reference(value)
+
+
+def _references(value, message) -> list:
+    """The diagram parameters an error about a document value is also
+    about: the value's own ``$reference``, or, for a generator that failed
+    on one argument ("in parameter 'n'"), that argument's reference. A
+    value that refers to several parameters (``random_poses: {n: $agents,
+    seed: $seed}``) and fails as a whole blames none of them."""
+    from ..scenarios.generators import GENERATORS
+    ref = _reference(value)
+    if ref is not None:
+        return [ref]
+    if isinstance(value, dict) and len(value) == 1:
+        (gen, args), = value.items()
+        if gen in GENERATORS and isinstance(args, dict):
+            import re
+            m = re.search(r"in parameter '([A-Za-z_]\w*)'", message)
+            ref = _reference(args.get(m.group(1))) if m else None
+            if ref is not None:
+                return [ref]
+    return []
+
+
+def counts(data) -> list:
+    """The diagram parameters used as an agent count: a block's ``n`` or a
+    generator's ``n`` given as ``$name``."""
+    from ..scenarios.generators import GENERATORS
+    found = []
+    for spec in (data.get("blocks") or {}).values():
+        if not isinstance(spec, dict):
+            continue
+        for k, v in spec.items():
+            cands = []
+            if k == "n":
+                cands.append(v)
+            if isinstance(v, dict) and len(v) == 1:
+                (gen, args), = v.items()
+                if gen in GENERATORS and isinstance(args, dict):
+                    cands.append(args.get("n"))
+            for c in cands:
+                ref = _reference(c)
+                if ref is not None and ref not in found:
+                    found.append(ref)
+    return found
+
+
+def check_counts(data) -> list:
+    """Errors of the diagram parameters used as an agent count (see
+    :func:`counts`): each a whole number >= 1, as a block's ``n`` is
+    (:mod:`avblocks.core.guarded`), reported on the parameter itself."""
+    from ..core.params import integer
+    params = data.get("parameters") or {}
+    errors = []
+    for name in counts(data):
+        if name not in params:
+            continue                        # the unknown reference has its own error
+        try:
+            integer(params[name], None, name, lo=1)
+        except AvError as e:
+            rec = error_record(e)
+            head = f"in parameter '{name}': "
+            if rec["message"].startswith(head):     # which count, then the library's words
+                rec["message"] = f"'{name}' is an agent count: {rec['message'][len(head):]}"
+            errors.append(rec)
+    return errors
+
+
+def _fields(errors, data) -> list:
+    """Each record with ``field``, the document entry it is about
+    (``blocks.drive.gain``, ``simulation.t_final``, ``parameters.agents``;
+    None when it is about a port, a wire or the whole diagram) and ``refs``,
+    the diagram parameters it is also about (see :func:`_references`: an
+    error of ``drive.v_max: $speed`` is also ``speed``'s)."""
+    blocks = data.get("blocks") or {}
+    sim = data.get("simulation") or {}
+    params = data.get("parameters") or {}
+    for rec in errors:
+        field, value = rec.get("field"), None
+        b, p = rec.get("block"), rec.get("param")
+        if field is None and b in blocks and p and isinstance(blocks[b], dict) \
+                and p in blocks[b]:
+            field, value = f"blocks.{b}.{p}", blocks[b][p]
+        elif field is not None and field.startswith("simulation."):
+            value = sim.get(field.partition(".")[2])
+        elif field is None and b is None and p in params and not rec.get("port"):
+            field = f"parameters.{p}"
+        rec["field"] = field
+        rec["refs"] = _references(value, rec["message"]) if value is not None else []
+    return errors
 
 
 def _unconnected(block, port):

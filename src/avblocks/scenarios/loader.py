@@ -91,6 +91,13 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def parameter_reference(value):
+    """The diagram parameter a value refers to (``"$agents"`` or
+    ``"${agents}"``: ``"agents"``), else None."""
+    m = _REF.match(value.strip()) if isinstance(value, str) else None
+    return m.group(1) if m else None
+
+
 def check_editor(section, source="<scenario>"):
     """The ``editor:`` section (the block-diagram editor's layout): checked
     lightly, never used to build or run. ``layout`` maps block names to

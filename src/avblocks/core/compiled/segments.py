@@ -45,6 +45,27 @@ SEGMENTS = 50
 #: diagram (docs/compiled.md), so short runs are cut into fewer pieces
 MIN_STEPS = 50
 
+#: wall seconds a segment should take at most: a stop (the editor's Cancel,
+#: Ctrl-C) waits for the segment running, so a long run of a slow diagram is
+#: cut into segments sized by the pace of its first one, not by SEGMENTS alone
+SEGMENT_SECONDS = 0.1
+
+#: most major steps the first segment runs: it measures the pace
+FIRST_STEPS = 512
+
+
+def paced_length(length: int, seconds: float, samples: int) -> int:
+    """Samples per segment at the pace measured (``samples`` took
+    ``seconds``): ``length`` when a segment of it takes at most
+    :data:`SEGMENT_SECONDS`, else the largest power of two that does (one
+    sample at least; powers of two, so that runs of one structure share a
+    few compiled segment programs)."""
+    per = seconds / max(1, int(samples))
+    if per * length <= SEGMENT_SECONDS:
+        return int(length)
+    fit = max(1, int(SEGMENT_SECONDS / per)) if per > 0 else int(length)
+    return max(1, min(int(length), 1 << (fit.bit_length() - 1)))
+
 
 def segment_length(nlog: int, log_every: int = 1) -> int:
     """Log samples (outer iterations) per segment: the run's ``nlog``
@@ -83,14 +104,27 @@ def run(runner, theta, X0, seed, params, progress):
     bar = progress_bar(nsteps) if progress is True else None
     report = None if progress is True else progress
 
-    def build():
-        return lambda theta, carry, i0: prog.segment(theta, carry, i0, length)
+    first = min(length, max(1, FIRST_STEPS // max(1, le)))
+
+    def build(n):
+        return lambda: (lambda theta, carry, i0: prog.segment(theta, carry, i0, n))
 
     i0 = np.asarray(0, np.int32)
     carry = prog.segment_start(X0)
-    exe, compile_s, place, args = runner._placed(("segment", length), build,
+    exe, compile_s, place, args = runner._placed(("segment", first), build(first),
                                                  runner._single, (theta, carry, i0))
     theta_p = args[0]
+    exes = {first: exe}
+
+    def segment_of(n):
+        """The compiled segment of ``n`` samples (compiled once per length)."""
+        nonlocal compile_s
+        if n not in exes:
+            exes[n], more, _place, _args = runner._placed(
+                ("segment", n), build(n), runner._single, (theta, carry, i0))
+            compile_s += more
+        return exes[n]
+
     bufs = [np.empty((nlog, *s.shape), dtype=s.dtype) for s in runner.specs]
     count, done, segments = 0, 0, 0
     interrupt = None
@@ -98,22 +132,30 @@ def run(runner, theta, X0, seed, params, progress):
     try:
         with _jax.x64(prog.x64):
             carry = args[1]
-            starts = list(range(0, nlog, length))
-            pending = exe(theta_p, carry, args[2])
-            for j, start in enumerate(starts):
-                new, rows = pending
-                if j + 1 < len(starts):
-                    # queue the next segment before waiting for this one's
-                    # rows: the device never waits for Python (dropped
-                    # unread if the run is stopped here)
-                    pending = exe(theta_p, place(new),
-                                  place(np.asarray(starts[j + 1], np.int32)))
-                take = min(length, nlog - start)
+            # (start, samples, result): the segment running; the next is queued
+            # before this one's rows are read, so the device never waits for
+            # Python (dropped unread if the run is stopped here); the first is
+            # read before the next is sent, to size the others by its pace
+            running = (0, first, exe(theta_p, carry, args[2]))
+            n = first
+            while running is not None:
+                start, size, (new, rows) = running
+                nxt = start + size
+                running = None
+                if segments > 0 and nxt < nlog:
+                    running = (nxt, n, segment_of(n)(theta_p, place(new),
+                                                     place(np.asarray(nxt, np.int32))))
+                take = min(size, nlog - start)
                 for b, r in zip(bufs, rows):
                     b[count:count + take] = np.asarray(r)[:take]
+                if segments == 0:
+                    n = paced_length(length, time.perf_counter() - t, size)
+                    if nxt < nlog:
+                        running = (nxt, n, segment_of(n)(theta_p, place(new),
+                                                         place(np.asarray(nxt, np.int32))))
                 was = done
                 carry, count, done = new, count + take, (
-                    nsteps if start + length >= nlog else (start + length) * le)
+                    nsteps if nxt >= nlog else nxt * le)
                 segments += 1
                 if bar is not None:
                     bar.update(done - was)

@@ -1,11 +1,16 @@
 // Document -> React Flow nodes and edges (pure; the canvas draws what this returns).
 
 import type { Doc, Palette, PortDecl, Validation, ValidationError, Wire, XY } from './types';
+import type { Pt } from './router';
+import type { Box, Route, WireEnds, Wiring } from './routes';
 import { declOf, groupPorts, groupsOf, itemsAt, portsOf, refBlock, splitRef, visibleOwner } from './model';
 
 export const NODE_W = 210;
 export const HEADER_H = 34;
 export const ROW_H = 22;
+
+/** A handle's centre is on the block's border; React Flow's wire ends are its outer edge. */
+export const HANDLE_OUT = 7;
 
 export const IN_NODE = '__in';
 export const OUT_NODE = '__out';
@@ -83,7 +88,21 @@ export interface EdgeData {
   wire: Wire;
   shape?: string;
   errors: string[];
+  /** The routed path (routes.ts), absent until routed or when a port is not drawn. */
+  route?: WireRoute;
   [k: string]: unknown;
+}
+
+export interface WireRoute {
+  /** SVG path */
+  d: string;
+  /** junction dots this wire draws */
+  dots: Pt[];
+  /** where the wire's name is shown when hovered (middle of its longest run) */
+  mid: Pt;
+  /** bounds [x0, y0, x1, y1] (fitting the view keeps a wire that goes round in view) */
+  box: [number, number, number, number];
+  how: 'grid' | 'straight' | 'fallback';
 }
 
 export interface FlowEdge {
@@ -353,6 +372,8 @@ function sameNode(a: FlowNode, b: FlowNode): boolean {
 }
 
 function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
+  const da = a.data;
+  const db = b.data;
   return (
     a.source === b.source &&
     a.target === b.target &&
@@ -360,7 +381,12 @@ function sameEdge(a: FlowEdge, b: FlowEdge): boolean {
     a.targetHandle === b.targetHandle &&
     !!a.selected === !!b.selected &&
     a.className === b.className &&
-    sameJson(a.data, b.data)
+    // a route is compared by identity (routed() keeps the object of one that did not change)
+    da.route === db.route &&
+    da.shape === db.shape &&
+    da.wire[0] === db.wire[0] &&
+    da.wire[1] === db.wire[1] &&
+    sameJson(da.errors, db.errors)
   );
 }
 
@@ -380,4 +406,71 @@ export function stableFlow(prev: { nodes: FlowNode[]; edges: FlowEdge[] }, next:
   });
   const same = <T,>(a: T[], b: T[]) => a.length === b.length && a.every((x, i) => x === b[i]);
   return { nodes: same(nodes, prev.nodes) ? prev.nodes : nodes, edges: same(edges, prev.edges) ? prev.edges : edges };
+}
+
+/** Where a wire meets a port handle (the same point React Flow ends its wires at). */
+export function portPoint(n: FlowNode, handle: string, side: 'in' | 'out'): Pt | null {
+  const d = n.data;
+  let list: PortView[];
+  if (d.kind === 'boundary') list = (d.side === 'in') === (side === 'out') ? d.ports : [];
+  else list = side === 'in' ? d.inputs : d.outputs;
+  const i = list.findIndex((p) => p.id === handle);
+  if (i < 0) return null;
+  const y = n.position.y + HEADER_H + i * ROW_H + ROW_H / 2 + 4;
+  return side === 'out' ? [n.position.x + (n.width ?? NODE_W) + HANDLE_OUT, y] : [n.position.x - HANDLE_OUT, y];
+}
+
+/** The blocks and the wire ends of a flow, for the router. */
+export function routeInputs(nodes: FlowNode[], edges: FlowEdge[]): { boxes: Box[]; wires: WireEnds[] } {
+  const byId = new Map(nodes.map((n) => [n.id, n]));
+  const boxes: Box[] = nodes.map((n) => ({ id: n.id, x: n.position.x, y: n.position.y, w: n.width ?? NODE_W, h: n.height ?? 60 }));
+  const wires: WireEnds[] = [];
+  for (const e of edges) {
+    const a = byId.get(e.source);
+    const b = byId.get(e.target);
+    const from = a ? portPoint(a, e.sourceHandle, 'out') : null;
+    const to = b ? portPoint(b, e.targetHandle, 'in') : null;
+    if (from && to) wires.push({ id: e.id, net: `${e.source}\u0000${e.sourceHandle}`, source: e.source, target: e.target, from, to });
+  }
+  return { boxes, wires };
+}
+
+function routeView(r: Route): WireRoute {
+  let best = -1;
+  let mid: Pt = r.points[0];
+  let x0 = Infinity;
+  let y0 = Infinity;
+  let x1 = -Infinity;
+  let y1 = -Infinity;
+  r.points.forEach((p, i) => {
+    x0 = Math.min(x0, p[0]);
+    y0 = Math.min(y0, p[1]);
+    x1 = Math.max(x1, p[0]);
+    y1 = Math.max(y1, p[1]);
+    const q = r.points[i + 1];
+    if (!q) return;
+    const len = Math.abs(q[0] - p[0]) + Math.abs(q[1] - p[1]);
+    if (len > best) {
+      best = len;
+      mid = [(p[0] + q[0]) / 2, (p[1] + q[1]) / 2];
+    }
+  });
+  return { d: r.d, dots: r.dots, mid, box: [x0, y0, x1, y1], how: r.how };
+}
+
+const views = new WeakMap<Route, WireRoute>();
+
+/** The flow with each wire's route (a wire whose ports are not drawn keeps none). A route
+ * that did not change keeps its view object, which tells stableFlow the wire is the same. */
+export function routed(flow: { nodes: FlowNode[]; edges: FlowEdge[] }, wiring: Wiring): { nodes: FlowNode[]; edges: FlowEdge[] } {
+  const { boxes, wires } = routeInputs(flow.nodes, flow.edges);
+  const routes = wiring.update(boxes, wires);
+  for (const e of flow.edges) {
+    const r = routes.get(e.id);
+    if (!r) continue;
+    let v = views.get(r);
+    if (!v) views.set(r, (v = routeView(r)));
+    e.data.route = v; // (toFlow's objects are new: set in place)
+  }
+  return flow;
 }

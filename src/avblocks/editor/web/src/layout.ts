@@ -3,7 +3,7 @@
 import type { ELK as Elk } from 'elkjs/lib/elk.bundled.js';
 import type { Doc, Palette, XY } from './types';
 import { groupsOf, itemsAt, moveItems } from './model';
-import { toFlow } from './flow';
+import { HEADER_H, ROW_H, toFlow } from './flow';
 
 // elkjs is most of the bundle (1.6 of 1.9 MB): the page loads it the first time something
 // is laid out (a file without positions, the Layout button), not with every diagram
@@ -22,6 +22,10 @@ const OPTIONS: Record<string, string> = {
   'elk.layered.nodePlacement.strategy': 'BRANDES_KOEPF',
   'elk.layered.crossingMinimization.strategy': 'LAYER_SWEEP',
   'elk.edgeRouting': 'ORTHOGONAL',
+  // room between layers and beside blocks for the wires the router draws round them
+  'elk.layered.spacing.edgeNodeBetweenLayers': '24',
+  'elk.spacing.edgeNode': '24',
+  'elk.layered.feedbackEdges': 'true',
   'elk.separateConnectedComponents': 'true',
   'elk.spacing.componentComponent': '60',
 };
@@ -41,19 +45,24 @@ export async function layoutLevel(doc: Doc, palette: Palette | null, level: stri
         id: n.id,
         width: n.width ?? 200,
         height: n.height ?? 60,
-        layoutOptions: { 'elk.portConstraints': 'FIXED_ORDER' },
+        // the ports where the canvas draws them (flow.portPoint), so layers line up with them
+        layoutOptions: { 'elk.portConstraints': 'FIXED_POS' },
         ports: [
           ...d.inputs.map((p, i) => ({
             id: `${n.id}::in::${p.id}`,
             width: 1,
             height: 1,
-            layoutOptions: { 'elk.port.side': 'WEST', 'elk.port.index': String(d.inputs.length - i) },
+            x: -1,
+            y: HEADER_H + i * ROW_H + ROW_H / 2 + 4,
+            layoutOptions: { 'elk.port.side': 'WEST' },
           })),
           ...d.outputs.map((p, i) => ({
             id: `${n.id}::out::${p.id}`,
             width: 1,
             height: 1,
-            layoutOptions: { 'elk.port.side': 'EAST', 'elk.port.index': String(i) },
+            x: (n.width ?? 200),
+            y: HEADER_H + i * ROW_H + ROW_H / 2 + 4,
+            layoutOptions: { 'elk.port.side': 'EAST' },
           })),
         ],
       };

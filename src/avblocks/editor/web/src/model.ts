@@ -17,7 +17,7 @@ export function emptyDocument(name = 'untitled'): Doc {
     parameters: { agents: 15, seed: 1 },
     blocks: {},
     wires: [],
-    simulation: { t_final: 60, dt: 0.01 },
+    simulation: { t_final: 30, dt: 0.02 },
     editor: { layout: {}, groups: {} },
   };
 }
@@ -463,8 +463,17 @@ export function valueToText(v: Json | undefined): string {
 
 const BARE = /^\$?[A-Za-z_][A-Za-z0-9_]*$/;
 
+/** How a number that JSON cannot write is written (as YAML writes it). */
+function numberText(v: number): string {
+  if (Number.isNaN(v)) return '.nan';
+  if (v === Infinity) return '.inf';
+  if (v === -Infinity) return '-.inf';
+  return JSON.stringify(v);
+}
+
 function flowText(v: Json): string {
-  if (v === null || typeof v === 'boolean' || typeof v === 'number') return JSON.stringify(v);
+  if (typeof v === 'number') return numberText(v);
+  if (v === null || typeof v === 'boolean') return JSON.stringify(v);
   if (typeof v === 'string') return BARE.test(v) && !['true', 'false', 'null'].includes(v) ? v : JSON.stringify(v);
   if (Array.isArray(v)) return `[${v.map(flowText).join(', ')}]`;
   return `{${Object.entries(v)
@@ -476,6 +485,8 @@ function flowText(v: Json): string {
 export function parseValue(text: string): Json {
   const t = text.trim();
   if (t === '') throw new ModelError('empty');
+  const special = nonFinite(t);
+  if (special !== null) return special;
   try {
     return JSON.parse(t) as Json;
   } catch {
@@ -486,17 +497,57 @@ export function parseValue(text: string): Json {
     if (/^[A-Za-z_][A-Za-z0-9_.\-]*$/.test(t)) return t; // a bare word: a string
     throw new ModelError(`cannot read '${t}' (numbers, [lists], {"mappings"} or $parameter)`);
   }
-  // quote $refs and bare keys / words
-  const quoted = t.replace(/("(?:[^"\\]|\\.)*")|(\$?[A-Za-z_][A-Za-z0-9_]*)/g, (m, str, word) => {
+  // quote $refs and bare keys / words; the numbers JSON cannot write become markers
+  const marks: number[] = [];
+  const quoted = t.replace(/("(?:[^"\\]|\\.)*")|(-?\.(?:nan|NaN|NAN|inf|Inf|INF)\b)|(-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)|(\$?[A-Za-z_][A-Za-z0-9_]*)/g, (m, str, yaml, number, word) => {
     if (str) return str;
+    if (yaml || number) {
+      const f = nonFinite(yaml ?? number);
+      if (f === null) return number;
+      marks.push(f);
+      return `{"\\u0000": ${marks.length - 1}}`;
+    }
     if (word === 'true' || word === 'false' || word === 'null') return word;
+    const f = nonFinite(word);
+    if (f !== null) {
+      marks.push(f);
+      return `{"\\u0000": ${marks.length - 1}}`;
+    }
     return JSON.stringify(word);
   });
+  let v: Json;
   try {
-    return JSON.parse(quoted) as Json;
+    v = JSON.parse(quoted) as Json;
   } catch (e) {
     throw new ModelError(`not a value: ${(e as Error).message}`);
   }
+  return unmark(v, marks);
+}
+
+/** A number too large for a float (1e999) or written as YAML writes NaN and infinity
+ * (.nan, .inf, -.inf; also nan, inf, Infinity): the number, which the library will judge;
+ * null for any other text. */
+export function nonFinite(t: string): number | null {
+  if (/^[-+]?\.?(nan|NaN|NAN)$/.test(t)) return NaN;
+  const m = /^([-+]?)\.?(inf|Inf|INF|infinity|Infinity)$/.exec(t);
+  if (m) return m[1] === '-' ? -Infinity : Infinity;
+  if (/^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/.test(t)) {
+    const v = Number(t);
+    if (!Number.isFinite(v)) return v;
+  }
+  return null;
+}
+
+function unmark(v: Json, marks: number[]): Json {
+  if (Array.isArray(v)) return v.map((x) => unmark(x, marks));
+  if (v && typeof v === 'object') {
+    const keys = Object.keys(v);
+    if (keys.length === 1 && keys[0] === '\u0000') return marks[(v as Record<string, number>)['\u0000']];
+    const out: Record<string, Json> = {};
+    for (const k of keys) out[k] = unmark((v as Record<string, Json>)[k], marks);
+    return out;
+  }
+  return v;
 }
 
 /** A one-key mapping naming a known generator, e.g. {"random_poses": {...}}. */
@@ -506,17 +557,4 @@ export function generatorOf(v: Json | undefined, names: string[]): { name: strin
   if (keys.length !== 1 || !names.includes(keys[0])) return null;
   const args = (v as Record<string, Json>)[keys[0]];
   return { name: keys[0], args: args && typeof args === 'object' && !Array.isArray(args) ? (args as Record<string, Json>) : {} };
-}
-
-/** Check a number against declared bounds; returns a message or null. */
-export function checkNumber(v: Json, kind: string, bounds?: [number | null, number | null] | null): string | null {
-  if (typeof v === 'string' && v.startsWith('$')) return null;
-  if (typeof v !== 'number' || !Number.isFinite(v)) return `expected a ${kind === 'int' ? 'whole number' : 'number'}`;
-  if (kind === 'int' && !Number.isInteger(v)) return 'expected a whole number';
-  if (bounds) {
-    const [lo, hi] = bounds;
-    if (lo !== null && lo !== undefined && v < lo) return `must be >= ${lo}`;
-    if (hi !== null && hi !== undefined && v > hi) return `must be <= ${hi}`;
-  }
-  return null;
 }

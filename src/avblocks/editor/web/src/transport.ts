@@ -1,15 +1,57 @@
 // One interface to the Python side, two ways to reach it (HTTP page, anywidget).
 
-import type { Doc, FileList, Loaded, Palette, RunStatus, SignalData, Validation } from './types';
+import type { Doc, FileList, Json, Loaded, Palette, RunStatus, SignalData, Validation, ValidationError } from './types';
 
 export class ApiError extends Error {
   status: number;
   kind: string;
-  constructor(message: string, status = 400, kind = 'Error') {
+  /** For `InvalidDiagram`: the check's error records (API.md). */
+  errors: ValidationError[];
+  constructor(message: string, status = 400, kind = 'Error', errors: ValidationError[] = []) {
     super(message);
     this.status = status;
     this.kind = kind;
+    this.errors = errors;
   }
+}
+
+/** JSON text of a request: a number JSON cannot write (NaN, an infinity, what a field
+ * reads from `.nan` or `1e999`) is written as Python's json module reads it (NaN,
+ * Infinity, -Infinity), so the library judges the value typed instead of a null. */
+export function toJson(v: unknown): string {
+  // a marker no text typed holds (a random tag per request)
+  const tag = `\u0000${Math.random().toString(36).slice(2)}:`;
+  const s = JSON.stringify(v, (_k, x) => (typeof x === 'number' && !Number.isFinite(x) ? `${tag}${Number.isNaN(x) ? 'NaN' : x > 0 ? 'Infinity' : '-Infinity'}` : x));
+  const quoted = JSON.stringify(tag).slice(1, -1).replace(/[\\^$.*+?()[\]{}|]/g, '\\$&');
+  return s.replace(new RegExp(`"${quoted}(NaN|Infinity|-Infinity)"`, 'g'), '$1');
+}
+
+/** A JSON answer, where a number JSON has no word for may come as Python's json module
+ * writes it (NaN, Infinity, -Infinity: a draft file holding `.nan`). */
+export function fromJson(text: string): unknown {
+  try {
+    return JSON.parse(text);
+  } catch (e) {
+    if (!/NaN|Infinity/.test(text)) throw e;
+  }
+  const marks: number[] = [];
+  // outside strings only: a string is skipped whole, a bare token becomes a marker
+  const t = text.replace(/("(?:[^"\\]|\\.)*")|(-?Infinity|NaN)/g, (m, str, tok) => {
+    if (str) return str;
+    marks.push(tok === 'NaN' ? NaN : tok.startsWith('-') ? -Infinity : Infinity);
+    return `{"\\u0000": ${marks.length - 1}}`;
+  });
+  const unmark = (v: unknown): unknown => {
+    if (Array.isArray(v)) return v.map(unmark);
+    if (v && typeof v === 'object') {
+      const o = v as Record<string, unknown>;
+      const keys = Object.keys(o);
+      if (keys.length === 1 && keys[0] === '\u0000') return marks[o['\u0000'] as number];
+      return Object.fromEntries(keys.map((k) => [k, unmark(o[k])]));
+    }
+    return v;
+  };
+  return unmark(JSON.parse(t));
 }
 
 export interface Transport {
@@ -36,7 +78,7 @@ export class HttpTransport implements Transport {
       const q = new URLSearchParams(Object.entries(args).map(([k, v]) => [k, String(v)]));
       url += `?${q}`;
     } else if (m === 'POST') {
-      init.body = JSON.stringify(args ?? {});
+      init.body = toJson(args ?? {});
       (init.headers as Record<string, string>)['Content-Type'] = 'application/json';
     }
     let res: Response;
@@ -47,13 +89,13 @@ export class HttpTransport implements Transport {
     }
     let body: unknown = null;
     try {
-      body = await res.json();
+      body = fromJson(await res.text());
     } catch {
       body = null;
     }
     if (!res.ok) {
-      const err = (body as { error?: { message?: string; kind?: string } } | null)?.error;
-      throw new ApiError(err?.message ?? `${res.status} ${res.statusText}`, res.status, err?.kind ?? 'Error');
+      const err = (body as { error?: { message?: string; kind?: string; errors?: ValidationError[] } } | null)?.error;
+      throw new ApiError(err?.message ?? `${res.status} ${res.statusText}`, res.status, err?.kind ?? 'Error', Array.isArray(err?.errors) ? err!.errors : []);
     }
     return body as T;
   }
@@ -76,7 +118,7 @@ export class WidgetTransport implements Transport {
   constructor(model: WidgetModel) {
     this.model = model;
     model.on('msg:custom', (msg: unknown) => {
-      const m = msg as { id?: number; ok?: boolean; result?: unknown; error?: { message?: string; kind?: string; status?: number } | string };
+      const m = msg as { id?: number; ok?: boolean; result?: unknown; error?: { message?: string; kind?: string; status?: number; errors?: ValidationError[] } | string };
       if (typeof m?.id !== 'number') return;
       const p = this.pending.get(m.id);
       if (!p) return;
@@ -84,7 +126,7 @@ export class WidgetTransport implements Transport {
       if (m.ok) p.resolve(m.result);
       else {
         const e = typeof m.error === 'string' ? { message: m.error } : (m.error ?? {});
-        p.reject(new ApiError(e.message ?? 'error', e.status ?? 400, e.kind ?? 'Error'));
+        p.reject(new ApiError(e.message ?? 'error', e.status ?? 400, e.kind ?? 'Error', Array.isArray(e.errors) ? e.errors : []));
       }
     });
   }
@@ -157,13 +199,16 @@ export class Api {
   load(args: { path?: string; builtin?: string }) {
     return this.t.call<Loaded>('load', args, 'POST');
   }
-  validate(document: Doc) {
-    return this.t.call<Validation>('validate', { document }, 'POST');
+  validate(document: Doc, path?: string | null) {
+    return this.t.call<Validation>('validate', path ? { document, path } : { document }, 'POST');
   }
   save(args: SaveArgs) {
     return this.t.call<{ path: string; revision: string; draft: boolean }>('save', { ...args }, 'POST');
   }
-  run(args: { document: Doc; backend: string; t_final?: number; dt?: number }) {
+  newDocument() {
+    return this.t.call<Loaded>('new');
+  }
+  run(args: { document: Doc; backend: string; t_final?: Json; dt?: Json; figures?: boolean }) {
     return this.t.call<{ run: string }>('run', args, 'POST');
   }
   runStatus(run: string) {

@@ -84,6 +84,7 @@ export interface Palette {
   families: Family[];
   generators: GeneratorDecl[];
   version?: string;
+  parameters?: Record<string, Json>;
 }
 
 export interface ValidationError {
@@ -94,6 +95,10 @@ export interface ValidationError {
   param?: string | null;
   wire?: Wire | null;
   cycle?: string[] | null;
+  /** The document entry it is about: "blocks.drive.gain", "simulation.t_final", "parameters.agents". */
+  field?: string | null;
+  /** The diagram parameters it is also about (the failing value refers to them). */
+  refs?: string[];
 }
 
 export interface Signal {
@@ -126,6 +131,7 @@ export interface Loaded {
 }
 
 export interface RunStatus {
+  run?: string;
   status: 'running' | 'done' | 'failed' | 'cancelled';
   progress: number;
   t?: number;

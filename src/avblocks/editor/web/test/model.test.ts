@@ -24,7 +24,6 @@ import {
   ungroup,
   valueToText,
   generatorOf,
-  checkNumber,
   defaultNameFor,
 } from '../src/model';
 import { toFlow, handleRef, IN_NODE, OUT_NODE } from '../src/flow';
@@ -303,12 +302,19 @@ describe('values', () => {
     expect(generatorOf([1, 2], ['random_poses'])).toBeNull();
   });
 
-  it('checks numbers against declared bounds', () => {
-    expect(checkNumber(-1, 'float', [0, null])).toBe('must be >= 0');
-    expect(checkNumber(2, 'float', [0, 1])).toBe('must be <= 1');
-    expect(checkNumber(0.5, 'int', null)).toBe('expected a whole number');
-    expect(checkNumber('$gain', 'float', [0, 1])).toBeNull();
-    expect(checkNumber(1, 'int', [1, 1])).toBeNull();
+  it('reads what YAML reads as NaN and infinity, and numbers too large, as those numbers', () => {
+    // (the library judges them: the field shows its words, nothing typed is dropped)
+    expect(parseValue('.nan')).toBeNaN();
+    expect(parseValue('nan')).toBeNaN();
+    expect(parseValue('1e999')).toBe(Infinity);
+    expect(parseValue('-1e999')).toBe(-Infinity);
+    expect(parseValue('.inf')).toBe(Infinity);
+    expect(parseValue('-.inf')).toBe(-Infinity);
+    expect(parseValue('[1, .nan, -.inf]')).toEqual([1, NaN, -Infinity]);
+    expect(parseValue('{gain: 1e999}')).toEqual({ gain: Infinity });
+    expect(valueToText(parseValue('[1, .nan, -.inf]'))).toBe('[1, .nan, -.inf]');
+    expect(valueToText(Infinity)).toBe('.inf');
+    expect(parseValue('infinite')).toBe('infinite'); // a word stays a word
   });
 });
 

@@ -1,5 +1,5 @@
 import { describe, expect, it } from 'vitest';
-import { signalLines } from '../src/panels';
+import { signalLines } from '../src/ui/PlotPanel';
 
 describe('signal plot lines', () => {
   const t = [0, 1, 2];

@@ -141,6 +141,7 @@ import time
 import numpy as np
 
 from ...core.errors import ParameterError
+from ..flight.cli import start_line
 from . import autopilots as ap
 from . import frames
 from ._links import TcpVehiclePort, UdpVehiclePort
@@ -197,13 +198,6 @@ def _dialect():
     return common
 
 
-def start_line(n, spacing=1.0):
-    """The default start positions (n, 3): on the floor, along x, centred
-    on 0, ``spacing`` apart (the drone_formation scenario's start line)."""
-    x = (np.arange(int(n)) - (int(n) - 1) / 2) * float(spacing)
-    return np.column_stack([x, np.zeros(len(x)), np.zeros(len(x))])
-
-
 class _Wire:
     """The file-like object pymavlink's MAVLink encoder writes to."""
 
@@ -250,9 +244,6 @@ class Emulator:
             raise ParameterError("unknown link", param="link", expected=list(LINKS),
                                  found=link)
         if pose0 is None:
-            if not np.isfinite(spacing):
-                raise ParameterError("spacing must be a finite distance [m]",
-                                     param="spacing", found=spacing)
             pose0 = start_line(int(n or 1), spacing)
         p0 = np.asarray(pose0, float)
         if p0.ndim != 2 or p0.shape[1] not in (2, 3):

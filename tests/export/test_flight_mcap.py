@@ -1,11 +1,13 @@
 """A drone flight and its simulation in one Foxglove layout: the
 drone_formation case study flown for a few seconds on five emulated PX4
 vehicles over MAVLink/UDP (``avblocks mavlink emulate``, a second process
-on loopback), exported with ``avblocks export RUN --mcap`` next to the same
-case study simulated, both read back independently of the writer. The
-set-points must be those of the flight log (read here with ``json``), the
-telemetry the fleet block logged, the events in order, and the two files
-on one clock."""
+on loopback, reached as PX4 SITL is: the vehicles send from their own
+ports to the commander's, ``udpin:127.0.0.1:BASE+``; they stand on the
+scenario's start positions, which pre-flight checks), exported with
+``avblocks export RUN --mcap`` next to the same case study simulated,
+both read back independently of the writer. The set-points must be those
+of the flight log (read here with ``json``), the telemetry the fleet block
+logged, the events in order, and the two files on one clock."""
 
 from __future__ import annotations
 
@@ -72,11 +74,14 @@ def test_a_flight_and_its_simulation_export_side_by_side(tmp_path):
         pytest.importorskip("pymavlink")
     from avblocks.scenarios import drone_formation as df
     n, t_final = 5, 2.0
-    base = _free_ports(n)
+    base = vport = _free_ports(n)      # the commander's (PX4: 14540+i) ...
+    while abs(vport - base) < n:        # ... and the vehicles' own (14580+i)
+        vport = _free_ports(n)
     elog = tmp_path / "emulator.jsonl"
     pose0 = df.start_positions(n, 0.0).tolist()
     emu = subprocess.Popen([sys.executable, "-m", "avblocks", "mavlink", "emulate", "--n",
-                            str(n), "--base-port", str(base), "--pose0", json.dumps(pose0),
+                            str(n), "--base-port", str(base), "--vehicle-port", str(vport),
+                            "--pose0", json.dumps(pose0),
                             "--log", str(elog)], env=_env(), stdout=subprocess.PIPE,
                            stderr=subprocess.STDOUT, text=True)
     try:
@@ -86,7 +91,7 @@ def test_a_flight_and_its_simulation_export_side_by_side(tmp_path):
             time.sleep(0.05)
         _run(["run", "drone_formation", "--t-final", str(t_final), "--quiet", "--out",
               str(tmp_path / "fly"), "--robots", "mavlink", "--mavlink-connect",
-              f"udpout:127.0.0.1:{base}+"])
+              f"udpin:127.0.0.1:{base}+"])
     finally:
         emu.terminate()
         try:

@@ -258,3 +258,15 @@ def test_a_platform_that_needs_arming_flies_only_once_armed_and_disarms_after_la
     assert all(f for t, f in fly if t_done + 0.1 < t < t_done + 1.9)
     assert not any(f for t, f in fly if t > t_done + 2.1)
     assert bits["cf1"][-1][1] == 1                      # disarmed: can be armed again
+
+
+def test_by_default_the_vehicles_stand_on_drone_formations_start_line(router, tmp_path):
+    """``avblocks crazyflies emulate --names cf1,cf2,cf3`` without
+    ``--position0`` sets its vehicles down where ``avblocks run
+    drone_formation --set agents=3`` starts them (truth: the scenario's own
+    ``start_positions``, on the floor), so the start-slot pre-flight takes
+    them as they are."""
+    from avblocks.scenarios.drone_formation import start_positions
+    with cf_emulator(router, "cf1,cf2,cf3", tmp_path) as log:
+        (start,) = events(read_log(log), "start")
+    np.testing.assert_array_equal(start["position"], start_positions(3, 0.0))

@@ -123,8 +123,8 @@ def test_shuffled_and_misplaced_mavlink_vehicles(tmp_path):
 
     from ._mavlink import emulator, received
     pos = [[0.03, 0.01, 0.0], [0.98, -0.02, 0.0], [-1.01, 0.0, 0.0]]
-    with emulator(tmp_path, 3, pose0=pos) as (log, port):
-        drones = Drones(f"udpout:127.0.0.1:{port}+", n=3, takeoff_height=1.0, slots=SLOTS)
+    with emulator(tmp_path, 3, pose0=pos) as (log, spec):
+        drones = Drones(spec, n=3, takeoff_height=1.0, slots=SLOTS)
         av.simulate(_diagram(drones), t_final=0.5, dt=0.05, realtime=1.0, progress=False)
     order = _best(pos)
     assert order == (2, 0, 1) and drones.agent_names == ["uav3", "uav1", "uav2"]
@@ -136,13 +136,18 @@ def test_shuffled_and_misplaced_mavlink_vehicles(tmp_path):
         assert vel and all(np.array_equal(np.float32([m.vx, m.vy, m.vz]), want)
                            for m in vel), (k, i)
     pos[1] = [0.98, 0.7, 0.0]
-    with emulator(tmp_path, 3, pose0=pos) as (log, port):
-        drones = Drones(f"udpout:127.0.0.1:{port}+", n=3, slots=SLOTS, wait=3.0)
+    with emulator(tmp_path, 3, pose0=pos) as (log, spec):
+        drones = Drones(spec, n=3, slots=SLOTS, wait=3.0)
         with pytest.raises(PreflightError, match=r"uav2 at \(0\.98, 0\.70\) is 0\.70 m from "
                                                  r"the nearest start slot \(agent 2"):
             av.simulate(_diagram(drones), t_final=0.5, dt=0.05, realtime=1.0,
                         progress=False)
-    assert [m for _, m in received(log, None, "COMMAND_LONG")] == []
+    # nothing was commanded: heartbeats, telemetry requests (SET_MESSAGE_INTERVAL)
+    # and parameter reads only, the MAVLink block's pre-flight traffic
+    for sid in (1, 2, 3):
+        types = {r["type"] for r, _ in received(log, sid)}
+        assert types <= {"HEARTBEAT", "COMMAND_LONG", "PARAM_REQUEST_READ"}, types
+        assert {m.command for _, m in received(log, sid, "COMMAND_LONG")} <= {511}
 
 
 def test_vehicles_going_silent_together_are_all_named(tmp_path):
@@ -158,8 +163,8 @@ def test_vehicles_going_silent_together_are_all_named(tmp_path):
     from ._mavlink import emulator
     n = 5
     silent = [f"--silent={k + 1}@{1.0 + 0.1 * k:.1f}" for k in range(n)]
-    with emulator(tmp_path, n, *silent) as (log, port):
-        drones = Drones(f"udpout:127.0.0.1:{port}+", n=n, takeoff_height=1.0,
+    with emulator(tmp_path, n, *silent) as (log, spec):
+        drones = Drones(spec, n=n, takeoff_height=1.0,
                         log=str(tmp_path / "flight.jsonl"))
         d = av.Diagram()
         c = d.add(av.blocks.Constant(np.zeros((n, 3))), name="c")

@@ -7,7 +7,11 @@ only: ``avblocks`` is this interpreter's ``python -m avblocks``, and the
 flight gets ``--set t_final=2`` (the page's runs are the full case study,
 flown by test_mavlink_formation.py) and the emulator a ``--log``;
 ``<!-- external: why -->`` blocks are PX4's or ArduPilot's own commands,
-which this machine cannot run (the page says which ran against what)."""
+which this machine cannot run (the page says which ran against what).
+A flown block must end complete, every vehicle landed, each vehicle
+matched by pre-flight to its own agent's start position (the scenario's
+``start_positions``) within 5 cm: the page sets its vehicles down where
+the scenario starts them."""
 
 import json
 import re
@@ -17,7 +21,10 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+
+from avblocks.scenarios.drone_formation import start_positions
 
 from ._mavlink import need_pymavlink, read_log
 from .conftest import env
@@ -132,6 +139,15 @@ def test_the_pages_mavlink_commands_run_as_written(tmp_path):
         assert res.returncode == 0, text
         summary = json.loads((tmp / "out" / "summary.json").read_text())
         assert summary["status"] == "complete"
+        # the page's vehicles stand on the scenario's start positions (its own
+        # start_positions): pre-flight gave uav k agent k, each within 5 cm
+        fl = [json.loads(s) for s in (tmp / "out" / "flight-log.jsonl").read_text()
+              .splitlines()]
+        (slots,) = [r for r in fl if r["ev"] == "slots"]
+        assert [m["vehicle"] for m in slots["mapping"]] == [f"uav{k + 1}" for k in range(n)]
+        np.testing.assert_allclose([m["slot"] for m in slots["mapping"]],
+                                   start_positions(n)[:, :2], atol=1e-3)
+        assert max(m["distance"] for m in slots["mapping"]) < 0.05, slots
         t_end = time.monotonic() + 15
         while time.monotonic() < t_end:           # the emulator's log, up to now
             em = read_log(logs[0])

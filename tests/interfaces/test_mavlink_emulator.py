@@ -387,3 +387,36 @@ def test_ardupilot_refuses_to_arm_while_its_gcs_failsafe_is_on(fleet):
     cl.c.mav.heartbeat_send(6, 8, 0, 0, 4)
     assert cl.command(400, 1) == 0 and em.armed[0]
     assert [e for e in em.events if e["ev"] == "gcs_failsafe_cleared"]
+
+
+def test_by_default_the_vehicles_stand_on_drone_formations_start_line():
+    """Without ``pose0`` the emulated vehicles stand where the drone_formation
+    scenario starts N agents (truth: the scenario's own ``start_positions``,
+    on the floor), so ``avblocks run drone_formation --set agents=N`` finds
+    each on its start slot; PX4's vehicle ports are the base port + 40 (SITL:
+    14540+i and 14580+i)."""
+    need_pymavlink()
+    from avblocks.interfaces.mavlink import Emulator
+    from avblocks.scenarios.drone_formation import start_positions
+    for n in (1, 2, 5):
+        for _ in range(20):
+            base = free_base_port(n)
+            try:
+                em = Emulator(n=n, base_port=base)
+            except OSError:             # base + 40 ... taken: another base
+                continue
+            break
+        else:
+            pytest.fail("no free pair of port ranges")
+        try:
+            np.testing.assert_array_equal(em.home, start_positions(n, 0.0))
+            assert em.ports == [base + i for i in range(n)]
+            assert em.vehicle_ports == [base + 40 + i for i in range(n)]
+        finally:
+            em.close()
+    em = Emulator(n=3, base_port=free_base_port(3), vehicle_port=free_base_port(3),
+                  spacing=0.5)
+    try:
+        np.testing.assert_array_equal(em.home[:, 0], [-0.5, 0.0, 0.5])
+    finally:
+        em.close()

@@ -34,6 +34,13 @@ def test_connection_specs_expand_as_the_sitls_number_their_ports():
         "serial:/dev/ttyUSB0:57600", "serial:/dev/ttyUSB1:57600"]
     with pytest.raises(ParameterError, match="needs the number of vehicles"):
         connections_from("udpin:127.0.0.1:14540+")
+    # a PORT+ whose port is not a number (a spec pasted into another one, as a
+    # test written for the old convention did): a clear error, not a ValueError
+    for bad in ("udpout:127.0.0.1:udpin:127.0.0.1:44815++", "udpin:127.0.0.1:x+",
+                ":14540+"):
+        with pytest.raises(ParameterError, match="ends with a port number") as e:
+            connections_from(bad, 3)
+        assert "udpin:127.0.0.1:14540+" in str(e.value)
 
 
 @pytest.mark.parametrize("bad, why", [

@@ -107,6 +107,7 @@ import numpy as np
 from ...core.errors import ParameterError
 from ...vehicles import Quadrotor, QuadrotorVelocityControl
 from .._emulator import run_emulator
+from ..flight.cli import start_line
 from . import _types
 from ._link import CfLink, NoReply
 
@@ -172,7 +173,8 @@ class CrazyflieEmulator:
     ----------
     names : list of str or "cf1,cf2"
     position0 : (N, 3), optional
-        Start positions [m] (default: a line along -y, 0.5 m apart, z = 0).
+        Start positions [m] (default: on the floor along x, centred on 0,
+        ``spacing`` apart: where the drone_formation scenario starts N agents).
     router : str
         Zenoh router endpoint.
     rate : float
@@ -194,15 +196,17 @@ class CrazyflieEmulator:
         Also publish ``/poses`` (NamedPoseArray) at ``pose_rate``.
     log : path, optional
     domain : int, optional
+    spacing : float [m]
+        Without ``position0``: the distance between neighbours on the line.
     """
 
     def __init__(self, names, position0=None, *, router="tcp/127.0.0.1:7447", rate=100.0,
                  pose_rate=50.0, kp=2.5, battery=None, silent=None, stale=None, yaw0=0.0,
-                 arming="auto", mocap=False, log=None, domain=None):
+                 arming="auto", mocap=False, log=None, domain=None, spacing=1.0):
         self.names = _names(names)
         n = self.n = len(self.names)
         if position0 is None:
-            position0 = [[0.0, -0.5 * k, 0.0] for k in range(n)]
+            position0 = start_line(n, spacing)
         p0 = np.array(position0, float)
         if p0.shape != (n, 3) or not np.isfinite(p0).all():
             raise ParameterError("position0 must be (N, 3) finite", param="position0",
@@ -680,15 +684,14 @@ def _parse_eq(items, what):
 def main(args):
     """``avblocks crazyflies emulate`` (see :func:`add_parser`)."""
     names = _names(args.names)
-    p0 = json.loads(args.position0) if args.position0 else [
-        [0.0, -args.spacing * k, 0.0] for k in range(len(names))]
+    p0 = json.loads(args.position0) if args.position0 else None
     yaw0 = json.loads(args.yaw0) if args.yaw0 else 0.0
     em = CrazyflieEmulator(names, p0, router=args.router, rate=args.rate,
                            pose_rate=args.pose_rate, battery=_parse_eq(args.battery, "battery"),
                            silent=_parse_at(args.silent, "silent"),
                            stale=_parse_at(args.stale, "stale"), yaw0=yaw0,
                            arming=args.arming, mocap=args.mocap, log=args.log,
-                           domain=args.domain)
+                           domain=args.domain, spacing=args.spacing)
     banner = (f"emulating Crazyflies {','.join(em.names)} (Crazyswarm2 over rmw_zenoh) "
               f"via {args.router}")
     return run_emulator(em, banner, args.duration)
@@ -703,14 +706,16 @@ def add_parser(sub):
                                       "(rmw_zenoh keys)")
     e.add_argument("--names", required=True, help="vehicle names, e.g. cf1,cf2,cf3")
     e.add_argument("--router", default="tcp/127.0.0.1:7447", help="Zenoh router endpoint")
-    e.add_argument("--position0", help="JSON list of [x, y, z] per vehicle")
+    e.add_argument("--position0", help="JSON list of [x, y, z] per vehicle (default: on "
+                                       "the floor along x, centred on 0, --spacing apart: "
+                                       "drone_formation's start line)")
     e.add_argument("--yaw0", help="start yaw [rad]: a number or a JSON list per vehicle")
     e.add_argument("--arming", default="auto", choices=list(ARMING),
                    help="auto: arms itself (Crazyflie 2.x); required: needs /cfN/arm "
                         "(Crazyflie 2.1 Brushless)")
     e.add_argument("--mocap", action="store_true",
                    help="also publish /poses (NamedPoseArray, motion capture)")
-    e.add_argument("--spacing", type=float, default=0.5,
+    e.add_argument("--spacing", type=float, default=1.0,
                    help="without --position0: vehicles on a line this far apart [m]")
     e.add_argument("--rate", type=float, default=100.0, help="physics rate [Hz]")
     e.add_argument("--pose-rate", type=float, default=50.0, dest="pose_rate",

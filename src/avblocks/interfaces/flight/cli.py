@@ -113,6 +113,22 @@ def flight_options(args, start_height=None):
     return kw
 
 
+def start_line(n, spacing=1.0):
+    """The emulators' default start positions (n, 3): on the floor, along x,
+    centred on 0, ``spacing`` apart: where the drone_formation scenario
+    starts n agents (its ``start_positions``), so that an emulator started
+    with n vehicles passes the start-slot pre-flight of ``avblocks run
+    drone_formation --set agents=n``."""
+    import numpy as np
+
+    from ...core.errors import ParameterError
+    if not np.isfinite(spacing):
+        raise ParameterError("spacing must be a finite distance [m]", param="spacing",
+                             found=spacing)
+    x = (np.arange(int(n)) - (int(n) - 1) / 2) * float(spacing)
+    return np.column_stack([x, np.zeros(len(x)), np.zeros(len(x))])
+
+
 def model_start(model):
     """Start positions (N, 3) of a velocity-controlled quadrotor subsystem
     or a 3-D SingleIntegrator (None when not found)."""

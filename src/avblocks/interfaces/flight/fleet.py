@@ -124,7 +124,9 @@ class Fleet(Block):
         ``fresh`` is false for a pose older than this.
     stale_timeout : float [s]
         In flight, a pose older than this lands the fleet (fail-safe; the
-        reason is "silent" when nothing else was heard either).
+        reason is "silent" when nothing else was heard since that pose,
+        allowing a quarter of ``stale_timeout`` for the last burst's
+        messages to be taken in).
     link_timeout : float [s]
         In flight, a vehicle not heard for this long lands the fleet
         (heartbeats count: for protocols with poses slower than heartbeats).
@@ -444,19 +446,29 @@ class Fleet(Block):
         # named (the others are just behind it: list those without a fresh pose)
         silent = tm.heard_age > self.link_timeout
         stale = tm.pose_age > self.stale_timeout
-        silent |= stale & (tm.heard_age > self.stale_timeout)   # nothing at all: silent
+        # a stale pose with nothing heard since it is a silent vehicle. "Since"
+        # allows for the last burst: the messages a vehicle sent with its last
+        # pose are stamped as its receive thread gets to them, milliseconds
+        # later (tens on a loaded computer), so a quarter of stale_timeout
+        # after the pose still counts as nothing; a vehicle that only lost its
+        # pose keeps sending its other telemetry (MAVLink: 5 Hz and more;
+        # Crazyflie status: 1-2 Hz), much later than that.
+        silent |= stale & ((tm.heard_age > self.stale_timeout)
+                           | (tm.heard_age > tm.pose_age - self.stale_timeout / 4))
         quiet = (tm.pose_age > self.timeout) | (tm.heard_age > self.timeout)
         for reason, hit, what in (
-                ("silent", silent, lambda who: f"nothing heard from {who} for more than "
-                 f"{min(self.link_timeout, self.stale_timeout):g} s (link_timeout "
-                 f"{self.link_timeout:g} s, stale_timeout {self.stale_timeout:g} s)"),
-                ("stale", stale, lambda who: f"no pose from {who} for more than "
+                ("silent", silent, lambda who, ix: f"nothing heard from {who} for "
+                 + ", ".join(f"{tm.heard_age[i]:.2f}" for i in ix)
+                 + f" s (link_timeout {self.link_timeout:g} s; or no pose for "
+                   f"stale_timeout {self.stale_timeout:g} s and nothing since)"),
+                ("stale", stale, lambda who, ix: f"no pose from {who} for more than "
                  f"stale_timeout={self.stale_timeout:g} s")):
             if hit.any():
-                who = [nm for nm, s in zip(names, hit) if s]
+                ix = np.nonzero(hit)[0]
+                who = [names[i] for i in ix]
                 also = [f"{nm} ({a:.2f} s)" for nm, s, q, a in
                         zip(names, hit, quiet, tm.pose_age) if q and not s]
-                msg = what(who) + ("; no fresh pose either from " + ", ".join(also)
+                msg = what(who, ix) + ("; no fresh pose either from " + ", ".join(also)
                                    if also else "")
                 self._fail(t, reason, [nm for nm, s, q in zip(names, hit, quiet)
                                        if s or q], msg)

@@ -112,16 +112,15 @@ def _deny(items):
 def emulator_kwargs(args):
     """The :class:`~.emulator.Emulator` keyword arguments of ``args``."""
     pose0 = json.loads(args.pose0) if args.pose0 else None
-    if pose0 is None:
-        pose0 = [[args.spacing * k, 0.0, 0.0] for k in range(args.n)]
     batt = json.loads(args.battery) if args.battery.strip().startswith("[") \
         else float(args.battery)
     base = args.base_port
     if base is None:
         base = 5760 if (args.link or ("udp" if args.flavor == "px4" else "tcp")) == "tcp" \
             else 14540
-    return dict(pose0=pose0, flavor=args.flavor, base_port=base, host=args.host,
-                link=args.link, vehicle_port=args.vehicle_port, battery=batt,
+    return dict(n=args.n, pose0=pose0, spacing=args.spacing, flavor=args.flavor,
+                base_port=base, host=args.host, link=args.link,
+                vehicle_port=args.vehicle_port, battery=batt,
                 offboard_timeout=args.offboard_timeout,
                 offboard_loss_action=args.offboard_loss_action,
                 guided_timeout=args.guided_timeout, gcs_timeout=args.gcs_timeout,
@@ -170,8 +169,11 @@ def add_emulate_parser(sub):
                    help="udp: the commander's ports base_port+i (default 14540); tcp: "
                         "vehicle i listens on base_port+10i (default 5760)")
     e.add_argument("--vehicle-port", type=int, default=None, dest="vehicle_port",
-                   help="udp: vehicle i's own port vehicle_port+i (default 14580)")
-    e.add_argument("--pose0", help="JSON list of [x, y, z] start positions (ENU) [m]")
+                   help="udp: vehicle i's own port vehicle_port+i (default base port + "
+                        "40: 14580, as PX4 SITL)")
+    e.add_argument("--pose0", help="JSON list of [x, y, z] start positions (ENU) [m] "
+                                   "(default: on the floor along x, centred on 0, "
+                                   "--spacing apart: drone_formation's start line)")
     e.add_argument("--spacing", type=float, default=1.0,
                    help="without --pose0: vehicles on a line this far apart [m]")
     e.add_argument("--battery", default="1.0",

@@ -698,6 +698,11 @@ def connections_from(spec, n=None):
                 raise ParameterError("a connection 'PREFIX:PORT+' needs the number of "
                                      "vehicles", param="connections", found=spec)
             pre, port = head.rsplit(":", 1)
+            if not port.isdigit() or not pre:
+                raise ParameterError("a connection 'PREFIX:PORT+' or 'PREFIX:PORT+STEP' "
+                                     "ends with a port number", param="connections",
+                                     found=spec, expected="udpin:127.0.0.1:14540+ or "
+                                                          "tcp:127.0.0.1:5760+10")
             d = int(step or 1)
             return [f"{pre}:{int(port) + d * k}" for k in range(int(n))]
         spec = [s.strip() for s in spec.split(",") if s.strip()]

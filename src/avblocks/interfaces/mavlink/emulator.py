@@ -4,13 +4,20 @@ One process, N vehicles; vehicle ``i`` has system id ``i + 1`` and is
 reached the way its real counterpart's SITL is (:mod:`._links`):
 
 * ``flavor="px4"`` (default link ``udp``): it owns UDP port
-  ``vehicle_port + i`` (14580 + i) and sends to ``base_port + i`` (14540 +
-  i) on ``host``, where the commander listens (``udpin:127.0.0.1:14540+``);
-  it answers the first peer that talks to it;
+  ``vehicle_port + i`` (14580 + i; by default ``base_port + 40``, PX4's
+  spacing of the two) and sends to ``base_port + i`` (14540 + i) on
+  ``host``, where the commander listens (``udpin:127.0.0.1:14540+``); it
+  answers the first peer that talks to it;
 * ``flavor="ardupilot"`` (default link ``tcp``): a TCP server on
   ``base_port + 10 i`` (5760 + 10 i, ArduPilot SITL's SERIAL0), reached
   with ``tcp:127.0.0.1:5760+10``; ``link="udp"`` gives it the UDP layout
   above.
+
+Without ``pose0`` the vehicles stand on the floor on a line along x
+centred on 0, ``spacing`` (1 m) apart: where the ``drone_formation``
+scenario's agents start (its ``start_positions``), so that ``avblocks run
+drone_formation --set agents=N --robots mavlink`` finds each vehicle on
+its start slot.
 
 Each vehicle is the library's quadrotor model
 (:class:`~avblocks.vehicles.Quadrotor` flown by
@@ -134,6 +141,7 @@ import time
 import numpy as np
 
 from ...core.errors import ParameterError
+from ..flight.cli import start_line
 from . import autopilots as ap
 from . import frames
 from ._links import TcpVehiclePort, UdpVehiclePort
@@ -221,7 +229,7 @@ class Emulator:
                  silent=None, stale=None, no_pose=(), log=None, mass=1.0,
                  pose_message="local", link=None, vehicle_port=None, params=None,
                  factory_defaults=False, gimbal=False, temp_reject=None, in_progress=None,
-                 deny_interval=None, no_interval=(), indoor=False):
+                 deny_interval=None, no_interval=(), indoor=False, spacing=1.0):
         from ...vehicles import Quadrotor, QuadrotorVelocityControl
         if flavor not in FLAVORS:
             raise ParameterError("unknown autopilot flavor", param="flavor",
@@ -236,8 +244,7 @@ class Emulator:
             raise ParameterError("unknown link", param="link", expected=list(LINKS),
                                  found=link)
         if pose0 is None:
-            n = int(n or 1)
-            pose0 = [[1.0 * k, 0.0, 0.0] for k in range(n)]
+            pose0 = start_line(int(n or 1), spacing)
         p0 = np.asarray(pose0, float)
         if p0.ndim != 2 or p0.shape[1] not in (2, 3):
             raise ParameterError("pose0 must be (N, 2) or (N, 3) start positions [m]",
@@ -312,7 +319,7 @@ class Emulator:
         self._next = [dict() for _ in range(n)]
         # the links
         self.host = host
-        vport = 14580 if vehicle_port is None else int(vehicle_port)
+        vport = base_port + 40 if vehicle_port is None else int(vehicle_port)
         if link == "udp":
             self.links = [UdpVehiclePort(host, vport + i, base_port + i) for i in range(n)]
             self.ports = [base_port + i for i in range(n)]

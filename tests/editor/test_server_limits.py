@@ -116,6 +116,21 @@ def test_booleans_and_names_are_checked_by_type(editor_server):
     assert status == 200, body                      # real booleans still work
 
 
+def test_the_argument_table_is_each_operations_signature():
+    """The table that types the arguments names exactly the parameters of
+    each operation's method (an argument added to a method and not to the
+    table was refused as unknown: the Tune tab's ``figures`` was)."""
+    import inspect
+
+    from avblocks.editor.service import EditorService
+    for op, spec in OPERATIONS.items():
+        params = inspect.signature(getattr(EditorService, op)).parameters
+        assert set(spec) == set(params) - {"self"}, op
+        for name, p in params.items():
+            if name != "self":
+                assert spec[name].required == (p.default is inspect.Parameter.empty), (op, name)
+
+
 SAMPLES = {"text": "a.yaml", "bool": True, "number": 1.5, "mapping": {"name": "x"}}
 WRONG = [None, True, 0, -1.5, "", "x", [], ["a"], {}, {"a": 1}]
 

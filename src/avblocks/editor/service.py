@@ -68,7 +68,7 @@ OPERATIONS = {
     "save": {"path": _NEED_TEXT, "document": _DOCUMENT, "revision": _TEXT, "draft": _BOOL,
              "origin": _TEXT, "create": _BOOL},
     "run": {"document": _DOCUMENT, "backend": _TEXT, "t_final": _NUMBER, "dt": _NUMBER,
-            "path": _TEXT},
+            "path": _TEXT, "figures": _BOOL},
     "status": {"run": _NEED_TEXT},
     "cancel": {"run": _NEED_TEXT},
     "signal": {"run": _NEED_TEXT, "name": _NEED_TEXT},

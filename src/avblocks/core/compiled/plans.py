@@ -132,6 +132,8 @@ def points_at_t0(cd, todo, *, dt, t0=0.0, seed=0, x0=None):
     downstream (the flocking law's pair lists at 10^7 agents: most of the
     minute planning took) are not evaluated."""
     from .. import memo as _memo
+    from .. import rng as _rng
+    from ..block import Block as _Block
     from ..simulator import Simulator
     names = cd.names
     wanted = []                                 # (block i, source block, output) or None
@@ -156,7 +158,15 @@ def points_at_t0(cd, todo, *, dt, t0=0.0, seed=0, x0=None):
         if j not in need:
             need.add(j)
             stack += [k for _inp, k, _o in eng.src_ft[j]]
-    X = sim.initial_states()
+    X = [{} for _ in cd.blocks]
+    for j in need:                              # states read, never written: no copies
+        b = cd.blocks[j]
+        x = dict(b._init) if type(b).initial_state is _Block.initial_state \
+            else b.initial_state()
+        x.update({nm: v for (i, nm), v in sim.x0.items() if i == j})
+        for r in b._random:
+            x[r] = _rng.key(sim.seed, f"{cd.names[j]}.{r}")
+        X[j] = x
     Y = [dict() for _ in cd.blocks]
     token = _memo.activate(sim._memo)
     try:

@@ -16,13 +16,15 @@ from .layout import _bounds, _gather_slots, _int_type, _query_cells, _windows, l
 
 
 def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=None,
-               min_capacity=8, hits=None) -> CellList:
+               min_capacity=8, hits=None, count_hits=True) -> CellList:
     """Plan a :class:`CellList` from sample positions (build time, NumPy).
 
     ``capacity`` defaults to ``max(min_capacity, ceil(headroom * most))``
     where ``most`` is the largest candidate count of a point at ``points``;
-    ``hits`` likewise from the most points within ``reach`` of one point.
-    Non-finite points raise a ``ParameterError`` naming the first.
+    ``hits`` likewise from the most points within ``reach`` of one point
+    (``count_hits=False``: not counted, left None, for a search that never
+    answers :func:`within`). Non-finite points raise a ``ParameterError``
+    naming the first.
     """
     pts = np.asarray(points, dtype=float)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3):
@@ -40,13 +42,51 @@ def plan_cells(points, reach, *, capacity=None, headroom=1.5, box=None, table=No
         return CellList(base.reach, 1, table, base.box, base.dim,
                         max(1, n - 1) if hits is None else int(hits))
     if capacity is None:
-        # the most candidates of a point: its cell window's slot ranges
-        capacity = max(int(min_capacity),
-                       int(math.ceil(float(headroom) * (_prepare(base, pts, None, np)[3]
-                                                        if n else 0))))
-    if hits is None:
+        # the most candidates of a point: the points in its cell window
+        most = _most_candidates(base, pts) if n else 0
+        if most is None:                # a periodic box, or a sparse frame
+            most = _prepare(base, pts, None, np)[3]
+        capacity = max(int(min_capacity), int(math.ceil(float(headroom) * most)))
+    if hits is None and count_hits:
         hits = max(int(min_capacity), int(math.ceil(float(headroom) * _most_hits(base, pts))))
-    return CellList(base.reach, int(capacity), table, base.box, base.dim, int(hits))
+    return CellList(base.reach, int(capacity), table, base.box, base.dim,
+                    None if hits is None else int(hits))
+
+
+def _most_candidates(cells, pts):
+    """The most candidates of one of ``pts`` in free space: the points in
+    the ``(2 split + 1)^D`` cells around its own, what :func:`_prepare`'s
+    slot ranges count (the same number), found without them: a count per
+    cell of the frame (a dense grid), summed over the window along each
+    axis by running sums, the largest sum of an occupied cell. Contiguous
+    passes over the grid instead of ``2 * 5^(D-1)`` scattered lookups per
+    point (10^7 points: 13 s -> about 1 s on this 2-core machine). None in
+    a periodic box or when the frame has more than ``4 N + 4096`` cells
+    (sparse: the slot ranges serve)."""
+    if cells.box is not None:
+        return None
+    n = pts.shape[0]
+    c = np.floor(pts / np.asarray(cells.cell_edges())).astype(np.int64)
+    c -= c.min(axis=0)
+    dims = (c.max(axis=0) + 1).tolist()
+    g = math.prod(int(x) for x in dims)
+    if g > 4 * n + 4096:
+        return None
+    key = c[:, -1]
+    for a in range(cells.dim - 2, -1, -1):      # key = c_0 + W_0 (c_1 + W_1 c_2)
+        key = key * dims[a] + c[:, a]
+    count = np.bincount(key, minlength=g).reshape(dims[::-1])
+    s, box = cells.split, count
+    w = 2 * s + 1
+    for ax in range(cells.dim):                 # a window sum along each axis
+        pad = [(0, 0)] * cells.dim
+        pad[ax] = (s + 1, s)
+        run = np.cumsum(np.pad(box, pad), axis=ax)
+        hi = [slice(None)] * cells.dim
+        lo = [slice(None)] * cells.dim
+        hi[ax], lo[ax] = slice(w, None), slice(0, -w)
+        box = run[tuple(hi)] - run[tuple(lo)]
+    return int(box[count > 0].max())
 
 
 def _most_hits(cells, pts):

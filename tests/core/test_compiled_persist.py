@@ -177,6 +177,16 @@ def test_simulate_keeps_programs_and_plans_by_default_and_opts_out(tmp_path):
     ref = av.simulate(d, 2.0, dt=0.05, solver="euler", log=["nb.neighbors"], log_every=4,
                       progress=False)
     np.testing.assert_array_equal(got, ref["nb.neighbors"])
+    # a damaged program entry: JAX warns, compiles, and the run is right
+    for f in (cache / "jax").rglob("*"):
+        if f.is_file() and "cache" in f.name:
+            f.write_bytes(b"not an executable" * 10)
+    damaged, err = child(SMALL % ("", out), env, tmp_path)
+    assert damaged["compiles"] >= 1 and damaged["hits"] == 0, damaged
+    assert "Error reading persistent compilation cache entry" in \
+        err + " ".join(damaged["warnings"])
+    np.testing.assert_array_equal(np.load(out), ref["nb.neighbors"])
+    kept = files(cache)
     # opting out: the same run compiles (programs and the plan not read) and
     # leaves the folder as it was
     off, _ = child(SMALL % (", cache=False", out), env, tmp_path)

@@ -165,3 +165,75 @@ def test_shard_agents_needs_the_agents_to_divide_over_the_devices():
         devices.check_shard("space", one, 99)
     assert devices.check_shard("agents", one, 99) == "agents"
     assert devices.check_shard("agents", one[:1], 7) == "agents"
+
+
+PROCESS = r'''
+import os, sys
+pid, port, out = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+os.environ["JAX_NUM_CPU_DEVICES"] = "2"
+import jax
+jax.config.update("jax_cpu_collectives_implementation", "gloo")
+if pid >= 0:
+    jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processes=2,
+                               process_id=pid)
+import numpy as np
+import avblocks as av
+N, K, R = 64, 4, 3.0
+rng = np.random.default_rng(0)
+p0 = rng.uniform(-12, 12, (N, 2))
+v0 = np.column_stack([-p0[:, 1], p0[:, 0]]) * 0.15 - p0 * 0.05
+d = av.Diagram()
+f = d.add(av.vehicles.DoubleIntegrator(p0, velocity0=v0), name="flock")
+nb = d.add(av.environment.Neighbors(N, K, radius=R, input="position", method="cells"),
+           name="nb")
+law = d.add(av.controllers.Flocking(N, 2.0, r=R), name="law")
+d.connect(f.position, nb.position)
+d.connect(f.position, law.position)
+d.connect(f.velocity, law.velocity)
+d.connect(nb.neighbors, law.neighbors)
+d.connect(law.accel, f.accel)
+kw = dict(dt=0.05, solver="euler", log=["flock.position", "nb.neighbors"], log_every=4,
+          cache=False)
+if pid >= 0:
+    r = av.compile(d, 1.0, devices=jax.devices(), shard="agents", **kw)
+else:
+    r = av.compile(d, 1.0, devices=1, **kw)
+res = r()
+np.save(out, np.asarray(res["flock.position"]))
+np.save(out + ".nb.npy", np.asarray(res["nb.neighbors"]))
+print("devices", len(jax.devices()), "local", len(jax.local_devices()))
+'''
+
+
+@pytest.mark.slow
+def test_a_swarm_split_over_two_processes_equals_one_device(tmp_path):
+    """``jax.distributed`` on one machine: two processes of two CPU devices
+    each (CPU collectives over gloo) run one sharded swarm over the four
+    devices; each process gets the whole result, equal to one device's."""
+    import socket
+
+    import numpy as np
+    src = str(Path(av.__file__).resolve().parents[1])
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([src, os.environ.get("PYTHONPATH",
+                                                                            "")])}
+    env.pop("XLA_FLAGS", None)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = str(s.getsockname()[1])
+    procs = [subprocess.Popen([sys.executable, "-c", PROCESS, str(i), port,
+                               str(tmp_path / f"p{i}.npy")], env=env, cwd=tmp_path,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in (0, 1)]
+    outs = [p.communicate(timeout=900) for p in procs]
+    for p, (o, e) in zip(procs, outs):
+        assert p.returncode == 0, e[-3000:]
+        assert "devices 4 local 2" in o
+    one = subprocess.run([sys.executable, "-c", PROCESS, "-1", port,
+                          str(tmp_path / "one.npy")], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=900)
+    assert one.returncode == 0, one.stderr[-3000:]
+    want = np.load(tmp_path / "one.npy")
+    for i in (0, 1):
+        np.testing.assert_allclose(np.load(tmp_path / f"p{i}.npy"), want, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(np.load(tmp_path / f"p{i}.npy.nb.npy"),
+                                      np.load(tmp_path / "one.npy.nb.npy"))

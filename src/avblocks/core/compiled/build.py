@@ -208,7 +208,8 @@ def _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite, cach
             log = tuple(log)
         key = (float(t_final), float(dt), solver if isinstance(solver, str)
                else _solver_key(solver), log, int(log_every), float(t0), dtype,
-               bool(check_finite), str(_persist.resolve(cache)),
+               bool(check_finite), cache if isinstance(cache, (bool, type(None)))
+               else str(cache),
                devices if devices is None or isinstance(devices, int)
                else tuple(d.id for d in devices), shard)
         hash(key)

@@ -112,10 +112,25 @@ class Placement:
 
         def one(a):
             a = np.asarray(a) if not hasattr(a, "sharding") else a
-            if np.ndim(a) >= 1 and np.shape(a)[0] == self.split:
-                return self._put(a, self.divided)
-            return self._put(a, self.replicated)
+            where = self.divided if (np.ndim(a) >= 1 and np.shape(a)[0] == self.split) \
+                else self.replicated
+            if not where.is_fully_addressable and not hasattr(a, "sharding"):
+                # devices of other processes (jax.distributed): every process
+                # holds the same host array and places its own devices' parts
+                return jax.make_array_from_callback(np.shape(a), where,
+                                                    lambda idx, a=a: a[idx])
+            return self._put(a, where)
         return jax.tree_util.tree_map(one, tree)
+
+
+def host(a):
+    """``a`` (a JAX array) as a NumPy array, whole: gathered from every
+    process's devices when part of it lives on another process's
+    (``jax.distributed``; each process then gets the whole array)."""
+    if getattr(a, "is_fully_addressable", True):
+        return np.asarray(a)
+    from jax.experimental import multihost_utils
+    return np.asarray(multihost_utils.process_allgather(a, tiled=True))
 
 
 _COLLECTIVES = ("all-gather", "all-reduce", "all-to-all", "collective-permute",

@@ -6,14 +6,16 @@ engine (:func:`avblocks.compile`):
 
 1. **plans** every search a block owns (``block.searches()``, or each
    attribute that is a ``NeighborSearch``; see
-   :func:`avblocks.core.diagnostics.searches_of`) from the block's input
-   values at ``t0`` the first time the block is compiled (or, when the
-   search's ``points`` names a parameter such as fixed targets, from that
-   parameter's value), computed by the NumPy engine (one initial
-   evaluation, no step), unless the user fixed
-   ``capacity=``. The plan is part of the block's structure, so it is part
-   of the compile-cache key; it is kept for the block's life and only grows
-   (after an overflow, step 3), so a grown plan is not planned away again;
+   :func:`avblocks.core.diagnostics.searches_of`) from the points it
+   searches at ``t0`` the first time the block is compiled: the block's
+   input ``points`` computed by the NumPy engine from the initial states
+   through only the blocks upstream of it (:func:`points_at_t0`: the
+   searching block and what follows it are not evaluated), or, when the
+   search's ``points`` names a parameter such as fixed targets, that
+   parameter's value; unless the user fixed ``capacity=``. The plan is part
+   of the block's structure, so it is part of the compile-cache key; it is
+   kept for the block's life and only grows (after an overflow, step 3), so
+   a grown plan is not planned away again;
 2. during the run, each search call adds what it needed to a running
    maximum the run carries and returns (:mod:`avblocks.core.diagnostics`;
    nothing is called back to the host);
@@ -44,12 +46,14 @@ before planning from ``t0``, so a second compile of the same structure
 (the same diagram object or one built anew) starts from the grown plan:
 no re-plan, and the program the first run compiled after growing. Read,
 set and save them with :func:`get_plans`, :func:`set_plans`,
-:func:`save_plans` and :func:`load_plans`. With a plan store
-(:func:`use_plan_store`, turned on with the persistent compilation cache:
-:func:`~avblocks.core.compiled.enable_persistent_cache`, and by the
-``avblocks`` command) grown plans are also written to disk, one JSON file
-per structure in a folder named after the avblocks and JAX versions, and
-read back by later processes.
+:func:`save_plans` and :func:`load_plans`. A runner with a cache folder
+(``compile(..., cache=)``, the user's cache folder by default: see
+:mod:`avblocks.core.compiled.persist`) also writes them to disk, one JSON
+file per structure in a folder named after the avblocks and JAX versions,
+read back (and checked as data) by later processes; so is the verdict that
+a use of the structure exchanges data between devices when split (it then
+runs on one device from the start). :func:`use_plan_store` overrides the
+folder for every runner, or keeps plans in memory only.
 """
 
 from __future__ import annotations

@@ -300,8 +300,8 @@ class Runner:
         prog = self.program
         if report is not None:
             res, needs, stopped = _segments.run(self, theta, X0, seed, params, report)
-            over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows \
-                else ()
+            over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
+                if prog.need_rows else ()
             if over and stopped:
                 # not repeated (it was stopped), but its samples are suspect
                 import warnings
@@ -338,10 +338,11 @@ class Runner:
             for a in flat:
                 a.block_until_ready()
             wall = time.perf_counter() - t
-        logs = [np.asarray(a) for a in logs]
-        XF = jax.tree_util.tree_unflatten(tree, [np.asarray(a) for a in flat])
+        logs = [_devices.host(a) for a in logs]
+        XF = jax.tree_util.tree_unflatten(tree, [_devices.host(a) for a in flat])
         res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
-        over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows else ()
+        over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
+            if prog.need_rows else ()
         if over:
             return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
@@ -456,11 +457,11 @@ class Runner:
                 logs, XF, most = exe(th, xs)
                 jax.block_until_ready((logs, XF))
             wall += time.perf_counter() - t
-            most = np.asarray(most).max(axis=0)          # the largest over the runs
+            most = _devices.host(most).max(axis=0)       # the largest over the runs
             needs = most if needs is None else np.maximum(needs, most)
             for o, a in zip(out, logs):
-                o[lo:hi] = np.asarray(a)[:hi - lo]
-            XF = jax.tree_util.tree_map(np.asarray, XF)
+                o[lo:hi] = _devices.host(a)[:hi - lo]
+            XF = jax.tree_util.tree_map(_devices.host, XF)
             if finals is None:
                 finals = [{k: np.empty((R, *v.shape[1:]), v.dtype) for k, v in x.items()}
                           for x in XF]

@@ -18,6 +18,7 @@ from ..results import Results
 from . import _jax
 from . import chunking as _chunking
 from . import devices as _devices
+from . import outcome as _outcome
 from . import plans as _plans
 from . import segments as _segments
 from .outcome import check_finite as _check_finite
@@ -173,8 +174,9 @@ class Runner:
         res = Results(self.t if t is None else t, data, dict(zip(self.names, self.specs)), meta,
                       self.aliases, runs=runs)
         cd = self.compiled
-        res.final_state = {f"{cd.names[i]}.{k}": v for i, x in enumerate(XF)
-                           for k, v in x.items()}
+        res.final_state = _outcome.final_states({f"{cd.names[i]}.{k}": v
+                                                 for i, x in enumerate(XF)
+                                                 for k, v in x.items()})
         return res
 
     def _meta(self, seed, params, wall, compile_s):
@@ -338,15 +340,23 @@ class Runner:
             for a in flat:
                 a.block_until_ready()
             wall = time.perf_counter() - t
+        large = _outcome.large(logs, flat)
+        # a large run (10^7 agents: logs and final state of hundreds of MB)
+        # is checked for NaN/inf on the device (a flag per array comes back,
+        # not a scan of every value on the host), and its final state stays
+        # there until it is read (res.final_state converts on access)
+        finite = _outcome.finite_on_device(list(logs) + flat) \
+            if (large and self.check_finite) else None
         logs = [_devices.host(a) for a in logs]
-        XF = jax.tree_util.tree_unflatten(tree, [_devices.host(a) for a in flat])
+        XF = jax.tree_util.tree_unflatten(tree, flat if large else
+                                          [_devices.host(a) for a in flat])
         res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
         over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
             if prog.need_rows else ()
         if over:
             return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
-            _check_finite(res)
+            _check_finite(res, finite)
         return res
 
     # ---------------------------------------------------------- ensemble

@@ -35,7 +35,8 @@ so memory grows as O(N). Real-time factor = dt / (seconds per step).
     python benchmarks/interacting.py --long --n 1000 10000    # 4 s runs: jax / Numba
     python benchmarks/interacting.py --long --n 100000 --numba2   # jax / two-thread Numba
     python benchmarks/interacting.py --float32 --n 1000       # float32 error, flocking
-    python benchmarks/interacting.py --gpu --out-dir OUT      # the GPU rows (one call)
+    python benchmarks/interacting.py --gpu --out-dir OUT --budget 420 --limit 200
+                                                              # the GPU rows (one call)
     python benchmarks/interacting.py --gpu-parts --out-dir OUT   # a GPU step's parts
 
 ``--long`` (issue 32; one process, so the ratios share the machine's
@@ -47,14 +48,23 @@ of the diagram (plan, overflow, re-plan, compile twice); the second
 no trace, no compile); the compiled runner's second call; each ratio to
 the Numba loop timed next to it (``--numba2``: the two-thread loop).
 
-``--gpu`` writes ``gpu_issue32.md`` (and ``.json``) into ``--out-dir``: on
+``--gpu`` writes ``gpu_issue47.md`` (and ``.json``) into ``--out-dir``: on
 JAX's default device, the cases of ``GPU_CASES`` in order of need, each in
 a child process with a time limit (``--limit``, 240 s; all within
 ``--budget``, 480 s, later cases skipped): flocking at N = 10^6 (RK4, dt
-0.02, float64 then float32: ms per step, planning and first-call seconds,
-peak device memory, and the search alone), N = 10^7 (float32 then
-float64, 10 steps), a check of the device against the NumPy engine (N =
-2000), N = 10^6 over 4 s (the flock contracts, one re-plan) and N = 10^5.
+0.02, float64 then float32) and N = 10^7 (float32 then float64), each
+from two runners of different step counts (10 and 50, 10 and 30), so a
+row gives the time of a step and the fixed cost of a call (what a call
+costs besides its steps), the plan's and the first call's seconds and the
+peak device memory (10^6 also the search alone); a profile of one call at
+10^7 in its own process (``cProfile`` of the host's Python and a
+``jax.profiler`` trace, summarised: busy time and top spans of the host
+and each device; the Perfetto file copied to ``--out-dir``); a check of
+the device against the NumPy engine (N = 2000); sharded runs
+(``shard="agents"``) on the machine's devices, then on its CPU split into
+16 devices (1, 2, 4, 8, 16); and N = 10^6 over 4 s (the flock contracts,
+one re-plan). The script sets ``AVBLOCKS_CACHE=off`` (unless set):
+compiles and plans are timed as a first process sees them.
 ``--gpu-parts`` times a GPU step's parts alone (cell sort, k-nearest at two
 chunk budgets, one law evaluation) at ``--n`` (10^6, 10^7).
 

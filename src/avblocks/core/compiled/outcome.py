@@ -23,8 +23,12 @@ LARGE_BYTES = 16 * 2**20
 
 def large(logs, finals) -> bool:
     """Whether the arrays of a run's logs and final state pass :data:`LARGE_BYTES`."""
-    return sum(int(np.prod(a.shape)) * a.dtype.itemsize
-               for a in (*logs, *finals)) >= LARGE_BYTES
+    total = 0
+    for a in logs:
+        total += a.nbytes
+    for a in finals:
+        total += a.nbytes
+    return total >= LARGE_BYTES
 
 
 _FLAGS: dict = {}
@@ -73,12 +77,10 @@ class FinalStates(Mapping):
         return f"FinalStates({sorted(self._values)})"
 
 
-def final_states(values):
-    """The final-state mapping of a run: a plain dict when its values are
-    host arrays, a :class:`FinalStates` when some live on a device."""
-    if all(isinstance(v, np.ndarray) for v in values.values()):
-        return values
-    return FinalStates(values)
+def final_states(values, on_device=False):
+    """The final-state mapping of a run: a plain dict of host arrays, or a
+    :class:`FinalStates` when they live on a device (``on_device``)."""
+    return FinalStates(values) if on_device else values
 
 
 def check_finite(res, finite=None):

@@ -169,14 +169,15 @@ class Runner:
         return X
 
     # --------------------------------------------------------------- run
-    def _results(self, logs, XF, meta, runs=None, t=None):
+    def _results(self, logs, XF, meta, runs=None, t=None, on_device=False):
         data = dict(zip(self.names, logs))
         res = Results(self.t if t is None else t, data, dict(zip(self.names, self.specs)), meta,
                       self.aliases, runs=runs)
         cd = self.compiled
         res.final_state = _outcome.final_states({f"{cd.names[i]}.{k}": v
                                                  for i, x in enumerate(XF)
-                                                 for k, v in x.items()})
+                                                 for k, v in x.items()},
+                                                on_device)
         return res
 
     def _meta(self, seed, params, wall, compile_s):
@@ -350,7 +351,8 @@ class Runner:
         logs = [_devices.host(a) for a in logs]
         XF = jax.tree_util.tree_unflatten(tree, flat if large else
                                           [_devices.host(a) for a in flat])
-        res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
+        res = self._results(logs, XF, self._meta(seed, params, wall, compile_s),
+                            on_device=large)
         over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
             if prog.need_rows else ()
         if over:

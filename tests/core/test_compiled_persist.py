@@ -301,3 +301,34 @@ def test_load_plans_refuses_what_is_not_a_plans_file(tmp_path):
         f.write_text(text)
         with pytest.raises(av.ParameterError, match="not a plans file"):
             _plans.load_plans(f)
+
+
+TINY = '''
+    import jax
+    if %r:                     # the user's own cache, keeping every program
+        jax.config.update("jax_compilation_cache_dir", %r)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+    import numpy as np
+    import avblocks as av
+    d = av.Diagram()
+    c = d.add(av.blocks.Constant([[1.0]]), name="c")
+    i = d.add(av.blocks.Integrator([[0.0]]), name="i")
+    d.connect(c.y, i.u)
+    out["y"] = float(av.simulate(d, 1.0, dt=0.1, log=["i.y"], backend="jax")["i.y"][-1, 0, 0])
+    out["jax_dir"] = jax.config.jax_compilation_cache_dir
+'''
+
+
+def test_a_jax_cache_folder_set_by_the_user_is_kept(tmp_path):
+    """Whoever set JAX's persistent cache folder first keeps it: the
+    programs go there, not into avblocks' folder; without one, avblocks
+    points JAX at ``<cache>/jax``."""
+    ours, mine = tmp_path / "ours", tmp_path / "mine"
+    env = environment(ours)
+    got, _ = child(TINY % (True, str(mine)), env, tmp_path)
+    assert abs(got["y"] - 1.0) < 1e-12
+    assert got["jax_dir"] == str(mine)
+    assert files(mine) and not [f for f in files(ours) if f.startswith("jax/")]
+    got, _ = child(TINY % (False, ""), env, tmp_path)
+    assert got["jax_dir"] == str(ours / "jax")
+    assert [f for f in files(ours) if f.startswith("jax/")]

@@ -282,6 +282,7 @@ def test_a_cache_folder_others_may_write_to_is_not_used(tmp_path):
 def test_the_cache_folder_is_the_platforms(monkeypatch, tmp_path):
     import platformdirs
     monkeypatch.delenv("AVBLOCKS_CACHE_DIR", raising=False)
+    monkeypatch.delenv("AVBLOCKS_CACHE", raising=False)
     assert persist.cache_dir() == Path(platformdirs.user_cache_dir("avblocks",
                                                                     appauthor=False))
     monkeypatch.setenv("AVBLOCKS_CACHE_DIR", str(tmp_path / "mine"))

@@ -59,9 +59,8 @@ from . import _jax
 
 _OFF = ("0", "off", "no", "false")
 _LOCK = threading.Lock()
-#: what this module did to JAX's configuration: the folder it set (None:
-#: nothing set by avblocks) and whether the user had set one first
-_JAX = {"dir": None, "user": None}
+#: the folder of JAX's persistent cache that avblocks set (None: none)
+_JAX = {"dir": None}
 _WARNED: set = set()
 _SAFE: dict = {}            # folder -> verdict (checked once a process)
 
@@ -157,15 +156,17 @@ def use(cache=None) -> Path | None:
     return root
 
 
-def _point_jax_at(folder: Path):
+def _point_jax_at(folder: Path, force=False):
     """Turn JAX's persistent compilation cache on in ``folder`` unless the
-    user configured JAX's own; switch folders when a runner names another."""
+    user configured JAX's own (a folder that avblocks did not set, set
+    before or since: it is left alone); switch folders when a runner names
+    another. ``force``: whatever was configured."""
     jax = _jax.jax()
     with _LOCK:
         now = jax.config.jax_compilation_cache_dir
-        if _JAX["user"] is None:
-            _JAX["user"] = bool(now) and now != _JAX["dir"]
-        if _JAX["user"] or now == str(folder):
+        if not force and now and now != _JAX["dir"]:
+            return                              # the user's own folder
+        if now == str(folder):
             return
         jax.config.update("jax_compilation_cache_dir", str(folder))
         # every program is kept: a second process should compile nothing
@@ -184,13 +185,18 @@ def _reset():
         pass
 
 
+def forget():
+    """After the folders were deleted (``avblocks cache clear``): check and
+    make them again at the next use, and let JAX open its cache afresh."""
+    with _LOCK:
+        _SAFE.clear()
+    _reset()
+
+
 def set_jax_folder(folder: Path):
     """Point JAX's cache at ``folder`` whatever was configured before
     (:func:`~avblocks.core.compiled.enable_persistent_cache`)."""
-    with _LOCK:
-        _JAX["user"] = False
-        _JAX["dir"] = None
-    _point_jax_at(Path(folder))
+    _point_jax_at(Path(folder), force=True)
 
 
 @contextmanager

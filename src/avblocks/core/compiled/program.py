@@ -116,6 +116,7 @@ def clear_persistent_cache(path=None):
             shutil.rmtree(d)
     from . import plans as _plans
     _plans.forget_plans()
+    _persist.forget()
     return freed
 
 

@@ -154,8 +154,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         ``"jax"`` compiles the whole run (:mod:`avblocks.core.compiled`):
         same arguments and Results (plus ``res.final_state``), fixed-step
         solvers and traceable blocks only, no ``realtime``; it takes the
-        option ``dtype="float32"`` (default ``"float64"``). A second run of
-        the same structure with other numeric values does not recompile.
+        options ``dtype="float32"`` (default ``"float64"``), ``cache``
+        (default: compiled programs and grown plans kept in the user's cache
+        folder, so the next process compiles nothing; ``cache=False`` or
+        ``AVBLOCKS_CACHE=off`` opt out), ``devices`` and ``shard="agents"``
+        (one swarm split over several devices). A second run of the same
+        structure with other numeric values does not recompile.
     live : bool or dict
         Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
         (URL printed, with a token) that draws and steers the run; a dict

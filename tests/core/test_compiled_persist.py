@@ -332,3 +332,27 @@ def test_a_jax_cache_folder_set_by_the_user_is_kept(tmp_path):
     got, _ = child(TINY % (False, ""), env, tmp_path)
     assert got["jax_dir"] == str(ours / "jax")
     assert [f for f in files(ours) if f.startswith("jax/")]
+
+
+def test_two_processes_share_the_cache_folder_at_once(tmp_path):
+    """Two processes of the same run started together on one cache folder
+    (JAX's reads and writes under a file lock, plan files written whole):
+    both give the NumPy engine's neighbours, with no damaged entry read; a
+    third then compiles nothing."""
+    cache = tmp_path / "cache"
+    env = environment(cache)
+    code = [CHILD % (SMALL % ("", str(tmp_path / f"n{i}.npy"))) for i in (0, 1)]
+    procs = [subprocess.Popen([sys.executable, "-c", c], env=env, cwd=tmp_path,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for c in code]
+    outs = [p.communicate(timeout=900) for p in procs]
+    for p, (o, e) in zip(procs, outs):
+        assert p.returncode == 0, e[-3000:]
+        assert "Error reading persistent compilation cache" not in o + e
+    a, b = np.load(tmp_path / "n0.npy"), np.load(tmp_path / "n1.npy")
+    np.testing.assert_array_equal(a, b)
+    third, _ = child(SMALL % ("", str(tmp_path / "n2.npy")), env, tmp_path)
+    assert third["compiles"] == 0, third
+    np.testing.assert_array_equal(np.load(tmp_path / "n2.npy"), a)
+    ref = av.simulate(contracting(), backend="numpy", progress=False, **KW)["nb.neighbors"]
+    np.testing.assert_array_equal(a, ref)

@@ -35,7 +35,11 @@ Safe to share between the user's processes, not with other users:
   larger than the search's point count, the search's own reach, box and
   dimension); a damaged or foreign entry is ignored with a warning and the
   search is planned afresh (never pickle, nothing executed);
-- a damaged program entry is JAX's to judge: it warns and compiles.
+- a damaged program entry is JAX's to judge: it warns and compiles;
+- processes share the folder safely: plan files are written whole
+  (atomically), and JAX reads and writes its programs under a file lock
+  (``filelock``), keeping at most :data:`MAX_BYTES` of them (the least
+  recently used go first).
 
 JAX's cache is one setting of the process: the first runner that uses a
 folder turns it on there (unless JAX's ``jax_compilation_cache_dir`` was set
@@ -172,9 +176,30 @@ def _point_jax_at(folder: Path, force=False):
         # every program is kept: a second process should compile nothing
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
         jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+        _bound_and_lock(jax)
         if now:                                 # another folder before: start over
             _reset()
         _JAX["dir"] = str(folder)
+
+
+#: the most bytes of programs kept (the least recently used go first)
+MAX_BYTES = 4 * 2**30
+
+
+def _bound_and_lock(jax):
+    """With ``filelock`` (the ``jax`` extra brings it), JAX's cache keeps at
+    most :data:`MAX_BYTES` and takes a file lock around each read and
+    write: two processes never see each other's half-written program.
+    Without it, the folder is unbounded and a program read while another
+    process writes it is one JAX warns about and compiles."""
+    try:
+        import filelock  # noqa: F401
+    except ImportError:                         # pragma: no cover - a minimal install
+        return
+    try:
+        jax.config.update("jax_compilation_cache_max_size", int(MAX_BYTES))
+    except (AttributeError, KeyError):          # pragma: no cover - an older JAX
+        pass
 
 
 def _reset():

@@ -621,6 +621,8 @@ def trace_summary(path, top=12):
             continue
         s, d = float(e["ts"]), float(e.get("dur", 0.0))
         first, last = min(first, s), max(last, s + d)
+        if e["name"].startswith(("$profiler.py", "$contextlib.py")):
+            continue                            # the profiler stopping itself
         spans[(e["pid"], e.get("tid"))].append((s, s + d))
         names[e["pid"]][e["name"]] += d
     out = {"span_ms": (last - first) / 1e3, "processes": {}}

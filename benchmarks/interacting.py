@@ -619,10 +619,10 @@ def trace_summary(path, top=12):
     for e in ev:
         if e.get("ph") != "X":
             continue
-        s, d = float(e["ts"]), float(e.get("dur", 0.0))
-        first, last = min(first, s), max(last, s + d)
         if e["name"].startswith(("$profiler.py", "$contextlib.py")):
             continue                            # the profiler stopping itself
+        s, d = float(e["ts"]), float(e.get("dur", 0.0))
+        first, last = min(first, s), max(last, s + d)
         spans[(e["pid"], e.get("tid"))].append((s, s + d))
         names[e["pid"]][e["name"]] += d
     out = {"span_ms": (last - first) / 1e3, "processes": {}}

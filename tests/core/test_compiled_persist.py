@@ -189,12 +189,18 @@ def test_simulate_keeps_programs_and_plans_by_default_and_opts_out(tmp_path):
     kept = files(cache)
     # opting out: the same run compiles (programs and the plan not read) and
     # leaves the folder as it was
-    off, _ = child(SMALL % (", cache=False", out), env, tmp_path)
+    # (the two opt-outs run side by side: neither touches the folder)
+    from concurrent.futures import ThreadPoolExecutor
+    out2 = str(tmp_path / "n2.npy")
+    with ThreadPoolExecutor(2) as pool:
+        a = pool.submit(child, SMALL % (", cache=False", out), env, tmp_path)
+        b = pool.submit(child, SMALL % ("", out2), environment(cache, AVBLOCKS_CACHE="off"),
+                        tmp_path)
+        (off, _), (off2, _) = a.result(), b.result()
     assert off["compiles"] >= 2 and off["hits"] == 0
     assert "re-planned" in " ".join(off["warnings"])
-    env_off = environment(cache, AVBLOCKS_CACHE="off")
-    off2, _ = child(SMALL % ("", out), env_off, tmp_path)
     assert off2["compiles"] >= 2 and off2["hits"] == 0
+    np.testing.assert_array_equal(np.load(out2), ref["nb.neighbors"])
     assert files(cache) == kept
     np.testing.assert_array_equal(np.load(out), ref["nb.neighbors"])
 

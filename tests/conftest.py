@@ -4,13 +4,20 @@ import matplotlib
 
 matplotlib.use("Agg")
 os.environ.setdefault("MPLBACKEND", "Agg")
-# the compiled engine's cache (programs and grown plans) of the CLI runs the
-# tests start: never the user's own folder
-os.environ.setdefault("AVBLOCKS_CACHE_DIR", __import__("tempfile").mkdtemp(
-    prefix="avblocks-test-cache-"))
+# The compiled engine's cache folder (avblocks.core.compiled.persist): one
+# per test session, never the user's own. Compiled runs keep their XLA
+# programs there by default, so a program compiled by one test (or the other
+# xdist worker, which inherits the folder) is read, not compiled, by the
+# next; the folder is new for each session (a CI run starts empty) and is
+# deleted when the session that made it ends. Grown plans stay out of it
+# (the fixture below): a plan grown in one test must not change another.
+if "AVBLOCKS_CACHE_DIR" not in os.environ:
+    import atexit
+    import shutil
+    import tempfile
+    os.environ["AVBLOCKS_CACHE_DIR"] = tempfile.mkdtemp(prefix="avblocks-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["AVBLOCKS_CACHE_DIR"], ignore_errors=True)
 
-
-import sys  # noqa: E402
 
 import pytest  # noqa: E402
 
@@ -20,10 +27,9 @@ def _no_kept_plans():
     """Each test starts with an empty plan book of the compiled engine (a
     plan grown in one test must not change what another one sees: see
     avblocks.core.compiled.plans)."""
-    plans = sys.modules.get("avblocks.core.compiled.plans")
-    if plans is not None:
-        plans.forget_plans()
-        plans.use_plan_store(None)      # a CLI run in this process may have turned it on
+    from avblocks.core.compiled import plans  # no JAX import: only the plan book
+    plans.forget_plans()
+    plans.use_plan_store(False)     # grown plans in memory only (programs on disk)
     yield
 
 

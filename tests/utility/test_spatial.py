@@ -287,3 +287,29 @@ def test_k_smallest_integer_minima_keep_the_gradient():
         e[3, 0] = 1e-6
         fd = (float(cost(p + e)) - float(cost(p - e))) / 2e-6
         assert np.abs(g).max() > 0.1 and abs(g[3, 0] - fd) < 1e-6
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_the_plans_candidate_count_by_cell_counts_equals_counting_each_point(seed):
+    """plan_cells counts a free-space cloud's most candidates from a count
+    per cell summed over each cell's window (queries._most_candidates);
+    counted here point by point: the points whose integer cell lies within
+    ``split`` cells of the point's own on every axis (2-D and 3-D clouds,
+    clusters, duplicates, integer coordinates on cell edges)."""
+    from avblocks.utility.spatial import queries
+    rng = np.random.default_rng(seed)
+    dim = 2 if seed % 2 == 0 else 3
+    n = int(rng.integers(2, 300))
+    p = rng.uniform(-15, 15, (n, dim)) * (0.05 if seed % 4 == 1 else 1.0)
+    if seed % 3 == 0:
+        p[: n // 3] = p[-1]
+    if seed % 4 == 2:
+        p = np.round(p)
+    cells = sp.CellList(float(rng.uniform(0.5, 4.0)), dim=dim)
+    c = np.floor(p / np.asarray(cells.cell_edges())).astype(int)
+    near = np.all(np.abs(c[:, None, :] - c[None, :, :]) <= cells.split, axis=-1)
+    most = int(near.sum(axis=1).max())
+    got = queries._most_candidates(cells, p)
+    assert got == most
+    assert sp.plan_cells(p, cells.reach, headroom=1.0, min_capacity=1,
+                         count_hits=False) == sp.CellList(cells.reach, most, dim=dim)

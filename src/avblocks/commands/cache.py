@@ -3,12 +3,14 @@
     avblocks cache info      # the folder, its size, whether it is on
     avblocks cache clear     # delete the compiled programs and stored plans
 
-``avblocks run ... --backend jax`` keeps JAX's compiled programs and the
-grown neighbour-search plans in the user's cache folder
-(:func:`avblocks.core.compiled.cache_dir`: ``$AVBLOCKS_CACHE_DIR``, else
-``$XDG_CACHE_HOME/avblocks``, else ``~/.cache/avblocks``), so the next
-process with the same diagram starts without compiling. ``--no-cache`` or
-``AVBLOCKS_CACHE=off`` turn that off (see docs/compiled.md).
+Compiled runs (``avblocks run ... --backend jax``, ``simulate(...,
+backend="jax")``, ``avblocks.compile``) keep JAX's compiled programs and the
+grown neighbour-search plans in the user's cache folder by default
+(:func:`avblocks.core.compiled.cache_dir`: ``$AVBLOCKS_CACHE_DIR``, else the
+platform's user cache folder, e.g. ``~/.cache/avblocks``), so the next
+process with the same diagram starts without compiling. ``--no-cache``,
+``cache=False`` or ``AVBLOCKS_CACHE=off`` turn that off (see
+:mod:`avblocks.core.compiled.persist` and docs/compiled.md).
 """
 
 from __future__ import annotations
@@ -39,5 +41,5 @@ def cmd_cache(args):
           f"(compiled programs {_size(root / 'jax') / 1e6:.1f} MB, "
           f"plans {_size(root / 'plans') / 1e6:.3f} MB)")
     print(f"status        {'off (AVBLOCKS_CACHE)' if cache_disabled() else 'on'} for "
-          "`avblocks run ... --backend jax`")
+          "compiled runs (`--backend jax`, `simulate(..., backend='jax')`)")
     return 0

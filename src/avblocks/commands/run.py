@@ -274,17 +274,14 @@ class _CompileCount:
 
 
 def _compile_cache(args, sim):
-    """For ``--backend jax``: turn on the persistent compilation cache and the
-    plan store in the user's cache folder (unless ``--no-cache`` or
-    ``AVBLOCKS_CACHE=off``); a counter of the compilations to report."""
+    """For ``--backend jax``: the compiled engine keeps its programs and grown
+    plans in the user's cache folder by default
+    (:mod:`avblocks.core.compiled.persist`); ``--no-cache`` (or
+    ``AVBLOCKS_CACHE=off``) runs without it. A counter of the compilations
+    to report."""
     if sim.get("backend") != "jax":
         return None
-    from ..core.compiled.program import cache_dir, cache_disabled, enable_persistent_cache
-    root = None
-    if not (getattr(args, "no_cache", False) or cache_disabled()):
-        try:
-            root = enable_persistent_cache(cache_dir())
-        except OSError as e:             # an unwritable cache folder: run without it
-            from .._runio import say
-            say(f"avblocks: the cache folder cannot be used ({e}); compiling afresh")
-    return _CompileCount(root)
+    from ..core.compiled import persist
+    if getattr(args, "no_cache", False):
+        sim["cache"] = False
+    return _CompileCount(persist.usable(persist.resolve(sim.get("cache"))))

@@ -71,6 +71,27 @@ def is_vmapped() -> bool:
     return _VMAPPED.get()
 
 
+_SHARDED: contextvars.ContextVar = contextvars.ContextVar("avblocks_sharded", default=None)
+
+
+@contextlib.contextmanager
+def sharded(mesh, axis):
+    """The compiled engine is tracing a run whose agents are split over the
+    devices of ``mesh`` along its axis ``axis`` (``compile(...,
+    shard="agents")``): a neighbour search answers each device's share of
+    the queries on that device (:mod:`avblocks.utility.spatial.queries`)."""
+    tok = _SHARDED.set((mesh, axis))
+    try:
+        yield
+    finally:
+        _SHARDED.reset(tok)
+
+
+def sharding():
+    """``(mesh, axis)`` inside :func:`sharded`, else None."""
+    return _SHARDED.get()
+
+
 class Tally:
     """The needs reported while one traced body runs: ``rows`` maps
     ``(block name, search number)`` to a row of ``value`` (a traced

@@ -82,10 +82,13 @@ def engine(name):
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
             seed=0, backend="jax", dtype="float64", check_finite=True, devices=None,
-            on_overflow="replan"):
+            on_overflow="replan", cache=None, shard="auto"):
     """Compile ``diagram`` once for runs of ``t_final`` with the compiling
     engine named by ``backend`` and return its :class:`Runner` (arguments:
-    :func:`avblocks.core.compiled.compile`, the JAX engine's)."""
+    :func:`avblocks.core.compiled.compile`, the JAX engine's; ``cache``:
+    where programs and plans are kept across processes, by default the
+    user's cache folder; ``shard="agents"``: one run split over the
+    devices)."""
     key = ("compile", backend) if isinstance(backend, str) else None
     fn = _loaded.get(key)
     if fn is None:
@@ -96,7 +99,7 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
         fn = _loaded[key] = _load(COMPILERS[backend])
     return fn(diagram, t_final, dt, solver, log=log, log_every=log_every, t0=t0, seed=seed,
               backend=backend, dtype=dtype, check_finite=check_finite, devices=devices,
-              on_overflow=on_overflow)
+              on_overflow=on_overflow, cache=cache, shard=shard)
 
 
 def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None,
@@ -153,8 +156,12 @@ def simulate(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=Non
         ``"jax"`` compiles the whole run (:mod:`avblocks.core.compiled`):
         same arguments and Results (plus ``res.final_state``), fixed-step
         solvers and traceable blocks only, no ``realtime``; it takes the
-        option ``dtype="float32"`` (default ``"float64"``). A second run of
-        the same structure with other numeric values does not recompile.
+        options ``dtype="float32"`` (default ``"float64"``), ``cache``
+        (default: compiled programs and grown plans kept in the user's cache
+        folder, so the next process compiles nothing; ``cache=False`` or
+        ``AVBLOCKS_CACHE=off`` opt out), ``devices`` and ``shard="agents"``
+        (one swarm split over several devices). A second run of the same
+        structure with other numeric values does not recompile.
     live : bool or dict
         Run in the browser (extra ``[live]``): serve a page on 127.0.0.1
         (URL printed, with a token) that draws and steers the run; a dict

@@ -364,6 +364,10 @@ class Neighbors(Block):
             raise ParameterError(str(e.args[0]) if e.args else "bad search settings",
                                  block="Neighbors", param="box" if box is not None
                                  else "capacity") from e
+        # hits (the most others within range of one agent) are read by the
+        # Verlet list and by the dense selection; a cell-list search that
+        # only answers the k nearest plans without counting them
+        self.search.counts_hits = bool(skin) or self._dense()
         if skin > 0:
             width = 1 if self.search.cells is None else self.search.cells.hits
             self.declare_discrete_state("verlet_list", np.full((n, width), -1),

@@ -13,8 +13,9 @@ _started = False
 def jax():
     """The ``jax`` module, or an AvError telling how to install it.
 
-    When this is the first import of JAX in the process and
-    ``JAX_NUM_CPU_DEVICES`` is not set, JAX is asked for one CPU device per
+    When this is the first import of JAX in the process and neither
+    ``JAX_NUM_CPU_DEVICES`` nor XLA's ``--xla_force_host_platform_device_count``
+    (in ``XLA_FLAGS``) says how many, JAX is asked for one CPU device per
     core, so compiled runs can use them all (see
     :mod:`avblocks.core.compiled.devices`)."""
     global _started
@@ -26,7 +27,8 @@ def jax():
                       "(or run with backend='numpy')") from e
     if not _started:
         _started = True
-        if fresh and "JAX_NUM_CPU_DEVICES" not in os.environ:
+        if fresh and "JAX_NUM_CPU_DEVICES" not in os.environ and \
+                "xla_force_host_platform_device_count" not in os.environ.get("XLA_FLAGS", ""):
             try:
                 _jax.config.update("jax_num_cpu_devices", default_cpu_devices())
             except (RuntimeError, AttributeError, KeyError):  # pragma: no cover

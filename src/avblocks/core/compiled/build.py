@@ -12,6 +12,7 @@ from ..runguard import finite_number, whole_steps
 from ..solvers import make_solver
 from . import _jax
 from . import devices as _devices
+from . import persist as _persist
 from . import plans as _plans
 from . import segments as _segments
 from .program import Program, get_program
@@ -63,7 +64,7 @@ def _check_traceable(compiled):
 
 def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t0=0.0,
             seed=0, backend="jax", dtype="float64", check_finite=True, devices=None,
-            on_overflow="replan"):
+            on_overflow="replan", cache=None, shard="auto"):
     """Compile ``diagram`` once for runs of ``t_final`` (JAX: ``jit`` of a
     nested ``lax.scan``) and return a :class:`Runner`.
 
@@ -102,6 +103,24 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
         axis and an ensemble along its run axis (see
         :mod:`avblocks.core.compiled.devices`); ``devices=1`` keeps
         everything on one device.
+    shard : ``"auto"`` (default) or ``"agents"``
+        How a single run uses several devices. ``"auto"``: its agent axis is
+        split only when the agents never interact (no exchange between
+        devices), else it runs on one device. ``"agents"``: split whatever
+        the agents do (one swarm across devices): each neighbour search
+        sorts the points on every device and answers each device's share
+        of the queries, a strip of space, there; the run equals the
+        one-device run (see :mod:`avblocks.core.compiled.devices`). The
+        agent count must divide evenly over the devices.
+    cache : None, bool or folder
+        Where the compiled programs and grown neighbour-search plans are
+        kept across processes (:mod:`avblocks.core.compiled.persist`):
+        None (default) the user's cache folder
+        (:func:`~avblocks.core.compiled.cache_dir`) unless
+        ``$AVBLOCKS_CACHE`` is ``off``; ``False`` nowhere (memory only);
+        ``True`` the cache folder even so; or a folder. A second process
+        with the same diagram then reads the program and starts from the
+        grown plans: no compile.
 
     Notes
     -----
@@ -156,7 +175,9 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                            hint="use backend='numpy' for solve_ivp methods")
     _check_traceable(cd)
     _plans.check_mode(on_overflow)
-    _plans.plan_searches(cd, dt=dt, t0=t0, seed=seed)
+    root = _persist.use(cache)
+    store = _plans.plan_store(root)
+    _plans.plan_searches(cd, dt=dt, t0=t0, seed=seed, store=store)
     idx, names, specs, aliases = _log_spec(cd, log)
     x64 = _DTYPES[dtype]
     key = (diagram_key(cd), nsteps, log_every, tuple(names), _solver_key(solv), dt,
@@ -166,9 +187,10 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
                                             solver=solv, x64=x64))
     runner = Runner(cd, prog, names=names, specs=specs, aliases=aliases, seed=seed,
                     dtype=dtype, check_finite=check_finite, solver_name=solv.name,
-                    devices=_devices.resolve(devices))
+                    devices=_devices.resolve(devices), shard=shard)
     runner.on_overflow = on_overflow
     runner.struct = key[0]          # the structure it was compiled for
+    runner.cache, runner.plan_store = root, store
     return runner
 
 
@@ -178,14 +200,18 @@ def compile(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1, t
 _LAST: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
-def _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite):
+def _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite, cache=None,
+              devices=None, shard="auto"):
     """Hashable run settings of a ``simulate`` call, or None (not cached)."""
     try:
         if log is not None and not isinstance(log, (str, PortRef)):
             log = tuple(log)
         key = (float(t_final), float(dt), solver if isinstance(solver, str)
                else _solver_key(solver), log, int(log_every), float(t0), dtype,
-               bool(check_finite))
+               bool(check_finite), cache if isinstance(cache, (bool, type(None)))
+               else str(cache),
+               devices if devices is None or isinstance(devices, int)
+               else tuple(d.id for d in devices), shard)
         hash(key)
     except (TypeError, ValueError):
         return None
@@ -217,7 +243,7 @@ def _last_runner(diagram, settings):
 def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=1,
                       seed=0, t0=0.0, realtime=None, progress=None, check_finite=True,
                       max_log_bytes=2 * 1024**3, params=None, x0=None, backend="jax",
-                      dtype="float64"):
+                      dtype="float64", cache=None, devices=None, shard="auto"):
     """:func:`avblocks.simulate` with ``backend="jax"`` (same arguments and
     Results; plus ``dtype``). ``realtime`` pacing needs the NumPy backend.
     ``progress`` (a callable ``progress(step, steps)`` or ``True``, a bar)
@@ -226,20 +252,25 @@ def simulate_compiled(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_
     (:mod:`avblocks.core.compiled.segments`); ``None`` or ``False`` runs it
     in one call. A second call on the same
     diagram with the same settings reuses the first call's runner (see
-    :func:`_last_runner`), so it costs a structure check, not a compile."""
+    :func:`_last_runner`), so it costs a structure check, not a compile.
+    ``cache`` (default None: the user's cache folder unless
+    ``$AVBLOCKS_CACHE=off``; ``False``: none) keeps the compiled program and
+    grown plans for the next process, as :func:`compile` says; ``devices``
+    and ``shard`` place the run as :func:`compile` does."""
     if realtime is not None:
         raise ParameterError("real-time pacing needs the NumPy backend", param="realtime",
                              hint="use backend='numpy' to pace a run to the clock")
     _segments.reporter(progress)        # a wrong progress= fails before compiling
     if log is not None and not isinstance(log, (str, PortRef)):
         log = list(log)                 # read once (it may be an iterator)
-    settings = _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite) \
-        if backend == "jax" else None
+    settings = _settings(t_final, dt, solver, log, log_every, t0, dtype, check_finite,
+                         cache, devices, shard) if backend == "jax" else None
     runner = _last_runner(diagram, settings)
     if runner is None:
         runner = compile(diagram, t_final, dt, solver, log=log, log_every=log_every,
                          t0=t0, seed=seed, backend=backend, dtype=dtype,
-                         check_finite=check_finite)
+                         check_finite=check_finite, cache=cache, devices=devices,
+                         shard=shard)
         if settings is not None and isinstance(diagram, Diagram):
             _LAST[diagram] = (settings, diagram._stamp, runner.struct,
                               Snapshot(runner.compiled), runner)

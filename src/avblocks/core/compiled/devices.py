@@ -63,6 +63,27 @@ def resolve(devices):
     return devs
 
 
+SHARDS = ("auto", "agents")
+
+
+def check_shard(shard, devices, n):
+    """``shard`` checked against the devices and the fleet size ``n``."""
+    if shard not in SHARDS:
+        raise ParameterError("unknown shard", param="shard",
+                             expected=" or ".join(repr(s) for s in SHARDS), found=shard)
+    if shard == "agents" and len(devices) > 1:
+        if not n:
+            raise ParameterError("shard='agents' needs a diagram with agents (ports with "
+                                 "an agent axis)", param="shard")
+        if n % len(devices):
+            fit = [k for k in range(len(devices), 0, -1) if n % k == 0][0]
+            raise ParameterError("shard='agents' splits the agents evenly over the "
+                                 "devices", param="devices",
+                                 expected=f"a count that divides {n} agents (e.g. {fit})",
+                                 found=len(devices))
+    return shard
+
+
 class Placement:
     """How the inputs of one compiled call are laid out over ``devices``:
     arrays whose leading axis is ``split`` long are divided along it (when
@@ -77,7 +98,7 @@ class Placement:
             self.key = ("one", self.devices[0].id)
             return
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
-        mesh = Mesh(np.array(self.devices), ("d",))
+        mesh = self.mesh = Mesh(np.array(self.devices), ("d",))
         self.divided = NamedSharding(mesh, PartitionSpec("d"))
         self.replicated = NamedSharding(mesh, PartitionSpec())
         self.key = ("split", self.split, tuple(d.id for d in self.devices))
@@ -91,10 +112,25 @@ class Placement:
 
         def one(a):
             a = np.asarray(a) if not hasattr(a, "sharding") else a
-            if np.ndim(a) >= 1 and np.shape(a)[0] == self.split:
-                return self._put(a, self.divided)
-            return self._put(a, self.replicated)
+            where = self.divided if (np.ndim(a) >= 1 and np.shape(a)[0] == self.split) \
+                else self.replicated
+            if not where.is_fully_addressable and not hasattr(a, "sharding"):
+                # devices of other processes (jax.distributed): every process
+                # holds the same host array and places its own devices' parts
+                return jax.make_array_from_callback(np.shape(a), where,
+                                                    lambda idx, a=a: a[idx])
+            return self._put(a, where)
         return jax.tree_util.tree_map(one, tree)
+
+
+def host(a):
+    """``a`` (a JAX array) as a NumPy array, whole: gathered from every
+    process's devices when part of it lives on another process's
+    (``jax.distributed``; each process then gets the whole array)."""
+    if getattr(a, "is_fully_addressable", True):
+        return np.asarray(a)
+    from jax.experimental import multihost_utils
+    return np.asarray(multihost_utils.process_allgather(a, tiled=True))
 
 
 _COLLECTIVES = ("all-gather", "all-reduce", "all-to-all", "collective-permute",

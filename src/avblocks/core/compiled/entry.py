@@ -15,7 +15,7 @@ def run(diagram, t_final, dt=0.01, solver="rk4", *, log=None, log_every=None, se
         t0=0.0, realtime=None, progress=None, check_finite=True,
         max_log_bytes=2 * 1024**3, params=None, x0=None, **options):
     """Run ``diagram`` compiled (arguments and result as :func:`avblocks.simulate`;
-    option ``dtype``). ``log_every=None`` logs every step."""
+    options ``dtype`` and ``cache``). ``log_every=None`` logs every step."""
     return simulate_compiled(diagram, t_final, dt, solver, log=log,
                              log_every=1 if log_every is None else log_every,
                              seed=seed, t0=t0, realtime=realtime, progress=progress,

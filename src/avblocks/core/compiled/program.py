@@ -40,6 +40,7 @@ from .. import diagnostics as _diagnostics
 from .. import memo as _memo
 from ..params import bound_parameters
 from . import _jax
+from . import persist as _persist
 from .carry import scan_steps
 from .engine import TracedEngine
 
@@ -65,44 +66,36 @@ def clear_cache():
 
 
 def cache_dir():
-    """The user's cache folder of avblocks: ``$AVBLOCKS_CACHE_DIR``, else
-    ``$XDG_CACHE_HOME/avblocks``, else ``~/.cache/avblocks`` (on Windows
-    ``%LOCALAPPDATA%/avblocks``). Compiled programs go in ``jax/``, grown
-    neighbour-search plans in ``plans/``."""
-    import os
-    from pathlib import Path
-    if os.environ.get("AVBLOCKS_CACHE_DIR"):
-        return Path(os.environ["AVBLOCKS_CACHE_DIR"]).expanduser()
-    base = os.environ.get("XDG_CACHE_HOME") or (
-        os.environ.get("LOCALAPPDATA") if os.name == "nt" else None)
-    return (Path(base) if base else Path.home() / ".cache") / "avblocks"
+    """The user's cache folder of avblocks: ``$AVBLOCKS_CACHE_DIR``, else the
+    platform's user cache folder (:func:`avblocks.core.compiled.persist.cache_dir`).
+    Compiled programs go in ``jax/``, grown neighbour-search plans in ``plans/``."""
+    return _persist.cache_dir()
 
 
 def cache_disabled() -> bool:
     """True when ``$AVBLOCKS_CACHE`` says off (``0``, ``off``, ``no``, ``false``)."""
-    import os
-    return os.environ.get("AVBLOCKS_CACHE", "").strip().lower() in ("0", "off", "no",
-                                                                     "false")
+    return _persist.cache_disabled()
 
 
 def enable_persistent_cache(path=None, *, min_compile_time_s=0.0):
-    """Turn on JAX's persistent compilation cache (off by default for the
-    library; the ``avblocks`` command turns it on), so a new Python process
-    reuses compiled programs from ``path/jax`` (default :func:`cache_dir`),
-    and keep grown neighbour-search plans in ``path/plans`` (see
-    :func:`avblocks.core.compiled.plans.use_plan_store`), so that process
-    traces the same program as the last one did. This sets JAX's global
-    configuration. Returns the folder."""
+    """Keep compiled programs and grown plans under ``path`` (default
+    :func:`cache_dir`) for every runner of this process, whatever their
+    ``cache=`` says: JAX's persistent compilation cache in ``path/jax``
+    (this sets JAX's global configuration, also over a folder you set
+    yourself) and the plan store in ``path/plans`` (see
+    :func:`avblocks.core.compiled.plans.use_plan_store`). Compiled runs do
+    this by default in :func:`cache_dir` (see
+    :mod:`avblocks.core.compiled.persist`); this is for another folder, or
+    for JAX programs of your own. Returns the folder."""
     from pathlib import Path
 
     from . import plans as _plans
     jax = _jax.jax()
     root = Path(path) if path is not None else cache_dir()
     p = root / "jax"
-    p.mkdir(parents=True, exist_ok=True)
-    jax.config.update("jax_compilation_cache_dir", str(p))
+    p.mkdir(mode=0o700, parents=True, exist_ok=True)
+    _persist.set_jax_folder(p)
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time_s))
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     _plans.use_plan_store(root / "plans")
     _listen()
     return root
@@ -122,8 +115,8 @@ def clear_persistent_cache(path=None):
             freed += sum(f.stat().st_size for f in d.rglob("*") if f.is_file())
             shutil.rmtree(d)
     from . import plans as _plans
-    with _plans._BOOK_LOCK:
-        _plans._BOOK.clear()
+    _plans.forget_plans()
+    _persist.forget()
     return freed
 
 
@@ -164,13 +157,17 @@ def compiler_options() -> dict:
 _OPTIONS_OK = {"cpu": True}
 
 
-def compile_lowered(lowered):
+def compile_lowered(lowered, cache=True):
     """``lowered.compile(compiler_options())``, falling back to XLA's own
     defaults (once per process) where this jaxlib rejects an option;
-    counted in :data:`COMPILES` (built, or read from the persistent cache)."""
+    counted in :data:`COMPILES` (built, or read from the persistent cache).
+    ``cache``: a runner's cache folder, or None: compiled with JAX's
+    persistent cache off (:func:`avblocks.core.compiled.persist.programs`)."""
     import time
+    _listen()
     hits, t = _EVENTS["hits"], time.perf_counter()
-    exe = _compile_lowered(lowered)
+    with _persist.programs(cache):
+        exe = _compile_lowered(lowered)
     if _EVENTS["hits"] > hits:
         COMPILES["from_disk"] += 1
     else:
@@ -432,13 +429,15 @@ class Program:
         return X
 
     # ------------------------------------------------------- executables
-    def executable(self, mode, build, args, compiled=None):
+    def executable(self, mode, build, args, compiled=None, cache=True):
         """Ahead-of-time compiled ``build()`` for ``args`` (cached by mode and
         argument signature): returns (callable, seconds spent compiling).
 
         ``compiled`` is the requesting runner's diagram (same structure when
         it was compiled). If the blocks this program was first traced with
         have since been changed structurally, it traces with those instead.
+        ``cache``: the runner's cache folder (None: not read from or written
+        to JAX's persistent cache; see :func:`compile_lowered`).
         Traces are serialized: binding traced parameter values to blocks
         must not race with another trace."""
         import time
@@ -457,7 +456,7 @@ class Program:
             self._current(compiled)
             t = time.perf_counter()
             with _jax.x64(self.x64):
-                exe = compile_lowered(jax.jit(build()).lower(*args))
+                exe = compile_lowered(jax.jit(build()).lower(*args), cache)
             spent = time.perf_counter() - t
         with self._lock:
             self._exe[key] = exe

@@ -18,6 +18,7 @@ from ..results import Results
 from . import _jax
 from . import chunking as _chunking
 from . import devices as _devices
+from . import outcome as _outcome
 from . import plans as _plans
 from . import segments as _segments
 from .outcome import check_finite as _check_finite
@@ -45,7 +46,7 @@ class Runner:
     """
 
     def __init__(self, compiled, program, *, names, specs, aliases, seed, dtype,
-                 check_finite, solver_name, devices=None):
+                 check_finite, solver_name, devices=None, shard="auto"):
         self.compiled = compiled
         self.program = program
         self.names = names
@@ -59,9 +60,18 @@ class Runner:
         self.devices = devices if devices is not None else _devices.resolve(None)
         self._run_exe = None            # (placement, executable) of __call__
         self._fixed = None              # (program, the meta all its runs share)
+        #: the cache folder of its programs and plans (None: memory only;
+        #: see :mod:`avblocks.core.compiled.persist`), set by ``compile``
+        self.cache = None
+        self.plan_store = None
         n = _devices.agents_of(compiled)
+        #: how a single run uses several devices: "auto" (its agents split
+        #: when they never interact) or "agents" (split whatever they do;
+        #: see :mod:`avblocks.core.compiled.devices`)
+        self.shard = _devices.check_shard(shard, self.devices, n)
         self._single = _devices.Placement(
-            self.devices, n if n and n >= _devices.MIN_AGENTS_TO_SPLIT else None)
+            self.devices, n if n and (n >= _devices.MIN_AGENTS_TO_SPLIT
+                                      or self.shard == "agents") else None)
 
     @property
     def log_bytes(self) -> int:
@@ -159,13 +169,15 @@ class Runner:
         return X
 
     # --------------------------------------------------------------- run
-    def _results(self, logs, XF, meta, runs=None, t=None):
+    def _results(self, logs, XF, meta, runs=None, t=None, on_device=False):
         data = dict(zip(self.names, logs))
         res = Results(self.t if t is None else t, data, dict(zip(self.names, self.specs)), meta,
                       self.aliases, runs=runs)
         cd = self.compiled
-        res.final_state = {f"{cd.names[i]}.{k}": v for i, x in enumerate(XF)
-                           for k, v in x.items()}
+        res.final_state = _outcome.final_states({f"{cd.names[i]}.{k}": v
+                                                 for i, x in enumerate(XF)
+                                                 for k, v in x.items()},
+                                                on_device)
         return res
 
     def _meta(self, seed, params, wall, compile_s):
@@ -194,22 +206,65 @@ class Runner:
         with communication between devices (agents that interact: a gather
         across agents, a neighbour sum) would wait on the other devices at
         every stage, so it is compiled for one device instead (waypoints,
-        300 agents: 3.5 s split, 0.2 s on one device)."""
+        300 agents: 3.5 s split, 0.2 s on one device). Known without a
+        compile: a single run whose blocks search neighbours (a search sorts
+        every agent), and what an earlier compile of the structure learnt
+        (kept with its plans, also across processes)."""
         prog = self.program
         spent = 0.0
-        if place.split is not None and key[0] not in prog.one_device:
+        if place.split is not None and self.shard == "agents" and key[0] != "ensemble":
+            return self._sharded(key, build, place, args)
+        if place.split is not None and not self._one_device(key[0]):
             with _jax.x64(prog.x64):
                 placed = place(args)
-            exe, spent = prog.executable(key + (place.key,), build, placed, self.compiled)
+            exe, spent = prog.executable(key + (place.key,), build, placed, self.compiled,
+                                         self.cache)
             if not _devices.communicates(exe):
                 return exe, spent, place, placed
             prog.one_device.add(key[0])     # it communicates: known for every runner
+            _plans.remember_one_device(self.compiled, key[0], self.plan_store)
         if place.split is not None:
             place = _devices.Placement(self.devices[:1])
         with _jax.x64(prog.x64):
             placed = place(args)
-        exe, more = prog.executable(key + (place.key,), build, placed, self.compiled)
+        exe, more = prog.executable(key + (place.key,), build, placed, self.compiled,
+                                    self.cache)
         return exe, spent + more, place, placed
+
+    def _sharded(self, key, build, place, args):
+        """:meth:`_placed` of a run whose agents are split over the devices
+        whatever they do (``shard="agents"``): traced under
+        :func:`avblocks.core.diagnostics.sharded`, so each neighbour search
+        answers each device's share of the queries there (see
+        :mod:`avblocks.core.compiled.devices`); XLA adds the rest of the
+        exchange (the gathers of neighbours' values)."""
+        prog = self.program
+
+        def sharded_build():
+            fn = build()
+
+            def run(*a):
+                with _diagnostics.sharded(place.mesh, "d"):
+                    return fn(*a)
+            return run
+        with _jax.x64(prog.x64):
+            placed = place(args)
+        exe, spent = prog.executable(key + (place.key, "agents"), sharded_build, placed,
+                                     self.compiled, self.cache)
+        return exe, spent, place, placed
+
+    def _one_device(self, use):
+        """Whether ``use`` ("run", "ensemble", ...) is known to communicate
+        when split (see :meth:`_placed`)."""
+        prog = self.program
+        if use in prog.one_device:
+            return True
+        if use in ("run", "segment") and _plans.owned(self.compiled):
+            return True
+        if _plans.one_device(self.compiled, use, self.plan_store):
+            prog.one_device.add(use)
+            return True
+        return False
 
     #: what a run does when a neighbour search overflows its plan
     #: (:mod:`avblocks.core.compiled.plans`): "replan" or "raise"
@@ -248,8 +303,8 @@ class Runner:
         prog = self.program
         if report is not None:
             res, needs, stopped = _segments.run(self, theta, X0, seed, params, report)
-            over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows \
-                else ()
+            over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
+                if prog.need_rows else ()
             if over and stopped:
                 # not repeated (it was stopped), but its samples are suspect
                 import warnings
@@ -286,14 +341,24 @@ class Runner:
             for a in flat:
                 a.block_until_ready()
             wall = time.perf_counter() - t
-        logs = [np.asarray(a) for a in logs]
-        XF = jax.tree_util.tree_unflatten(tree, [np.asarray(a) for a in flat])
-        res = self._results(logs, XF, self._meta(seed, params, wall, compile_s))
-        over = _plans.overflows(self.compiled, prog.needs(needs)) if prog.need_rows else ()
+        large = _outcome.large(logs, flat)
+        # a large run (10^7 agents: logs and final state of hundreds of MB)
+        # is checked for NaN/inf on the device (a flag per array comes back,
+        # not a scan of every value on the host), and its final state stays
+        # there until it is read (res.final_state converts on access)
+        finite = _outcome.finite_on_device(list(logs) + flat) \
+            if (large and self.check_finite) else None
+        logs = [_devices.host(a) for a in logs]
+        XF = jax.tree_util.tree_unflatten(tree, flat if large else
+                                          [_devices.host(a) for a in flat])
+        res = self._results(logs, XF, self._meta(seed, params, wall, compile_s),
+                            on_device=large)
+        over = _plans.overflows(self.compiled, prog.needs(_devices.host(needs))) \
+            if prog.need_rows else ()
         if over:
             return _plans.settle(self, over, lambda: self(params, x0, seed))
         if self.check_finite:
-            _check_finite(res)
+            _check_finite(res, finite)
         return res
 
     # ---------------------------------------------------------- ensemble
@@ -404,11 +469,11 @@ class Runner:
                 logs, XF, most = exe(th, xs)
                 jax.block_until_ready((logs, XF))
             wall += time.perf_counter() - t
-            most = np.asarray(most).max(axis=0)          # the largest over the runs
+            most = _devices.host(most).max(axis=0)       # the largest over the runs
             needs = most if needs is None else np.maximum(needs, most)
             for o, a in zip(out, logs):
-                o[lo:hi] = np.asarray(a)[:hi - lo]
-            XF = jax.tree_util.tree_map(np.asarray, XF)
+                o[lo:hi] = _devices.host(a)[:hi - lo]
+            XF = jax.tree_util.tree_map(_devices.host, XF)
             if finals is None:
                 finals = [{k: np.empty((R, *v.shape[1:]), v.dtype) for k, v in x.items()}
                           for x in XF]
@@ -498,7 +563,7 @@ class Runner:
 
         exe, _ = prog.executable(("grad", cost, tuple(pw), tuple(w for w, *_ in sw),
                                   bool(checkpoint)), build, (diff, theta, X0),
-                                 self.compiled)
+                                 self.compiled, self.cache)
         with _jax.x64(prog.x64):
             (val, needs), g = exe(diff, theta, X0)
         grads = {w: np.asarray(g[0][key]) for w, key in pw}

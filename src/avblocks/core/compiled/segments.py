@@ -36,6 +36,7 @@ import numpy as np
 
 from ..errors import ParameterError
 from . import _jax
+from . import devices as _devices
 
 #: most segments a run is cut into (a report every 2 % of the run)
 SEGMENTS = 50
@@ -147,7 +148,7 @@ def run(runner, theta, X0, seed, params, progress):
                                                      place(np.asarray(nxt, np.int32))))
                 take = min(size, nlog - start)
                 for b, r in zip(bufs, rows):
-                    b[count:count + take] = np.asarray(r)[:take]
+                    b[count:count + take] = _devices.host(r)[:take]
                 if segments == 0:
                     n = paced_length(length, time.perf_counter() - t, size)
                     if nxt < nlog:
@@ -169,7 +170,7 @@ def run(runner, theta, X0, seed, params, progress):
     wall = time.perf_counter() - t
     X, needs = carry[0], carry[2]
     flat, tree = jax.tree_util.tree_flatten(X)
-    XF = jax.tree_util.tree_unflatten(tree, [np.asarray(a) for a in flat])
+    XF = jax.tree_util.tree_unflatten(tree, [_devices.host(a) for a in flat])
     meta = runner._meta(seed, params, wall, compile_s)
     meta["segments"] = segments
     if interrupt is not None:

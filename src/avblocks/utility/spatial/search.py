@@ -40,6 +40,14 @@ class NeighborSearch:
     at ``t0`` times this, also when re-planning after an overflow),
     ``hits`` (width of :meth:`within` rows), ``table`` (unused).
     See the module docstring for the contract with the compiled engine.
+
+    ``counts_hits`` (attribute, default True): whether a plan counts the
+    most points within ``reach`` of one point (the plan's ``hits``, which
+    only :meth:`within` rows and the plans' users such as a Verlet list
+    read). A block whose search only ever answers :meth:`nearest` or
+    :meth:`candidates` sets it False: its plans then leave ``hits`` out
+    (None), and planning skips the count (at 10^6 points most of a plan's
+    time: a k-d tree query of every point).
     """
 
     #: marks a search for :func:`avblocks.core.diagnostics.searches_of`
@@ -61,6 +69,7 @@ class NeighborSearch:
             hits = self.capacity            # never more hits than candidates
         self.hits = None if hits is None else int(hits)
         self.cells = None
+        self.counts_hits = True
         CellList(self.reach, self.capacity, table, box, self.dim, self.hits)  # validates
         if self.capacity is not None:
             self.cells = CellList(self.reach, self.capacity, table, box, self.dim,
@@ -76,7 +85,7 @@ class NeighborSearch:
         pts = np.asarray(points, dtype=float)[:, : self.dim]
         self.cells = plan_cells(pts, self.reach, capacity=self.capacity,
                                 headroom=self.headroom, box=self.box, table=self.table,
-                                hits=self.hits)
+                                hits=self.hits, count_hits=self.counts_hits)
         return self.cells
 
     def _cells(self, xp, radius, npoints=None):

@@ -61,9 +61,16 @@ def expectations(text):
     return passes, re.findall(r"^expect: (.+)$", text, re.M)
 
 
+#: attacks that only a platform feature stops, with the test of that feature:
+#: skipped where it is missing on a user's machine, never in CI
+NEEDS = {"signals.py": lambda: SCOPED,
+         "reads_files.py": lambda: oscalls.landlock_abi() >= 1,
+         "sockets_and_modes.py": lambda: oscalls.seccomp_arch() is not None}
+
+
 def attacks():
     names = sorted(p.name for p in HOSTILE.glob("*.py"))
-    return [n for n in names if n != "signals.py" or SCOPED or os.environ.get("CI")]
+    return [n for n in names if n not in NEEDS or NEEDS[n]() or os.environ.get("CI")]
 
 
 def _cli(*args, env=None, src=SRC, timeout=900, cwd=None):
@@ -106,8 +113,10 @@ def _grade_the_class(folder, token, names):
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     children = {c.pid for c in _children()}
     try:
-        # graded from inside the folder, beside its random.py, numpy.py, avblocks.py
-        p = _cli("check", "1", ".", "--json", "--timeout", "10", cwd=folder)
+        # graded from inside the folder, beside its random.py, numpy.py, avblocks.py;
+        # the grader's environment holds a "secret" (reads_environ.py looks for it)
+        p = _cli("check", "1", ".", "--json", "--timeout", "10", cwd=folder,
+                 env={"AVBLOCKS_HOSTILE_SECRET": token})
         survivors = _marked(token)
         left = [c for c in _children() if c.pid not in children]
     finally:

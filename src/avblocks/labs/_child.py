@@ -15,7 +15,9 @@ Start-up, before any of the student's code runs:
 2. read the configuration (the first message): its folder, its limits,
    the platform features switched off;
 3. move into its own temporary folder, set the resource limits
-   (:func:`oscalls.apply_limits`) and Landlock (:func:`oscalls.restrict_writes`);
+   (:func:`oscalls.apply_limits`), Landlock (:func:`oscalls.restrict_writes`),
+   give up every capability (:func:`oscalls.drop_capabilities`) and install
+   the seccomp filter (:func:`oscalls.restrict_syscalls`);
 4. answer ``{"ready": {what was set}}``.
 
 Requests (``{"id": n, "op": ...}``), each answered ``{"id": n, "ok": value}``
@@ -109,6 +111,8 @@ def main():
     os.chdir(workdir)
     done = oscalls.apply_limits(**config.get("limits", {}))
     done.update(oscalls.restrict_writes(workdir))
+    done["privileges"] = oscalls.drop_capabilities()
+    done.update(oscalls.restrict_syscalls())
     send({"ready": done, "pid": os.getpid()})
 
     while True:

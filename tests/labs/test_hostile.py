@@ -247,6 +247,31 @@ def test_without_landlock_a_write_into_the_grader_stops_the_run(tmp_path):
     assert (src / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt").exists()
 
 
+def test_without_seccomp_a_changed_mode_fails_the_writer_not_the_class(tmp_path):
+    """Landlock does not stop chmod: a submission that changed the mode of a
+    grader's file used to stop the whole class's run (status 2, no CSV).
+    Now only the content of the grader's files stops it; a changed mode
+    fails the submission that changed it, is put back, and the class goes on."""
+    src = _package_copy(tmp_path)
+    module = src / "avblocks" / "labs" / "registry.py"
+    mode = module.stat().st_mode & 0o777
+    folder = tmp_path / "class"
+    folder.mkdir()
+    token = uuid.uuid4().hex
+    (folder / "modes.py").write_text(
+        (HOSTILE / "sockets_and_modes.py").read_text().replace("TOKEN", token))
+    shutil.copyfile(SOLUTION, folder / "zoe.py")
+    p = _cli("check", "1", str(folder), "--json", "--timeout", "10", src=src,
+             env={"AVBLOCKS_LAB_DISABLE": "seccomp"})
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stderr
+    doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
+    assert doc["zoe.py"]["passed"] and doc["zoe.py"]["points"] == 5
+    files = {c["name"]: c["message"] for c in doc["modes.py"]["checks"]}["files"]
+    assert files == ("it changed the mode of the grader's own files (labs/registry.py): a "
+                     "submission must not touch them; their modes were put back")
+    assert doc["modes.py"]["points"] == 0 and module.stat().st_mode & 0o777 == mode
+
+
 SLEEPER = ("\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"
            "    subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(3600)', "
            "TOKEN])\n    time.sleep(3600)\n")

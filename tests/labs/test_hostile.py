@@ -45,14 +45,18 @@ HOSTILE = HERE / "hostile"
 ROOT = HERE.parents[1]
 SRC = ROOT / "src"
 SOLUTION = HERE / "solutions" / "lab1_kinematics.py"
-SCOPED = oscalls.landlock_abi() >= 6
+#: a student's signals to the grader and its supervisor are refused: by
+#: Landlock's scoping (ABI 6+, Linux 6.12+) or by the seccomp filter
+SCOPED = oscalls.landlock_abi() >= 6 or oscalls.seccomp_arch() is not None
 
 
 def _need_scoping():
-    """Signals to outside processes are refused only under Landlock ABI 6+:
-    skip elsewhere on a user's machine, never in CI."""
+    """Signals to outside processes are refused only under Landlock ABI 6+
+    or seccomp (Linux x86-64, arm64): skip elsewhere on a user's machine,
+    never in CI."""
     if not SCOPED and not os.environ.get("CI"):
-        pytest.skip("needs Landlock ABI 6 (Linux 6.12+) to refuse a student's signals")
+        pytest.skip("needs Landlock ABI 6 (Linux 6.12+) or seccomp to refuse a student's "
+                    "signals")
 
 
 def expectations(text):
@@ -63,7 +67,7 @@ def expectations(text):
 
 #: attacks that only a platform feature stops, with the test of that feature:
 #: skipped where it is missing on a user's machine, never in CI
-NEEDS = {"signals.py": lambda: SCOPED,
+NEEDS = {"signals.py": lambda: SCOPED, "kills_supervisor.py": lambda: SCOPED,
          "reads_files.py": lambda: oscalls.landlock_abi() >= 1,
          "sockets_and_modes.py": lambda: oscalls.seccomp_arch() is not None}
 
@@ -184,17 +188,33 @@ def test_a_class_folder_full_of_attacks(tmp_path):
     assert not problems, "\n".join(problems)
 
 
-def test_signals_to_the_grader_are_refused(tmp_path):
+@pytest.mark.parametrize("off", ["", "landlock"])
+def test_signals_to_the_grader_are_refused(tmp_path, off):
+    """Also without Landlock (as before Linux 6.12, when only the seccomp
+    filter refuses them): the grader and its supervisor cannot be stopped or
+    killed, so a daemon started after the attempt is still collected."""
     _need_scoping()
+    if off and oscalls.seccomp_arch() is None and not os.environ.get("CI"):
+        pytest.skip("needs seccomp (Linux x86-64, arm64)")
     token = uuid.uuid4().hex
-    _class_folder(tmp_path, token, ["signals.py"])
-    p = _cli("check", "1", str(tmp_path), "--json", "--timeout", "10")
+    folder = tmp_path / "class"
+    folder.mkdir()
+    _class_folder(folder, token, ["signals.py", "kills_supervisor.py"])
+    src = _package_copy(tmp_path) if off else SRC       # nothing may touch the checkout
+    try:
+        p = _cli("check", "1", str(folder), "--json", "--timeout", "10", src=src,
+                 env={"AVBLOCKS_LAB_DISABLE": off})
+        survivors = _marked(token)
+    finally:
+        for pid, _ in _marked(token):
+            psutil.Process(pid).kill()
     assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr
     doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
     text = "\n".join(c["message"] for c in doc["signals.py"]["checks"])
     for needle in expectations((HOSTILE / "signals.py").read_text())[1]:
         assert needle in text
     assert doc["alice.py"]["passed"] and not doc["carol.py"]["passed"]
+    assert doc["kills_supervisor.py"]["passed"] and survivors == []
 
 
 # ---------------------------------------------------------------- without Landlock

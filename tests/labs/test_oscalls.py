@@ -429,3 +429,34 @@ def test_landlock_reads_only_the_installation_and_its_own_folder(tmp_path):
     assert res == {"secret": "PermissionError", "list": "PermissionError", "mine": "done",
                    "shadow": "PermissionError", "stdlib": "done", "numpy": "done",
                    "avblocks": "done", "run": "done"}
+
+
+@pytest.mark.skipif(oscalls.seccomp_arch() is None and not os.environ.get("CI"),
+                    reason="seccomp filter for Linux x86-64 and arm64 only")
+def test_seccomp_refuses_signals_to_the_protected_processes_only():
+    """The grader and the supervisor (here: the test process, the child's
+    parent), their group and ``-1`` are protected; the child's own process,
+    group and children are not."""
+    me = os.getpid()
+    res = _restricted(
+        "import signal, subprocess\nres = {}\n"
+        "def t(name, fn):\n"
+        "    try:\n"
+        "        fn(); res[name] = 'sent'\n"
+        "    except OSError as e:\n"
+        "        res[name] = e.errno\n"
+        f"t('parent', lambda: os.kill({me}, 0))\n"
+        f"t('parent group', lambda: os.killpg(os.getpgid({me}), 0))\n"
+        "t('everyone', lambda: os.kill(-1, 0))\n"
+        f"t('thread', lambda: signal.pthread_kill(__import__('threading').get_ident(), 0))\n"
+        "t('self', lambda: os.kill(os.getpid(), 0))\n"
+        "kid = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
+        "t('child', lambda: kid.kill())\n"
+        "kid.wait()\n"
+        "res['child status'] = kid.returncode\n"
+        "print('RESULT ' + json.dumps(res))\n",
+        f"restrict_syscalls([{me}, -os.getpgid({me}), -1])")
+    import errno
+    assert res == {"parent": errno.EPERM, "parent group": errno.EPERM,
+                   "everyone": errno.EPERM, "thread": "sent", "self": "sent", "child": "sent",
+                   "child status": -9}

@@ -112,7 +112,7 @@ def main():
     done = oscalls.apply_limits(**config.get("limits", {}))
     done.update(oscalls.restrict_writes(workdir))
     done["privileges"] = oscalls.drop_capabilities()
-    done.update(oscalls.restrict_syscalls())
+    done.update(oscalls.restrict_syscalls(_protected(config)))
     send({"ready": done, "pid": os.getpid()})
 
     while True:
@@ -140,6 +140,21 @@ def main():
             send({"id": req.get("id"), "error": {
                 "kind": "TooLarge", "message": str(e), "flags": ["too_large"],
                 "returns": _return_lines(_target(st, req), st.filename)}})
+
+
+def _protected(config) -> list:
+    """The processes the student's code may not signal: the grader and the
+    supervisor (this process's parent), their process groups, and every
+    process at once (``kill(-1, ...)``)."""
+    out = [-1]
+    for pid in (config.get("grader"), os.getppid()):
+        if type(pid) is int and pid > 1:
+            out.append(pid)
+            try:
+                out.append(-os.getpgid(pid))
+            except (OSError, AttributeError):          # gone; Windows has no groups
+                pass
+    return out
 
 
 class _Refused(Exception):

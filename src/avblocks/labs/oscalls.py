@@ -407,36 +407,70 @@ def seccomp_arch() -> str | None:
     return arch if arch in _DENIED_CALLS and struct.calcsize("P") == 8 else None
 
 
-def _seccomp_program(arch) -> list:
+#: the calls that send a signal to a process named by their first argument
+#: (kill, tgkill, rt_sigqueueinfo, rt_tgsigqueueinfo): refused for the
+#: protected processes of :func:`restrict_syscalls`
+_SIGNAL_CALLS = {"x86_64": (62, 234, 129, 297), "aarch64": (129, 131, 138, 240)}
+#: refused outright: tkill (a thread of any process), pidfd_send_signal, pidfd_getfd
+_DENIED_CALLS["x86_64"].update(tkill=200, pidfd_send_signal=424, pidfd_getfd=438)
+_DENIED_CALLS["aarch64"].update(tkill=130, pidfd_send_signal=424, pidfd_getfd=438)
+
+
+def _seccomp_program(arch, protect=()) -> list:
     """The BPF program: a call of another architecture (a 32-bit call from
-    a 64-bit process, x32) or in :data:`_DENIED_CALLS` gets ``EPERM``,
-    everything else is allowed."""
+    a 64-bit process, x32) or in :data:`_DENIED_CALLS` gets ``EPERM``; so
+    does a signal (:data:`_SIGNAL_CALLS`) whose target, the low 32 bits of
+    the first argument, is one of ``protect`` (process ids, ``-pgid`` for a
+    group, ``-1`` for every process); everything else is allowed."""
     import errno
     ld_abs, jeq, jge, ret = 0x20, 0x15, 0x35, 0x06
     allow, deny = 0x7FFF0000, 0x00050000 | errno.EPERM
-    calls = sorted(_DENIED_CALLS[arch].values())
-    prog = [(ld_abs, 0, 0, 4)]                           # seccomp_data.arch
-    body = [(ld_abs, 0, 0, 0)]                           # seccomp_data.nr
+    # (code, jump-if-true label, jump-if-false label, k); labels resolved below
+    prog = [(ld_abs, None, None, 4),                     # seccomp_data.arch
+            (jeq, None, "deny", _AUDIT_ARCH[arch]),
+            (ld_abs, None, None, 0)]                     # seccomp_data.nr
     if arch == "x86_64":
-        body.append((jge, 0, 0, 0x40000000))             # the x32 ABI: jt set below
-    body += [(jeq, 0, 0, nr) for nr in calls]
-    # prog[1] checks the architecture; then body; then allow; then deny
-    n = 2 + len(body)                                    # index of the ALLOW return
-    deny_at = n + 1
-    prog.append((jeq, 0, deny_at - 2, _AUDIT_ARCH[arch]))
-    for i, (code, _, _, k) in enumerate(body):
-        at = 2 + i
-        prog.append((code, deny_at - at - 1, 0, k) if code in (jeq, jge) else (code, 0, 0, k))
-    prog += [(ret, 0, 0, allow), (ret, 0, 0, deny)]
-    return prog
+        prog.append((jge, "deny", None, 0x40000000))     # the x32 ABI
+    prog += [(jeq, "deny", None, nr) for nr in sorted(_DENIED_CALLS[arch].values())]
+    targets = sorted({int(p) & 0xFFFFFFFF for p in protect})
+    if targets:
+        prog += [(jeq, "signal", None, nr) for nr in _SIGNAL_CALLS[arch]]
+    prog.append((ret, None, None, allow))
+    if targets:
+        prog.append(("label", "signal", None, None))
+        prog.append((ld_abs, None, None, 16))            # args[0], its low 32 bits
+        prog += [(jeq, "deny", None, t) for t in targets]
+        prog.append((ret, None, None, allow))
+    prog += [("label", "deny", None, None), (ret, None, None, deny)]
+    at, out = {}, []
+    for ins in prog:
+        if ins[0] == "label":
+            at[ins[1]] = len(out)
+        else:
+            out.append(ins)
+
+    def off(label, i):
+        if label is None:
+            return 0
+        d = at[label] - i - 1
+        if not 0 <= d < 256:
+            raise ValueError("a seccomp jump out of range")
+        return d
+
+    return [(c, off(t, i), off(f, i), k) for i, (c, t, f, k) in enumerate(out)]
 
 
-def restrict_syscalls() -> dict:
+def restrict_syscalls(protect=()) -> dict:
     """Install the seccomp filter of :func:`_seccomp_program` in this
     process (and all it starts; it cannot be removed): no socket of any
     kind, no ``chmod``/``chown``/``utime``/``setxattr``, no ``ptrace`` or
-    ``process_vm_*``, no ``io_uring``. Sets ``PR_SET_NO_NEW_PRIVS`` first.
-    Returns ``{"sockets": ..., "file_modes": ...}`` in words."""
+    ``process_vm_*``, no ``io_uring``, and no signal to the processes of
+    ``protect`` (the grader and the supervisor, by process and group id,
+    and ``-1``: where Landlock cannot scope signals, before Linux 6.12, a
+    student's process killed its supervisor, then left a daemon running).
+    Sets ``PR_SET_NO_NEW_PRIVS`` first. Returns ``{"sockets": ...,
+    "file_modes": ..., "grader_signals": ...}`` in words (``grader_signals``
+    only when ``protect`` is given)."""
     arch = seccomp_arch()
     if arch is None:
         why = ("not restricted: seccomp switched off" if not enabled("seccomp") else
@@ -444,7 +478,7 @@ def restrict_syscalls() -> dict:
                "arm64 only)")
         return {"sockets": why, "file_modes": why}
     import ctypes
-    prog = _seccomp_program(arch)
+    prog = _seccomp_program(arch, protect)
 
     class Insn(ctypes.Structure):
         _fields_ = [("code", ctypes.c_uint16), ("jt", ctypes.c_uint8), ("jf", ctypes.c_uint8),
@@ -464,9 +498,13 @@ def restrict_syscalls() -> dict:
     except (OSError, AttributeError) as e:
         why = f"not restricted: seccomp refused the filter ({e})"
         return {"sockets": why, "file_modes": why}
-    return {"sockets": "no socket of any kind: no UDP, no Unix socket (seccomp)",
-            "file_modes": "no chmod, chown, utime or extended attributes, no ptrace "
-                          "(seccomp)"}
+    out = {"sockets": "no socket of any kind: no UDP, no Unix socket (seccomp)",
+           "file_modes": "no chmod, chown, utime or extended attributes, no ptrace "
+                         "(seccomp)"}
+    if protect:
+        out["grader_signals"] = "no signal to the grader, its supervisor or their group " \
+                                "(seccomp)"
+    return out
 
 
 # ------------------------------------------------------------------ capabilities

@@ -460,3 +460,21 @@ def test_seccomp_refuses_signals_to_the_protected_processes_only():
     assert res == {"parent": errno.EPERM, "parent group": errno.EPERM,
                    "everyone": errno.EPERM, "thread": "sent", "self": "sent", "child": "sent",
                    "child status": -9}
+
+
+@posix
+def test_a_supervised_command_starts_with_the_default_signal_handlers(tmp_path):
+    """The supervisor ignores SIGINT, SIGTERM and SIGHUP (a Ctrl-C in the
+    grader's terminal is the grader's to handle), but by a handler, not by
+    SIG_IGN, which a program inherits: the student's process ignored them."""
+    out = tmp_path / "signals.txt"
+    code = ("import signal, sys\nopen(sys.argv[1], 'w').write(' '.join(str(int(signal."
+            "getsignal(s) is signal.default_int_handler or signal.getsignal(s) == "
+            "signal.SIG_DFL)) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)))\n")
+    run = oscalls.Supervised([sys.executable, "-c", code, str(out)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        assert run.exit_code(30) == 0
+    finally:
+        run.kill()
+    assert out.read_text() == "1 1 1"

@@ -952,6 +952,11 @@ class Supervised:
 
 
 # ------------------------------------------------------------------ the supervisor
+def _ignore(signum, frame):
+    """The supervisor's handler of SIGINT, SIGTERM and SIGHUP: nothing (it
+    dies only with the grader's control socket or its ``kill``)."""
+
+
 def supervise(argv):
     """The supervisor (POSIX): ``oscalls.py supervise OFF CTRL_FD CLEANUP -- CMD...``.
 
@@ -972,8 +977,10 @@ def supervise(argv):
     sub = become_subreaper()
     # the grader's end going away must not kill us by SIGPIPE before we clean up
     signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    # a handler, not SIG_IGN: an ignored signal stays ignored across execve,
+    # and the student's process (and lab 6's emulator) would ignore them too
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_IGN)
+        signal.signal(sig, _ignore)
     devnull = os.open(os.devnull, os.O_RDWR)
     try:
         child = subprocess.Popen(cmd, stdin=0, stdout=1, stderr=devnull, close_fds=True,

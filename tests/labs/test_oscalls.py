@@ -478,3 +478,35 @@ def test_a_supervised_command_starts_with_the_default_signal_handlers(tmp_path):
     finally:
         run.kill()
     assert out.read_text() == "1 1 1"
+
+
+@posix
+def test_remove_tree_whatever_the_depth_and_modes(tmp_path):
+    """What a student may leave in its own folder: folders nested deeper
+    than Python's recursion limit (shutil.rmtree raised RecursionError and
+    ended the grader's run), a folder nobody may list, a folder holding a
+    file that may not be written, a link to a folder outside (never
+    followed: what it points at stays)."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep.txt").write_text("keep")
+    top = tmp_path / "student"
+    top.mkdir()
+    fd = os.open(top, os.O_RDONLY | os.O_DIRECTORY)
+    for _ in range(1200):                             # (os.makedirs recurses too)
+        os.mkdir("d", dir_fd=fd)
+        fd, old = os.open("d", os.O_RDONLY | os.O_DIRECTORY, dir_fd=fd), fd
+        os.close(old)
+    os.close(os.open("bottom.txt", os.O_WRONLY | os.O_CREAT, dir_fd=fd))
+    os.close(fd)
+    (top / "shut").mkdir(mode=0)
+    (top / "ro").mkdir()
+    (top / "ro" / "f.txt").write_text("x")
+    (top / "ro").chmod(0o500)
+    (top / "link").symlink_to(outside)
+    with pytest.raises(RecursionError):               # what the grader used
+        import shutil
+        shutil.rmtree(top)
+    assert oscalls.remove_tree(top) is True
+    assert not top.exists() and (outside / "keep.txt").read_text() == "keep"
+    assert oscalls.remove_tree(top) is True           # gone already: fine

@@ -31,7 +31,6 @@ import contextlib
 import os
 import queue
 import re
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -226,7 +225,7 @@ class Sandbox:
                         f.close()
         finally:
             if self.workdir:
-                shutil.rmtree(self.workdir, ignore_errors=True)
+                oscalls.remove_tree(self.workdir)
         return self._status
 
     def ended(self, wait=5.0) -> Died:

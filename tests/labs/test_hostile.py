@@ -113,14 +113,17 @@ def _class_folder(folder, token, names):
 
 
 def _grade_the_class(folder, token, names):
-    """Grade the class folder from inside it; what the run left behind."""
+    """Grade the class folder from inside it; what the run left behind
+    (also in the grader's temporary folder, TMPDIR)."""
+    tmp = folder.parent / "grader-tmp"
+    tmp.mkdir()
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     children = {c.pid for c in _children()}
     try:
         # graded from inside the folder, beside its random.py, numpy.py, avblocks.py;
         # the grader's environment holds a "secret" (reads_environ.py looks for it)
         p = _cli("check", "1", ".", "--json", "--timeout", "10", cwd=folder,
-                 env={"AVBLOCKS_HOSTILE_SECRET": token})
+                 env={"AVBLOCKS_HOSTILE_SECRET": token, "TMPDIR": str(tmp)})
         survivors = _marked(token)
         left = [c for c in _children() if c.pid not in children]
     finally:
@@ -135,6 +138,10 @@ def _grade_the_class(folder, token, names):
         for q in planted:
             q.unlink()
     doc = json.loads(p.stdout) if p.stdout.strip().startswith("[") else None
+    planted += sorted(tmp.iterdir())            # every student's folder removed
+    for q in planted:
+        if q.is_dir():
+            oscalls.remove_tree(q)
     return p, doc, before, survivors, left, planted
 
 

@@ -514,6 +514,7 @@ def _remove_tree_case(top, outside):
     (top / "shut").mkdir(mode=0)
     (top / "ro").mkdir()
     (top / "ro" / "f.txt").write_text("x")
+    (top / "ro" / "shut").mkdir(mode=0)               # moving it up needs its own modes
     (top / "ro").chmod(0o500)
     (top / "link").symlink_to(outside)
     assert oscalls.remove_tree(top) is True

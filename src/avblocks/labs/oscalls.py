@@ -772,6 +772,8 @@ def remove_tree(path) -> bool:
                     if is_dir:                       # moved up: depth does not matter
                         n += 1
                         flat = f".avblocks-flat-{n}"
+                        with contextlib.suppress(OSError):    # moving needs its write right
+                            os.chmod(e.name, 0o700, dir_fd=sub)
                         with contextlib.suppress(OSError):
                             os.rename(e.name, flat, src_dir_fd=sub, dst_dir_fd=top)
                             todo.append(flat)

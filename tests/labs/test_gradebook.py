@@ -156,12 +156,22 @@ def test_extra_checks_with_points_in_the_csv_and_results_json(capsys, tmp_path):
     ("LAB = 1\nCHECKS = [('ports', lambda sub: 'x')]\n", "check 'ports' is named twice"),
     ("LAB = 1\nCHECKS = [('free', lambda sub: 'x', -1)]\n", "points must be a finite number > 0"),
     ("LAB = 1\nimport nothing_here\n", "the check module failed to load: ModuleNotFoundError"),
+    # a student's file (no LAB): refused before anything of the folder runs
+    ("import os\nopen(os.path.join(os.path.dirname(__file__), 'ran'), 'w')\n",
+     "not a check module: it assigns no LAB (or LABS) at its top level"),
+    ("LAB = 1\ndef (:\n", "the check module does not parse (SyntaxError"),
 ])
 def test_a_bad_extra_check_module_is_status_2(capsys, tmp_path, body, says):
     (tmp_path / "bad.py").write_text(body)
+    (tmp_path / "a_checks.py").write_text("LAB = 1\nopen(__file__ + '.ran', 'w')\n"
+                                          "CHECKS = [('probe', lambda sub: 'x')]\n")
     rc = main(["lab", "check", "1", str(SOLUTION), "--extra-checks", str(tmp_path)])
     err = capsys.readouterr().err
     assert rc == 2 and says in err and "bad.py" in err, err
+    assert not (tmp_path / "ran").exists()
+    # a file that is not a check module stops the run before any of the folder runs
+    assert (tmp_path / "a_checks.py.ran").exists() != ("not a check module" in says
+                                                     or "does not parse" in says)
 
 
 def test_gradescope_wants_one_file(capsys, tmp_path):

@@ -45,14 +45,18 @@ HOSTILE = HERE / "hostile"
 ROOT = HERE.parents[1]
 SRC = ROOT / "src"
 SOLUTION = HERE / "solutions" / "lab1_kinematics.py"
-SCOPED = oscalls.landlock_abi() >= 6
+#: a student's signals to the grader and its supervisor are refused: by
+#: Landlock's scoping (ABI 6+, Linux 6.12+) or by the seccomp filter
+SCOPED = oscalls.landlock_abi() >= 6 or oscalls.seccomp_arch() is not None
 
 
 def _need_scoping():
-    """Signals to outside processes are refused only under Landlock ABI 6+:
-    skip elsewhere on a user's machine, never in CI."""
+    """Signals to outside processes are refused only under Landlock ABI 6+
+    or seccomp (Linux x86-64, arm64): skip elsewhere on a user's machine,
+    never in CI."""
     if not SCOPED and not os.environ.get("CI"):
-        pytest.skip("needs Landlock ABI 6 (Linux 6.12+) to refuse a student's signals")
+        pytest.skip("needs Landlock ABI 6 (Linux 6.12+) or seccomp to refuse a student's "
+                    "signals")
 
 
 def expectations(text):
@@ -61,9 +65,16 @@ def expectations(text):
     return passes, re.findall(r"^expect: (.+)$", text, re.M)
 
 
+#: attacks that only a platform feature stops, with the test of that feature:
+#: skipped where it is missing on a user's machine, never in CI
+NEEDS = {"signals.py": lambda: SCOPED, "kills_supervisor.py": lambda: SCOPED,
+         "reads_files.py": lambda: oscalls.landlock_abi() >= 1,
+         "sockets_and_modes.py": lambda: oscalls.seccomp_arch() is not None}
+
+
 def attacks():
     names = sorted(p.name for p in HOSTILE.glob("*.py"))
-    return [n for n in names if n != "signals.py" or SCOPED or os.environ.get("CI")]
+    return [n for n in names if n not in NEEDS or NEEDS[n]() or os.environ.get("CI")]
 
 
 def _cli(*args, env=None, src=SRC, timeout=900, cwd=None):
@@ -102,12 +113,17 @@ def _class_folder(folder, token, names):
 
 
 def _grade_the_class(folder, token, names):
-    """Grade the class folder from inside it; what the run left behind."""
+    """Grade the class folder from inside it; what the run left behind
+    (also in the grader's temporary folder, TMPDIR)."""
+    tmp = folder.parent / "grader-tmp"
+    tmp.mkdir()
     before = {p.name: p.read_bytes() for p in folder.iterdir()}
     children = {c.pid for c in _children()}
     try:
-        # graded from inside the folder, beside its random.py, numpy.py, avblocks.py
-        p = _cli("check", "1", ".", "--json", "--timeout", "10", cwd=folder)
+        # graded from inside the folder, beside its random.py, numpy.py, avblocks.py;
+        # the grader's environment holds a "secret" (reads_environ.py looks for it)
+        p = _cli("check", "1", ".", "--json", "--timeout", "10", cwd=folder,
+                 env={"AVBLOCKS_HOSTILE_SECRET": token, "TMPDIR": str(tmp)})
         survivors = _marked(token)
         left = [c for c in _children() if c.pid not in children]
     finally:
@@ -122,6 +138,10 @@ def _grade_the_class(folder, token, names):
         for q in planted:
             q.unlink()
     doc = json.loads(p.stdout) if p.stdout.strip().startswith("[") else None
+    planted += sorted(tmp.iterdir())            # every student's folder removed
+    for q in planted:
+        if q.is_dir():
+            oscalls.remove_tree(q)
     return p, doc, before, survivors, left, planted
 
 
@@ -175,17 +195,33 @@ def test_a_class_folder_full_of_attacks(tmp_path):
     assert not problems, "\n".join(problems)
 
 
-def test_signals_to_the_grader_are_refused(tmp_path):
+@pytest.mark.parametrize("off", ["", "landlock"])
+def test_signals_to_the_grader_are_refused(tmp_path, off):
+    """Also without Landlock (as before Linux 6.12, when only the seccomp
+    filter refuses them): the grader and its supervisor cannot be stopped or
+    killed, so a daemon started after the attempt is still collected."""
     _need_scoping()
+    if off and oscalls.seccomp_arch() is None and not os.environ.get("CI"):
+        pytest.skip("needs seccomp (Linux x86-64, arm64)")
     token = uuid.uuid4().hex
-    _class_folder(tmp_path, token, ["signals.py"])
-    p = _cli("check", "1", str(tmp_path), "--json", "--timeout", "10")
+    folder = tmp_path / "class"
+    folder.mkdir()
+    _class_folder(folder, token, ["signals.py", "kills_supervisor.py"])
+    src = _package_copy(tmp_path) if off else SRC       # nothing may touch the checkout
+    try:
+        p = _cli("check", "1", str(folder), "--json", "--timeout", "10", src=src,
+                 env={"AVBLOCKS_LAB_DISABLE": off})
+        survivors = _marked(token)
+    finally:
+        for pid, _ in _marked(token):
+            psutil.Process(pid).kill()
     assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr
     doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
     text = "\n".join(c["message"] for c in doc["signals.py"]["checks"])
     for needle in expectations((HOSTILE / "signals.py").read_text())[1]:
         assert needle in text
     assert doc["alice.py"]["passed"] and not doc["carol.py"]["passed"]
+    assert doc["kills_supervisor.py"]["passed"] and survivors == []
 
 
 # ---------------------------------------------------------------- without Landlock
@@ -236,6 +272,31 @@ def test_without_landlock_a_write_into_the_grader_stops_the_run(tmp_path):
     assert "the grader's own files (the avblocks package) changed while writes_grader.py " \
            "ran; reinstall avblocks and grade in a read-only installation" in p.stderr
     assert (src / "avblocks" / "labs" / f"_hostile_sentinel_{token}.txt").exists()
+
+
+def test_without_seccomp_a_changed_mode_fails_the_writer_not_the_class(tmp_path):
+    """Landlock does not stop chmod: a submission that changed the mode of a
+    grader's file used to stop the whole class's run (status 2, no CSV).
+    Now only the content of the grader's files stops it; a changed mode
+    fails the submission that changed it, is put back, and the class goes on."""
+    src = _package_copy(tmp_path)
+    module = src / "avblocks" / "labs" / "registry.py"
+    mode = module.stat().st_mode & 0o777
+    folder = tmp_path / "class"
+    folder.mkdir()
+    token = uuid.uuid4().hex
+    (folder / "modes.py").write_text(
+        (HOSTILE / "sockets_and_modes.py").read_text().replace("TOKEN", token))
+    shutil.copyfile(SOLUTION, folder / "zoe.py")
+    p = _cli("check", "1", str(folder), "--json", "--timeout", "10", src=src,
+             env={"AVBLOCKS_LAB_DISABLE": "seccomp"})
+    assert p.returncode == 1 and "Traceback" not in p.stdout + p.stderr, p.stderr
+    doc = {Path(r["file"]).name: r for r in json.loads(p.stdout)}
+    assert doc["zoe.py"]["passed"] and doc["zoe.py"]["points"] == 5
+    files = {c["name"]: c["message"] for c in doc["modes.py"]["checks"]}["files"]
+    assert files == ("it changed the mode of the grader's own files (labs/registry.py): a "
+                     "submission must not touch them; their modes were put back")
+    assert doc["modes.py"]["points"] == 0 and module.stat().st_mode & 0o777 == mode
 
 
 SLEEPER = ("\n\ndef wheels_to_cmd(*a, **k):\n    import subprocess, sys, time\n"

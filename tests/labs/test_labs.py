@@ -377,6 +377,9 @@ def test_a_folder_goes_on_after_a_timeout(tmp_path):
 @pytest.mark.parametrize("option", [["--timeout", "-1"], ["--timeout", "0"],
                                     ["--timeout", "inf"], ["--timeout", "nan"],
                                     ["--timeout", "1e999"], ["--timeout", "soon"],
+                                    # finite but past a day: a correct solution failed to
+                                    # start (1e20), select() overflowed (1e10)
+                                    ["--timeout", "1e10"], ["--timeout", "86401"],
                                     ["--memory", "-5"], ["--memory", "1.5"], ["--seed", "-1"],
                                     ["--student", ""], ["--bogus"], ["--json", "--csv"]])
 def test_a_bad_option_is_refused_with_status_2(capsys, option):

@@ -111,7 +111,7 @@ def test_limits_without_setrlimit_are_reported_not_set():
     with oscalls.disabled("resource"):
         got = oscalls.apply_limits(memory_mb=512, cpu_s=10, processes=8, files=64, file_mb=1)
     assert got == {k: "not set: setrlimit switched off"
-                   for k in ("memory", "cpu", "processes", "files", "file_size")}
+                   for k in ("memory", "cpu", "processes", "open_files", "file_size")}
 
 
 def _in_child(code):
@@ -129,14 +129,41 @@ def test_limits_are_set_as_reported():
         "import json, resource\n"
         "from avblocks.labs import oscalls\n"
         "said = oscalls.apply_limits(memory_mb=3000, cpu_s=77, files=99, file_mb=5)\n"
-        "got = {k: resource.getrlimit(getattr(resource, k))[0] for k in "
+        "got = {k: resource.getrlimit(getattr(resource, k)) for k in "
         "('RLIMIT_AS', 'RLIMIT_CPU', 'RLIMIT_NOFILE', 'RLIMIT_FSIZE', 'RLIMIT_CORE')}\n"
-        "print('RESULT ' + json.dumps([said, got]))\n")
-    said, got = out
-    assert got == {"RLIMIT_AS": 3000 * 2 ** 20, "RLIMIT_CPU": 77, "RLIMIT_NOFILE": 99,
-                   "RLIMIT_FSIZE": 5 * 2 ** 20, "RLIMIT_CORE": 0}
+        "raised = {}\n"
+        "for k in got:\n"                 # a process may raise a soft limit to its hard one
+        "    rl = getattr(resource, k)\n"
+        "    try:\n"
+        "        resource.setrlimit(rl, (resource.RLIM_INFINITY, resource.RLIM_INFINITY))\n"
+        "    except (ValueError, OSError):\n"
+        "        resource.setrlimit(rl, (resource.getrlimit(rl)[1],) * 2)\n"
+        "    raised[k] = resource.getrlimit(rl)[0]\n"
+        "print('RESULT ' + json.dumps([said, got, raised]))\n")
+    said, got, raised = out
+    soft = {"RLIMIT_AS": 3000 * 2 ** 20, "RLIMIT_CPU": 77, "RLIMIT_NOFILE": 99,
+            "RLIMIT_FSIZE": 5 * 2 ** 20, "RLIMIT_CORE": 0}
+    assert {k: v[0] for k, v in got.items()} == soft
+    # each hard limit is the soft one (CPU: SIGKILL 5 s after SIGXCPU), so the
+    # process cannot raise them again (as root it could: the grader's child
+    # drops CAP_SYS_RESOURCE with every other capability, tested below)
+    assert {k: v[1] for k, v in got.items()} == {**soft, "RLIMIT_CPU": 82}
+    if os.geteuid() != 0:
+        assert raised == {**soft, "RLIMIT_CPU": 82}
     assert said["memory"].startswith("3000 MiB") and said["cpu"] == "77 s of CPU time " \
-        "(RLIMIT_CPU)" and said["files"] == "99 open files (RLIMIT_NOFILE)"
+        "(RLIMIT_CPU)" and said["open_files"] == "99 open files (RLIMIT_NOFILE)"
+
+
+@posix
+def test_huge_limits_are_reported_not_a_crash():
+    out = _in_child(
+        "import json\n"
+        "from avblocks.labs import oscalls\n"
+        "said = oscalls.apply_limits(cpu_s=1e300, memory_mb=2 ** 40)\n"
+        "x = sum(range(10 ** 6))\n"              # some CPU time: no SIGXCPU at once
+        "print('RESULT ' + json.dumps(said))\n")
+    assert out["cpu"] == "1000000000 s of CPU time (RLIMIT_CPU)"
+    assert out["memory"] == f"{2 ** 40} MiB of address space (RLIMIT_AS)"
 
 
 def test_landlock_switched_off_is_reported(tmp_path):
@@ -247,3 +274,249 @@ def test_the_grader_with_every_feature_off(tmp_path):
     assert good.limits["files"] == "not restricted: Landlock switched off"
     assert not bad.passed and "port `pose (its rate, derivative)`" in bad.text()
     assert _marked(token) == []
+
+
+def test_a_writer_given_up_on_never_writes_into_a_reused_descriptor(tmp_path):
+    """Without select (Windows), write_all's thread outlives its deadline.
+    The caller then closes the pipe (the student's process is killed, its
+    end closes too), and the descriptor's number comes back for the next
+    file the grader opens (the next student's pipe, a results file): what
+    the old thread had left to write must not land there."""
+    r, w = os.pipe()
+    with oscalls.disabled("select"):
+        with pytest.raises(TimeoutError):
+            oscalls.write_all(w, b"y" * (4 << 20), time.monotonic() + 0.3)
+    os.close(w)
+    results = tmp_path / "results.json"
+    fd = os.open(results, os.O_WRONLY | os.O_CREAT)   # the lowest free number: w's
+    try:
+        os.close(r)                   # the reader is gone: the blocked write returns
+        time.sleep(0.5)
+    finally:
+        os.close(fd)
+    assert fd != w or results.stat().st_size == 0, \
+        f"the old writer wrote {results.stat().st_size} bytes into the next file"
+
+
+def _restricted(code, *setup):
+    """Run ``code`` in a child after ``setup`` (calls of oscalls, as the
+    grader's child makes them); its RESULT."""
+    return _in_child("import json, os, sys\nfrom avblocks.labs import oscalls\n"
+                     + "".join(f"said_{i} = oscalls.{c}\n" for i, c in enumerate(setup))
+                     + code)
+
+
+@pytest.mark.skipif(oscalls.seccomp_arch() is None and not os.environ.get("CI"),
+                    reason="seccomp filter for Linux x86-64 and arm64 only")
+def test_seccomp_refuses_sockets_and_mode_changes_and_nothing_else(tmp_path):
+    f = tmp_path / "f.txt"
+    f.write_text("x")
+    res = _restricted(
+        "import socket\nres = {'said': said_0}\n"
+        "def t(name, fn):\n"
+        "    try:\n"
+        "        fn(); res[name] = 'done'\n"
+        "    except OSError as e:\n"
+        "        res[name] = e.errno\n"
+        "t('udp', lambda: socket.socket(socket.AF_INET, socket.SOCK_DGRAM))\n"
+        "t('unix', lambda: socket.socket(socket.AF_UNIX))\n"
+        "t('pair', lambda: socket.socketpair())\n"
+        f"t('chmod', lambda: os.chmod({str(f)!r}, 0o600))\n"
+        f"t('utime', lambda: os.utime({str(f)!r}, (0, 0)))\n"
+        f"t('read', lambda: open({str(f)!r}).read())\n"
+        f"t('write', lambda: open({str(f)!r}, 'a').write('y'))\n"
+        "import subprocess\n"
+        "res['run'] = subprocess.run([sys.executable, '-c', 'import socket; "
+        "socket.socket()'], capture_output=True, text=True).stderr.splitlines()[-1]\n"
+        "print('RESULT ' + json.dumps(res))\n", "restrict_syscalls()")
+    import errno
+    assert res.pop("said")["sockets"].startswith("no socket of any kind")
+    # refused with EPERM; a socket pair (no address: only itself) and files are fine;
+    # the filter holds in what the process starts (the socket call there fails)
+    assert res == {"udp": errno.EPERM, "unix": errno.EPERM, "pair": "done",
+                   "chmod": errno.EPERM, "utime": errno.EPERM, "read": "done",
+                   "write": "done",
+                   "run": "PermissionError: [Errno 1] Operation not permitted"}
+    assert f.stat().st_mode & 0o777 != 0o600 and f.stat().st_mtime > 0
+
+
+def test_seccomp_switched_off_is_reported():
+    with oscalls.disabled("seccomp"):
+        assert oscalls.seccomp_arch() is None
+        got = oscalls.restrict_syscalls()
+    assert set(got.values()) == {"not restricted: seccomp switched off"}
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Linux capabilities")
+def test_dropped_capabilities_stay_dropped():
+    res = _restricted(
+        "import resource\n"
+        "st = open('/proc/self/status').read()\n"
+        "caps = {k: int(v, 16) for k, v in (ln.split(':') for ln in st.splitlines() "
+        "if ln.startswith('Cap'))}\n"
+        "raised = 'no'\n"
+        "resource.setrlimit(resource.RLIMIT_NOFILE, (64, 64))\n"
+        "try:\n"
+        "    resource.setrlimit(resource.RLIMIT_NOFILE, (128, 128)); raised = 'yes'\n"
+        "except (ValueError, OSError):\n"
+        "    pass\n"
+        "import subprocess\n"
+        "again = subprocess.run([sys.executable, '-c', \"print(open('/proc/self/status')"
+        ".read().split('CapEff:')[1].split()[0])\"], capture_output=True, text=True).stdout\n"
+        "print('RESULT ' + json.dumps([said_0, caps, raised, int(again, 16)]))\n",
+        "drop_capabilities()")
+    said, caps, raised, again = res
+    assert caps["CapEff"] == caps["CapPrm"] == caps["CapInh"] == caps.get("CapAmb", 0) == 0
+    if os.geteuid() == 0:                 # only a process with CAP_SETPCAP empties it
+        assert caps["CapBnd"] == 0
+    assert raised == "no" and again == 0          # not even by running a program
+    assert said == ("every capability dropped (the grader runs as root)" if os.geteuid() == 0
+                    else "none (the grader does not run as root)")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="PR_SET_DUMPABLE")
+def test_an_undumpable_grader_hides_its_environment():
+    """While the grader grades, a process without CAP_SYS_PTRACE (the
+    student's, whose capabilities are dropped) cannot read its environment."""
+    import ctypes
+    libc = ctypes.CDLL(None)
+    code = ("import os\nfrom avblocks.labs import oscalls\noscalls.drop_capabilities()\n"
+            "try:\n    open(f'/proc/{os.getppid()}/environ', 'rb').read(); print('read')\n"
+            "except OSError:\n    print('refused')\n")
+    env = {**os.environ, "PYTHONPATH": str(SRC)}
+
+    def child():
+        return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              env=env, timeout=60).stdout.strip()
+
+    assert libc.prctl(3, 0, 0, 0, 0) == 1
+    with oscalls.undumpable():
+        assert libc.prctl(3, 0, 0, 0, 0) == 0
+        assert child() == "refused"
+    assert libc.prctl(3, 0, 0, 0, 0) == 1              # put back
+    if os.geteuid() != 0:
+        assert child() == "read"          # the same user reads a dumpable process's
+
+
+@pytest.mark.skipif(oscalls.landlock_abi() < 1, reason="needs Landlock (Linux 5.13+)")
+def test_landlock_reads_only_the_installation_and_its_own_folder(tmp_path):
+    inside, outside = tmp_path / "in", tmp_path / "out"
+    inside.mkdir()
+    outside.mkdir()
+    (outside / "secret.py").write_text("answer = 42\n")
+    (inside / "mine.txt").write_text("mine")
+    res = _restricted(
+        "res = {}\n"
+        "def t(name, fn):\n"
+        "    try:\n"
+        "        fn(); res[name] = 'done'\n"
+        "    except OSError as e:\n"
+        "        res[name] = type(e).__name__\n"
+        f"t('secret', lambda: open({str(outside / 'secret.py')!r}).read())\n"
+        f"t('list', lambda: os.listdir({str(outside)!r}))\n"
+        f"t('mine', lambda: open({str(inside / 'mine.txt')!r}).read())\n"
+        "t('shadow', lambda: open('/etc/shadow').read() if os.path.exists('/etc/shadow') "
+        "else (_ for _ in ()).throw(PermissionError()))\n"
+        "import importlib\n"
+        "t('stdlib', lambda: importlib.import_module('xml.dom.minidom'))\n"
+        "t('numpy', lambda: importlib.import_module('numpy.polynomial.hermite'))\n"
+        "t('avblocks', lambda: importlib.import_module('avblocks.controllers'))\n"
+        "import subprocess\n"
+        "t('run', lambda: subprocess.run([sys.executable, '-c', 'import numpy'], "
+        "check=True))\n"
+        "print('RESULT ' + json.dumps([said_0, res]))\n",
+        f"restrict_writes({str(inside)!r})")
+    said, res = res
+    assert said["reads"].startswith("reads only its own folder")
+    assert res == {"secret": "PermissionError", "list": "PermissionError", "mine": "done",
+                   "shadow": "PermissionError", "stdlib": "done", "numpy": "done",
+                   "avblocks": "done", "run": "done"}
+
+
+@pytest.mark.skipif(oscalls.seccomp_arch() is None and not os.environ.get("CI"),
+                    reason="seccomp filter for Linux x86-64 and arm64 only")
+def test_seccomp_refuses_signals_to_the_protected_processes_only():
+    """The grader and the supervisor (here: the test process, the child's
+    parent), their group and ``-1`` are protected; the child's own process,
+    group and children are not."""
+    me = os.getpid()
+    res = _restricted(
+        "import signal, subprocess\nres = {}\n"
+        "def t(name, fn):\n"
+        "    try:\n"
+        "        fn(); res[name] = 'sent'\n"
+        "    except OSError as e:\n"
+        "        res[name] = e.errno\n"
+        f"t('parent', lambda: os.kill({me}, 0))\n"
+        f"t('parent group', lambda: os.killpg(os.getpgid({me}), 0))\n"
+        "t('everyone', lambda: os.kill(-1, 0))\n"
+        f"t('thread', lambda: signal.pthread_kill(__import__('threading').get_ident(), 0))\n"
+        "t('self', lambda: os.kill(os.getpid(), 0))\n"
+        "kid = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(30)'])\n"
+        "t('child', lambda: kid.kill())\n"
+        "kid.wait()\n"
+        "res['child status'] = kid.returncode\n"
+        "print('RESULT ' + json.dumps(res))\n",
+        f"restrict_syscalls([{me}, -os.getpgid({me}), -1])")
+    import errno
+    assert res == {"parent": errno.EPERM, "parent group": errno.EPERM,
+                   "everyone": errno.EPERM, "thread": "sent", "self": "sent", "child": "sent",
+                   "child status": -9}
+
+
+@posix
+def test_a_supervised_command_starts_with_the_default_signal_handlers(tmp_path):
+    """The supervisor ignores SIGINT, SIGTERM and SIGHUP (a Ctrl-C in the
+    grader's terminal is the grader's to handle), but by a handler, not by
+    SIG_IGN, which a program inherits: the student's process ignored them."""
+    out = tmp_path / "signals.txt"
+    code = ("import signal, sys\nopen(sys.argv[1], 'w').write(' '.join(str(int(signal."
+            "getsignal(s) is signal.default_int_handler or signal.getsignal(s) == "
+            "signal.SIG_DFL)) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)))\n")
+    run = oscalls.Supervised([sys.executable, "-c", code, str(out)],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        assert run.exit_code(30) == 0
+    finally:
+        run.kill()
+    assert out.read_text() == "1 1 1"
+
+
+@posix
+def test_remove_tree_whatever_the_depth_and_modes(tmp_path):
+    """What a student may leave in its own folder: folders nested deeper
+    than Python's recursion limit (shutil.rmtree raised RecursionError and
+    ended the grader's run), a folder nobody may list, a folder holding a
+    file that may not be written, a link to a folder outside (never
+    followed: what it points at stays)."""
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "keep.txt").write_text("keep")
+    top = tmp_path / "student"
+    top.mkdir()
+    try:
+        _remove_tree_case(top, outside)
+    finally:                # never leave pytest a tree its own clean-up cannot remove
+        oscalls.remove_tree(top)
+
+
+def _remove_tree_case(top, outside):
+    fd = os.open(top, os.O_RDONLY | os.O_DIRECTORY)
+    for _ in range(1200):                             # (os.makedirs recurses too)
+        os.mkdir("d", dir_fd=fd)
+        fd, old = os.open("d", os.O_RDONLY | os.O_DIRECTORY, dir_fd=fd), fd
+        os.close(old)
+    os.close(os.open("bottom.txt", os.O_WRONLY | os.O_CREAT, dir_fd=fd))
+    os.close(fd)
+    with pytest.raises(RecursionError):               # what the grader used
+        import shutil
+        shutil.rmtree(top)
+    (top / "shut").mkdir(mode=0)
+    (top / "ro").mkdir()
+    (top / "ro" / "f.txt").write_text("x")
+    (top / "ro" / "shut").mkdir(mode=0)               # moving it up needs its own modes
+    (top / "ro").chmod(0o500)
+    (top / "link").symlink_to(outside)
+    assert oscalls.remove_tree(top) is True
+    assert not top.exists() and (outside / "keep.txt").read_text() == "keep"
+    assert oscalls.remove_tree(top) is True           # gone already: fine

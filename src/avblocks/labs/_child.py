@@ -15,7 +15,9 @@ Start-up, before any of the student's code runs:
 2. read the configuration (the first message): its folder, its limits,
    the platform features switched off;
 3. move into its own temporary folder, set the resource limits
-   (:func:`oscalls.apply_limits`) and Landlock (:func:`oscalls.restrict_writes`);
+   (:func:`oscalls.apply_limits`), Landlock (:func:`oscalls.restrict_writes`),
+   give up every capability (:func:`oscalls.drop_capabilities`) and install
+   the seccomp filter (:func:`oscalls.restrict_syscalls`);
 4. answer ``{"ready": {what was set}}``.
 
 Requests (``{"id": n, "op": ...}``), each answered ``{"id": n, "ok": value}``
@@ -109,6 +111,8 @@ def main():
     os.chdir(workdir)
     done = oscalls.apply_limits(**config.get("limits", {}))
     done.update(oscalls.restrict_writes(workdir))
+    done["privileges"] = oscalls.drop_capabilities()
+    done.update(oscalls.restrict_syscalls(_protected(config)))
     send({"ready": done, "pid": os.getpid()})
 
     while True:
@@ -136,6 +140,21 @@ def main():
             send({"id": req.get("id"), "error": {
                 "kind": "TooLarge", "message": str(e), "flags": ["too_large"],
                 "returns": _return_lines(_target(st, req), st.filename)}})
+
+
+def _protected(config) -> list:
+    """The processes the student's code may not signal: the grader and the
+    supervisor (this process's parent), their process groups, and every
+    process at once (``kill(-1, ...)``)."""
+    out = [-1]
+    for pid in (config.get("grader"), os.getppid()):
+        if type(pid) is int and pid > 1:
+            out.append(pid)
+            try:
+                out.append(-os.getpgid(pid))
+            except (OSError, AttributeError):          # gone; Windows has no groups
+                pass
+    return out
 
 
 class _Refused(Exception):

@@ -35,16 +35,24 @@ import json
 import math
 import os
 import shutil
+import stat
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 from ..core.errors import ParameterError
-from .grading import DEFAULT_MEMORY_MB, DEFAULT_TIMEOUT, GraderTampered, grade_all, run_checks
+from .grading import (
+    DEFAULT_MEMORY_MB,
+    DEFAULT_TIMEOUT,
+    MAX_TIMEOUT,
+    GraderTampered,
+    grade_all,
+    run_checks,
+)
 from .registry import get, labs
 from .remote import seed_for
-from .report import CSV_COLUMNS, CSV_HELP, csv_row, gradescope
+from .report import CSV_COLUMNS, CSV_HELP, csv_row, gradescope, shown
 
 
 def _seconds(text):
@@ -52,9 +60,10 @@ def _seconds(text):
         v = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not (math.isfinite(v) and v > 0):
+    if not (math.isfinite(v) and 0 < v <= MAX_TIMEOUT):
         raise argparse.ArgumentTypeError(
-            f"must be a finite number of seconds > 0, got {text!r}")
+            f"must be a finite number of seconds > 0 and at most {MAX_TIMEOUT:g} (a day), "
+            f"got {text!r}")
     return v
 
 
@@ -108,8 +117,8 @@ def add_parser(sub):
                      help="one CSV row per submission, columns: " + ", ".join(CSV_COLUMNS))
     ch.add_argument("--timeout", type=_seconds, default=DEFAULT_TIMEOUT, metavar="SECONDS",
                     help=f"time limit of loading the file and of each check (default "
-                         f"{DEFAULT_TIMEOUT:g}; a finite number > 0); a check past it fails "
-                         f"as timed out")
+                         f"{DEFAULT_TIMEOUT:g}; a finite number > 0, at most "
+                         f"{MAX_TIMEOUT:g}); a check past it fails as timed out")
     ch.add_argument("--memory", type=_mib, default=DEFAULT_MEMORY_MB, metavar="MIB",
                     help=f"address-space limit of the process running the student's code "
                          f"(default {DEFAULT_MEMORY_MB}; 0: none)")
@@ -156,9 +165,80 @@ def cmd_start(args):
     return 0
 
 
-def _shown(name) -> str:
-    """A file name as one line of printable text (a name is the student's)."""
-    return "".join(c if c.isprintable() else "?" for c in name)
+_shown = shown                      # a file name as one line of printable text
+
+
+def _results_target(text):
+    """The ``--gradescope`` path, checked before anything is graded (a
+    results file that cannot be written used to end a finished run in a
+    traceback): not empty, not a folder, in a folder that exists and can
+    be written."""
+    if not text.strip():
+        raise ParameterError("an empty path", param="--gradescope",
+                             expected="the path of the results file", found=repr(text))
+    target = Path(text)
+    if target.is_dir():
+        raise ParameterError("a folder, not a file", param="--gradescope",
+                             expected="the path of the results file (results.json)",
+                             found=text)
+    folder = target.resolve().parent
+    if not folder.is_dir():
+        raise ParameterError("the folder of the results file does not exist",
+                             param="--gradescope", found=text)
+    if not (os.path.exists(target) and not os.path.isfile(target)) \
+            and not os.access(folder, os.W_OK):
+        raise ParameterError("the folder of the results file cannot be written",
+                             param="--gradescope", found=text)
+    return target
+
+
+def _write_results(path, text):
+    """Write the results file: a regular file (or a new one) is replaced
+    atomically (a symbolic link is replaced, never followed); a device, a
+    pipe or a terminal (``/dev/stdout``, ``/dev/null``) is written in place,
+    never replaced (as root, replacing ``/dev/null`` broke the machine)."""
+    path = Path(path)
+    try:
+        st = os.stat(path)
+    except OSError:
+        st = None
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(text)
+        return
+    _write_atomically(path, text)
+
+
+def _same_folder(a, b) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _imported_from(folder) -> list:
+    """Modules of the grader's own process loaded from ``folder`` (``python
+    -m avblocks`` run inside a class folder puts it first on the path: a
+    submission named ``random.py`` was then imported as the grader's code)."""
+    out = []
+    for name, mod in list(sys.modules.items()):
+        f = getattr(mod, "__file__", None)
+        if isinstance(f, str) and _same_folder(os.path.dirname(os.path.abspath(f)), folder):
+            out.append(name)
+    return sorted(out)
+
+
+def _keep_off_the_path(folder):
+    """Refuse to grade a folder the grader imported code from, and take it
+    off the grader's path so that nothing is imported from it later."""
+    shadow = _imported_from(folder)
+    if shadow:
+        raise ParameterError(
+            f"the grader itself imported {', '.join(shadow)} from the folder it grades "
+            f"(python -m avblocks puts the current folder first on its path): run the "
+            f"`avblocks` command, or `python -P -m avblocks`, inside a class folder",
+            param="path", found=str(folder))
+    sys.path[:] = [p for p in sys.path if not _same_folder(p or ".", folder)]
 
 
 def _write_atomically(path, text):
@@ -189,16 +269,22 @@ def cmd_check(args):
             raise ParameterError("--gradescope writes the results of one submission",
                                  param="--gradescope", expected="a file, not a folder",
                                  found=str(path))
-    elif path.is_file() or path.is_symlink():
-        files = [path]
+    elif path.exists() or path.is_symlink():
+        files = [path]          # not a regular file (a FIFO...): read_submission says so
     else:
         raise ParameterError("no such file or folder", param="path",
                              expected="a .py file or a folder of them", found=str(path))
-    if args.gradescope and not Path(args.gradescope).resolve().parent.is_dir():
-        raise ParameterError("the folder of the results file does not exist",
-                             param="--gradescope", found=args.gradescope)
+    results = _results_target(args.gradescope) if args.gradescope is not None else None
+    folder = path if path.is_dir() else path.absolute().parent
+    _keep_off_the_path(folder)
     extra = []
     if args.extra_checks:
+        if _same_folder(args.extra_checks, folder):
+            raise ParameterError(
+                "the extra checks' folder is the folder of the submissions: its files "
+                "would be imported into the grader as the instructor's trusted code",
+                param="--extra-checks", expected="a folder of the instructor's own",
+                found=args.extra_checks)
         from .extra import load_extra
         extra = load_extra(args.extra_checks, lab)
     if args.student is not None:
@@ -216,9 +302,16 @@ def cmd_check(args):
             reports = [run_checks(lab, files[0], seed=seeds[0], **kw)]
     except GraderTampered as e:
         raise ParameterError(str(e), param="path") from None
-    if args.gradescope:
+    status = 0 if all(r.passed for r in reports) else 1
+    if results is not None:
         doc = gradescope(reports[0], execution_time=time.monotonic() - t0)
-        _write_atomically(args.gradescope, json.dumps(doc, indent=1) + "\n")
+        try:
+            _write_results(results, json.dumps(doc, indent=1) + "\n")
+        except OSError as e:
+            status = 2
+            print(f"avblocks: error: in parameter '--gradescope': the results file could not "
+                  f"be written ({e.strerror or e}; found {_shown(str(results))}); the "
+                  f"results follow", file=sys.stderr)
     if args.json:
         doc = reports[0].as_dict() if not path.is_dir() else [r.as_dict() for r in reports]
         print(json.dumps(doc, indent=1))
@@ -243,7 +336,7 @@ def cmd_check(args):
         good = sum(r.passed for r in reports)
         print(f"{good} of {len(reports)} submissions pass every check")
         _print_unset(reports)
-    return 0 if all(r.passed for r in reports) else 1
+    return status
 
 
 def _print_unset(reports):

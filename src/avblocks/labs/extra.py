@@ -43,16 +43,19 @@ from .grading import as_check
 def load_extra(folder, lab) -> list:
     """The extra checks in ``folder`` for ``lab``, in file-name order;
     :class:`ParameterError` naming the file for one that does not load or
-    does not declare ``LAB``/``LABS`` and ``CHECKS`` properly."""
+    does not declare ``LAB``/``LABS`` and ``CHECKS`` properly. Every file
+    is first read and parsed, none run: a file without a top-level ``LAB``
+    or ``LABS`` is refused before any of the folder is imported."""
     folder = Path(folder)
     if not folder.is_dir():
         raise ParameterError("no such folder", param="--extra-checks",
                              expected="a folder of check modules", found=str(folder))
     out = []
     taken = {c.name for c in lab.all_checks()}
-    for path in sorted(folder.glob("*.py")):
-        if path.name.startswith(("_", ".")):
-            continue
+    paths = [p for p in sorted(folder.glob("*.py")) if not p.name.startswith(("_", "."))]
+    for path in paths:                     # before any of them runs
+        _looks_like_checks(path)
+    for path in paths:
         mod = _import(path)
         labs = getattr(mod, "LABS", None)
         if labs is None:
@@ -83,6 +86,34 @@ def load_extra(folder, lab) -> list:
             taken.add(c.name)
             out.append(c)
     return out
+
+
+def _looks_like_checks(path):
+    """Refuse, without running it, a file that cannot be a module of checks:
+    not readable text, or no top-level ``LAB = ...`` / ``LABS = ...`` (a
+    folder of students' files given by mistake, a download folder: those
+    were imported, and so run, as the instructor's trusted code)."""
+    import ast
+
+    from .grading import read_submission
+    text, err = read_submission(path)
+    if err:
+        raise ParameterError(f"not a check module: {err} (nothing of the folder was run)",
+                             param="--extra-checks", found=path.name)
+    try:
+        tree = ast.parse(text, filename=path.name)
+    except (SyntaxError, ValueError, RecursionError, MemoryError) as e:
+        raise ParameterError(f"the check module does not parse ({type(e).__name__}: "
+                             f"{str(e)[:120]}; nothing of the folder was run)",
+                             param="--extra-checks", found=path.name) from None
+    for node in tree.body:
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, ast.AnnAssign) else []
+        if any(isinstance(t, ast.Name) and t.id in ("LAB", "LABS") for t in targets):
+            return
+    raise ParameterError("not a check module: it assigns no LAB (or LABS) at its top level; "
+                         "nothing of the folder was run (is it the folder of the "
+                         "submissions?)", param="--extra-checks", found=path.name)
 
 
 def _import(path):

@@ -51,6 +51,10 @@ from pathlib import Path
 
 import numpy as np
 
+# every module a check needs is loaded before any student's code runs: where
+# nothing stops a write into the installation (no Landlock), a module first
+# imported during a check could be one the student's process had replaced
+from ..core import run_loop as _run_loop  # noqa: F401
 from .remote import RESERVED, Failed, Submission, seed_for
 from .report import VISIBILITY, CheckResult, Report
 from .sandbox import (
@@ -67,6 +71,9 @@ _TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 #: the default time limit of loading the file and of each check [s]
 DEFAULT_TIMEOUT = 60.0
+#: the largest time limit accepted [s]: one day (beyond it the platform's
+#: timers and limits overflow; a correct solution failed to start with 1e20)
+MAX_TIMEOUT = 86400.0
 #: the default limit of the child's address space [MiB] (``RLIMIT_AS``)
 DEFAULT_MEMORY_MB = 4096
 #: how long the child may take to start and import avblocks before the
@@ -258,7 +265,10 @@ def read_submission(path) -> tuple[str | None, str | None]:
     the file is opened without following a symbolic link, must be a
     regular file of at most :data:`MAX_SOURCE_BYTES` and UTF-8 text."""
     path = Path(path)
-    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
+    # O_NONBLOCK: opening a FIFO named like a submission must not wait for a
+    # writer (a folder holding one hung the grader); checked regular below
+    flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0) \
+        | getattr(os, "O_NONBLOCK", 0)
     try:
         fd = os.open(path, flags)
     except FileNotFoundError:
@@ -270,7 +280,7 @@ def read_submission(path) -> tuple[str | None, str | None]:
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            return None, "not a regular file"
+            return None, "not a regular file (a folder, a pipe or a device?)"
         if st.st_size > MAX_SOURCE_BYTES:
             return None, (f"the file holds {st.st_size} bytes, more than a lab's "
                           f"{MAX_SOURCE_BYTES} (is it the right file?)")
@@ -473,7 +483,8 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
     path : str or Path
         The student's file (its name is what messages quote).
     timeout : float
-        Seconds allowed to loading the file and to each check (finite, > 0).
+        Seconds allowed to loading the file and to each check (finite, > 0,
+        at most :data:`MAX_TIMEOUT`).
         A check that runs longer is stopped (the student's process is
         killed) and fails with ``timed out after ... s in check '...'``; the
         checks after it are reported as not run. ``None`` or 0 (older
@@ -505,12 +516,14 @@ def run_checks(lab, path, *, timeout=DEFAULT_TIMEOUT, memory_mb=DEFAULT_MEMORY_M
         Every check's verdict, with what the grader could set of the limits.
     """
     timeout = float(timeout) if timeout else DEFAULT_TIMEOUT
-    if not (math.isfinite(timeout) and timeout > 0):
-        raise ValueError(f"timeout must be a finite number of seconds > 0, got {timeout!r}")
+    if not (math.isfinite(timeout) and 0 < timeout <= MAX_TIMEOUT):
+        raise ValueError(f"timeout must be a finite number of seconds > 0 and at most "
+                         f"{MAX_TIMEOUT:g}, got {timeout!r}")
     checks = lab.all_checks() + [as_check(c) for c in extra]
     limits = limits or limits_for(timeout, memory_mb, len(checks))
     emit = on_result or (lambda kind, value: None)
-    with _interrupts() as interrupted:
+    from . import oscalls
+    with _interrupts() as interrupted, oscalls.undumpable():
         return _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit,
                     sandbox, interrupted)
 
@@ -525,7 +538,7 @@ def _run(lab, path, checks, timeout, memory_mb, seed, source, limits, emit, sand
         emit("result", result)
 
     def load_failed(msg):
-        add(CheckResult("load", False, msg, 0.0))
+        add(CheckResult("load", False, _one_line(msg), 0.0))
         for c in checks:
             report.checks.append(CheckResult(c.name, False, "not run: the file did not load",
                                              c.points, c.visibility))
@@ -638,7 +651,9 @@ def _snapshot(folder) -> dict:
 def _package_snapshot() -> dict:
     """``{path: (size, mode, SHA-256)}`` of every file of the installed
     avblocks package (the grader's own code; a time stamp alone may change,
-    which Landlock does not prevent and which changes nothing)."""
+    which Landlock does not prevent and which changes nothing; a mode alone
+    is the submission's fault, not a reason to stop grading the class: see
+    :func:`_grade_one`)."""
     import hashlib
     root = Path(__file__).resolve().parents[1]
     out = {}
@@ -686,16 +701,15 @@ def grade_all(lab, paths, *, seeds=None, **kw) -> list[Report]:
     # no student's process can reach another (Landlock ABI 6+, a subreaper)
     ahead = oscalls.full_isolation()
     nxt = None
-    try:
+    with contextlib.ExitStack() as stack:
+        stack.enter_context(oscalls.undumpable())
+        stack.callback(lambda: nxt is not None and nxt.close())
         for i, (p, (text, err), seed) in enumerate(zip(paths, texts, seeds)):
             sandbox, nxt = nxt, None
             if ahead and i + 1 < len(paths) and texts[i + 1][1] is None:
                 nxt = Sandbox(limits).start()
             reports.append(_grade_one(lab, p, text, err, seed, sandbox, limits, folders,
                                       before, pkg, kw))
-    finally:
-        if nxt is not None:
-            nxt.close()
     return reports
 
 
@@ -705,7 +719,7 @@ def _grade_one(lab, p, text, err, seed, sandbox, limits, folders, before, pkg, k
         if sandbox is not None:
             sandbox.close()
         r = Report(lab=lab.number, file=str(p), seed=seed)
-        r.checks.append(CheckResult("load", False, err, 0.0))
+        r.checks.append(CheckResult("load", False, _one_line(err), 0.0))
         for c in lab.all_checks() + [as_check(c) for c in kw.get("extra", ())]:
             r.checks.append(CheckResult(c.name, False, "not run: the file did not load",
                                         c.points, c.visibility))
@@ -726,14 +740,37 @@ def _grade_one(lab, p, text, err, seed, sandbox, limits, folders, before, pkg, k
             f"the folder changed while this submission ran ({', '.join(changed[:5])}"
             f"{' ...' if len(changed) > 5 else ''}): a submission must not write files; "
             f"every other file was graded from the copy read before any code ran"), 0.0))
-    if _package_snapshot() != pkg:
-        raise GraderTampered(
-            f"the grader's own files (the avblocks package) changed while {p.name} ran; "
-            f"reinstall avblocks and grade in a read-only installation")
+    now = _package_snapshot()
+    if now != pkg:
+        content = {k: (v[0], v[2]) for k, v in now.items()}
+        if content != {k: (v[0], v[2]) for k, v in pkg.items()}:
+            raise GraderTampered(
+                f"the grader's own files (the avblocks package) changed while {p.name} ran; "
+                f"reinstall avblocks and grade in a read-only installation")
+        # only modes changed (chmod, which Landlock does not stop): the code the
+        # grader runs is the same, every module it needs is loaded; the
+        # submission fails, the modes are put back, the class goes on
+        moved = sorted(k for k in now if now[k][1] != pkg[k][1])
+        for k in moved:
+            with contextlib.suppress(OSError):
+                os.chmod(k, stat.S_IMODE(pkg[k][1]))
+        for c in r.checks:
+            if c.passed:
+                c.passed = False
+                c.message = "void: " + c.message
+        names = ", ".join(os.path.relpath(k, Path(__file__).resolve().parents[1])
+                          for k in moved[:3])
+        r.checks.append(CheckResult("files", False, _one_line(
+            f"it changed the mode of the grader's own files ({names}"
+            f"{' ...' if len(moved) > 3 else ''}): a submission must not touch them; "
+            f"their modes were put back"), 0.0))
+        pkg.clear()
+        pkg.update(_package_snapshot())
     return r
 
 
 __all__ = ["Check", "CheckResult", "DEFAULT_MEMORY_MB", "DEFAULT_TIMEOUT", "Failed",
+           "MAX_TIMEOUT",
            "GraderTampered", "Lab", "Report", "as_check", "check_ports", "compare",
            "describe", "expect_shape", "fmt", "grade_all", "read_submission", "run_checks",
            "run_checks_here", "seed_for"]

@@ -173,10 +173,14 @@ def check_simulation(sub):
 def _emulator(endpoint, log, tmp):
     """The robot emulator under the sandbox's supervisor: it and all it
     starts die when the check stops it, and also when the grader itself is
-    killed (:class:`avblocks.labs.oscalls.Supervised`)."""
+    killed (:class:`avblocks.labs.oscalls.Supervised`). Its environment is
+    the sandbox's, not the grader's."""
     import avblocks
     src = str(Path(avblocks.__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    # not the grader's environment: a student's process of the same user can
+    # read the emulator's /proc/<pid>/environ (the instructor's tokens and keys)
+    env = {**oscalls.child_environment(tmp),
+           "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
     cmd = [sys.executable, "-m", "avblocks", "robots", "emulate", "--names", "tb1,tb2",
            "--router", endpoint, "--log", str(log), "--rate", "50",
            "--pose0", "[[0, 0, 0], [0, 2, 0]]", "--drop", "tb2@2.0"]

@@ -19,6 +19,16 @@ and is told, in words, what it got:
   other students); ``ptrace`` of outside processes always refused.
   Elsewhere nothing stops a write, and the grader detects changed files
   afterwards (:func:`avblocks.labs.grading.grade_all`);
+* **no socket, no change of a file's mode, owner or times, no ptrace**
+  (Linux x86-64 and arm64, seccomp): UDP, Unix sockets (a Docker or
+  ssh-agent socket), ``chmod``/``chown``/``utime``/``setxattr`` and
+  ``io_uring`` are refused with ``EPERM``, which Landlock does not cover;
+* **no capability** (Linux): a student's process started by a grader
+  running as root drops every capability (it cannot raise a hard limit,
+  read another process's environment, or regain them by ``execve``);
+* **a grader the student cannot inspect** (Linux): while it grades, the
+  grader is not dumpable, so a process of the same user cannot read its
+  ``/proc/<pid>/environ`` (the instructor's tokens and keys);
 * **killing everything it started**: a supervisor that is the "child
   subreaper" of the student's process (Linux ``prctl``), so that even a
   daemon that double-forked out of the session comes back to it and is
@@ -46,7 +56,7 @@ import time
 
 #: the features :func:`disabled` can switch off (to test the fallbacks)
 FEATURES = ("resource", "landlock", "killpg", "setsid", "subreaper", "proc", "psutil",
-            "select", "supervisor")
+            "select", "supervisor", "seccomp", "capabilities", "dumpable")
 
 _OFF: set = set(filter(None, os.environ.get("AVBLOCKS_LAB_DISABLE", "").split(",")))
 
@@ -141,7 +151,7 @@ def apply_limits(*, memory_mb=None, cpu_s=None, processes=None, files=None,
         why = ("not set: this platform has no setrlimit (Windows)" if enabled("resource")
                else "not set: setrlimit switched off")
         for key, val in (("memory", memory_mb), ("cpu", cpu_s), ("processes", processes),
-                         ("files", files), ("file_size", file_mb)):
+                         ("open_files", files), ("file_size", file_mb)):
             if val:
                 out[key] = why
         return out
@@ -153,14 +163,17 @@ def apply_limits(*, memory_mb=None, cpu_s=None, processes=None, files=None,
             return
         try:
             _, hard = res.getrlimit(rl)
-            value = int(value)
+            value = min(int(value), 2 ** 62)
             if hard != res.RLIM_INFINITY:
                 value = min(value, hard)
+            # the hard limit comes down to the soft one: a process may always
+            # raise its soft limit up to its hard limit, and a student's would
+            new_hard = value
             if key == "cpu":               # SIGXCPU at the soft limit, SIGKILL 5 s later
-                hard = value + 5 if hard == res.RLIM_INFINITY else min(hard, value + 5)
-            res.setrlimit(rl, (value, hard))
+                new_hard = value + 5 if hard == res.RLIM_INFINITY else min(hard, value + 5)
+            res.setrlimit(rl, (value, new_hard))
             out[key] = f"{text(value)} ({name})"
-        except (ValueError, OSError) as e:
+        except (ValueError, OSError, OverflowError) as e:
             out[key] = f"not set: {name} refused ({e})"
 
     if memory_mb:
@@ -168,7 +181,10 @@ def apply_limits(*, memory_mb=None, cpu_s=None, processes=None, files=None,
                lambda v: f"{v // 2 ** 20} MiB of address space")
 
     if cpu_s:
-        setlim("cpu", "RLIMIT_CPU", max(1, int(cpu_s)), lambda v: f"{v} s of CPU time")
+        # at most 10**9 s: the kernel counts CPU time in nanoseconds, and a larger
+        # limit wrapped around to an immediate SIGXCPU
+        setlim("cpu", "RLIMIT_CPU", max(1, int(min(float(cpu_s), 1e9))),
+               lambda v: f"{v} s of CPU time")
     if processes:
         if os.geteuid() == 0:
             out["processes"] = "not enforced: the grader runs as root (uid 0), which " \
@@ -181,7 +197,7 @@ def apply_limits(*, memory_mb=None, cpu_s=None, processes=None, files=None,
         else:
             out["processes"] = "not set: the user's process count is unknown here"
     if files:
-        setlim("files", "RLIMIT_NOFILE", files, lambda v: f"{v} open files")
+        setlim("open_files", "RLIMIT_NOFILE", files, lambda v: f"{v} open files")
     if file_mb:
         setlim("file_size", "RLIMIT_FSIZE", file_mb * 2 ** 20,
                lambda v: f"files up to {v // 2 ** 20} MiB")
@@ -214,6 +230,41 @@ def _user_tasks(uid) -> int:
 _LL_FS_ABI1 = sum(1 << b for b in (1, 4, 5, 6, 7, 8, 9, 10, 11, 12))   # the write rights
 _LL_REFER, _LL_TRUNCATE, _LL_IOCTL_DEV = 1 << 13, 1 << 14, 1 << 15
 _LL_FILE_WRITE = (1 << 1)                                           # WRITE_FILE
+_LL_EXECUTE, _LL_READ_FILE, _LL_READ_DIR = 1 << 0, 1 << 2, 1 << 3      # the read rights
+_LL_READ = _LL_EXECUTE | _LL_READ_FILE | _LL_READ_DIR
+
+#: system folders a student's process may read (and run programs from): the
+#: C library, the dynamic loader, locales and zone data live there; the
+#: Python installation and the library are added by :func:`readable_roots`
+_SYSTEM_READ = ("/usr", "/lib", "/lib64", "/lib32", "/libx32", "/bin", "/sbin", "/proc",
+                "/sys", "/nix/store")
+#: single files outside those (the loader's cache, the time zone, the
+#: random devices); not the rest of /etc (``/etc/shadow`` is root's to read)
+_FILES_READ = ("/etc/ld.so.cache", "/etc/localtime", "/dev/urandom", "/dev/random",
+               "/dev/zero", "/dev/full")
+
+
+def readable_roots() -> list:
+    """The folders a student's process may read under Landlock: the Python
+    installation (prefixes, the interpreter's folder, every folder on
+    ``sys.path``: the standard library, site-packages, avblocks itself) and
+    the system folders of :data:`_SYSTEM_READ`. Not the user's home, not
+    /tmp, not the class folder, not an instructor's extra checks, not the
+    tests and their reference solutions."""
+    import sysconfig
+    out = []
+    cands = [sys.prefix, sys.exec_prefix, sys.base_prefix, sys.base_exec_prefix,
+             os.path.dirname(os.path.realpath(sys.executable)),
+             *(sysconfig.get_paths().get(k, "") for k in ("stdlib", "platstdlib", "purelib",
+                                                          "platlib")),
+             *sys.path, *_SYSTEM_READ]
+    for p in cands:
+        if not p or not os.path.isabs(p):
+            continue
+        real = os.path.realpath(p)
+        if os.path.isdir(real) and real not in out:
+            out.append(real)
+    return out
 
 
 def landlock_abi() -> int:
@@ -229,23 +280,29 @@ def landlock_abi() -> int:
     return max(0, int(abi))
 
 
-def restrict_writes(workdir) -> dict:
+def restrict_writes(workdir, readable=None) -> dict:
     """Landlock this process (and all it starts): files may be created,
     written, truncated or removed only under ``workdir`` (and ``/dev/null``
-    written); with ABI 4+ no TCP ``bind``/``connect``; with ABI 6+ no
-    signal to, and no abstract-socket connection with, any process outside
-    (the grader, the supervisor, other students). Landlock also refuses
-    ``ptrace`` of outside processes. Returns ``{"files": ..., "network":
-    ..., "signals": ...}`` in words."""
+    written); files may be read, and programs run, only under ``workdir``
+    and the folders of ``readable`` (default :func:`readable_roots`: the
+    Python installation, avblocks, system folders), so that a student's
+    code cannot read the class folder, an instructor's hidden checks, the
+    reference solutions or the user's files; with ABI 4+ no TCP
+    ``bind``/``connect``; with ABI 6+ no signal to, and no abstract-socket
+    connection with, any process outside (the grader, the supervisor, other
+    students). Landlock also refuses ``ptrace`` of outside processes.
+    Returns ``{"files": ..., "reads": ..., "network": ..., "signals": ...}``
+    in words."""
     abi = landlock_abi()
     if abi <= 0:
         why = ("not restricted: Landlock is not available (Linux 5.13+ only)"
                if enabled("landlock") else "not restricted: Landlock switched off")
-        return {"files": why, "network": why, "signals": why}
+        return {"files": why, "reads": why, "network": why, "signals": why}
     import ctypes
     libc = ctypes.CDLL(None, use_errno=True)
+    readable = readable_roots() if readable is None else [str(p) for p in readable]
     fs = _LL_FS_ABI1 | (_LL_REFER if abi >= 2 else 0) | (_LL_TRUNCATE if abi >= 3 else 0) \
-        | (_LL_IOCTL_DEV if abi >= 5 else 0)
+        | (_LL_IOCTL_DEV if abi >= 5 else 0) | _LL_READ
     net = 3 if abi >= 4 else 0
     scoped = 3 if abi >= 6 else 0
 
@@ -263,13 +320,25 @@ def restrict_writes(workdir) -> dict:
     if rs < 0:
         err = os.strerror(ctypes.get_errno())
         why = f"not restricted: Landlock refused the ruleset ({err})"
-        return {"files": why, "network": why, "signals": why}
+        return {"files": why, "reads": why, "network": why, "signals": why}
     try:
         rules = [(str(workdir), fs)]
+        file_rights = _LL_READ_FILE | _LL_EXECUTE
         if os.path.exists(os.devnull):
-            rules.append((os.devnull, fs & (_LL_FILE_WRITE | _LL_TRUNCATE | _LL_IOCTL_DEV)))
+            rules.append((os.devnull, fs & (_LL_FILE_WRITE | _LL_TRUNCATE | _LL_IOCTL_DEV
+                                            | _LL_READ_FILE)))
+        rules += [(p, _LL_READ) for p in readable if os.path.isdir(p)]
+        rules += [(p, file_rights) for p in _FILES_READ
+                  if os.path.exists(p) and not os.path.isdir(p)]
         for path, allowed in rules:
-            fd = os.open(path, getattr(os, "O_PATH", os.O_RDONLY) | os.O_CLOEXEC)
+            try:
+                fd = os.open(path, getattr(os, "O_PATH", os.O_RDONLY) | os.O_CLOEXEC)
+            except OSError:
+                if path == str(workdir):
+                    raise
+                continue                                 # gone since it was listed
+            if not os.path.isdir(path):                  # a file takes file rights only
+                allowed &= file_rights | _LL_FILE_WRITE | _LL_TRUNCATE | _LL_IOCTL_DEV
             try:
                 rule = Rule(allowed, fd)
                 if libc.syscall(445, ctypes.c_int(rs), ctypes.c_int(1), ctypes.byref(rule),
@@ -283,16 +352,251 @@ def restrict_writes(workdir) -> dict:
             raise OSError(ctypes.get_errno(), "landlock_restrict_self")
     except OSError as e:
         why = f"not restricted: Landlock failed ({e})"
-        return {"files": why, "network": why, "signals": why}
+        return {"files": why, "reads": why, "network": why, "signals": why}
     finally:
         os.close(rs)
     return {"files": f"writes only inside its own temporary folder (Landlock ABI {abi})",
+            "reads": "reads only its own folder, the Python installation, avblocks and "
+                     "system folders: not the class folder, the user's files, extra "
+                     "checks or the tests (Landlock)",
             "network": ("no TCP bind or connect (Landlock)" if net else
                         "not restricted: Landlock ABI < 4 has no network rules"),
             "signals": ("no signal to, and no ptrace of, any process outside its own "
                         "(Landlock)" if scoped else
                         "ptrace of outside processes refused (Landlock); signals not "
                         "restricted: Landlock ABI < 6")}
+
+
+# ------------------------------------------------------------------ seccomp
+#: ``AUDIT_ARCH_*`` of the architectures whose system call numbers are known here
+_AUDIT_ARCH = {"x86_64": 0xC000003E, "amd64": 0xC000003E, "aarch64": 0xC00000B7,
+               "arm64": 0xC00000B7}
+
+#: the calls a student's process may not make, by architecture (Linux's
+#: ``arch/x86/entry/syscalls/syscall_64.tbl`` and ``include/uapi/asm-generic/unistd.h``):
+#: sockets (UDP, Unix: Landlock covers TCP only), a file's mode, owner, times
+#: and extended attributes (Landlock covers writes, not these), ptrace and
+#: another process's memory, io_uring (which makes the others without a call)
+_DENIED_CALLS = {
+    "x86_64": {"socket": 41, "chmod": 90, "fchmod": 91, "chown": 92, "fchown": 93,
+               "lchown": 94, "ptrace": 101, "utime": 132, "setxattr": 188,
+               "lsetxattr": 189, "fsetxattr": 190, "removexattr": 197, "lremovexattr": 198,
+               "fremovexattr": 199, "utimes": 235, "fchownat": 260, "futimesat": 261,
+               "fchmodat": 268, "utimensat": 280, "process_vm_readv": 310,
+               "process_vm_writev": 311, "io_uring_setup": 425, "io_uring_enter": 426,
+               "io_uring_register": 427, "fchmodat2": 452, "setxattrat": 463,
+               "removexattrat": 466},
+    "aarch64": {"setxattr": 5, "lsetxattr": 6, "fsetxattr": 7, "removexattr": 14,
+                "lremovexattr": 15, "fremovexattr": 16, "fchmod": 52, "fchmodat": 53,
+                "fchownat": 54, "fchown": 55, "utimensat": 88, "ptrace": 117, "socket": 198,
+                "process_vm_readv": 270, "process_vm_writev": 271, "io_uring_setup": 425,
+                "io_uring_enter": 426, "io_uring_register": 427, "fchmodat2": 452,
+                "setxattrat": 463, "removexattrat": 466},
+}
+
+
+def seccomp_arch() -> str | None:
+    """``"x86_64"`` or ``"aarch64"`` where :func:`restrict_syscalls` can
+    filter this process's system calls (64-bit Linux on those), else None."""
+    if not (IS_LINUX and enabled("seccomp")):
+        return None
+    import platform
+    import struct
+    arch = {"amd64": "x86_64", "arm64": "aarch64"}.get(platform.machine().lower(),
+                                                     platform.machine().lower())
+    return arch if arch in _DENIED_CALLS and struct.calcsize("P") == 8 else None
+
+
+#: the calls that send a signal to a process named by their first argument
+#: (kill, tgkill, rt_sigqueueinfo, rt_tgsigqueueinfo): refused for the
+#: protected processes of :func:`restrict_syscalls`
+_SIGNAL_CALLS = {"x86_64": (62, 234, 129, 297), "aarch64": (129, 131, 138, 240)}
+#: refused outright: tkill (a thread of any process), pidfd_send_signal, pidfd_getfd
+_DENIED_CALLS["x86_64"].update(tkill=200, pidfd_send_signal=424, pidfd_getfd=438)
+_DENIED_CALLS["aarch64"].update(tkill=130, pidfd_send_signal=424, pidfd_getfd=438)
+
+
+def _seccomp_program(arch, protect=()) -> list:
+    """The BPF program: a call of another architecture (a 32-bit call from
+    a 64-bit process, x32) or in :data:`_DENIED_CALLS` gets ``EPERM``; so
+    does a signal (:data:`_SIGNAL_CALLS`) whose target, the low 32 bits of
+    the first argument, is one of ``protect`` (process ids, ``-pgid`` for a
+    group, ``-1`` for every process); everything else is allowed."""
+    import errno
+    ld_abs, jeq, jge, ret = 0x20, 0x15, 0x35, 0x06
+    allow, deny = 0x7FFF0000, 0x00050000 | errno.EPERM
+    # (code, jump-if-true label, jump-if-false label, k); labels resolved below
+    prog = [(ld_abs, None, None, 4),                     # seccomp_data.arch
+            (jeq, None, "deny", _AUDIT_ARCH[arch]),
+            (ld_abs, None, None, 0)]                     # seccomp_data.nr
+    if arch == "x86_64":
+        prog.append((jge, "deny", None, 0x40000000))     # the x32 ABI
+    prog += [(jeq, "deny", None, nr) for nr in sorted(_DENIED_CALLS[arch].values())]
+    targets = sorted({int(p) & 0xFFFFFFFF for p in protect})
+    if targets:
+        prog += [(jeq, "signal", None, nr) for nr in _SIGNAL_CALLS[arch]]
+    prog.append((ret, None, None, allow))
+    if targets:
+        prog.append(("label", "signal", None, None))
+        prog.append((ld_abs, None, None, 16))            # args[0], its low 32 bits
+        prog += [(jeq, "deny", None, t) for t in targets]
+        prog.append((ret, None, None, allow))
+    prog += [("label", "deny", None, None), (ret, None, None, deny)]
+    at, out = {}, []
+    for ins in prog:
+        if ins[0] == "label":
+            at[ins[1]] = len(out)
+        else:
+            out.append(ins)
+
+    def off(label, i):
+        if label is None:
+            return 0
+        d = at[label] - i - 1
+        if not 0 <= d < 256:
+            raise ValueError("a seccomp jump out of range")
+        return d
+
+    return [(c, off(t, i), off(f, i), k) for i, (c, t, f, k) in enumerate(out)]
+
+
+def restrict_syscalls(protect=()) -> dict:
+    """Install the seccomp filter of :func:`_seccomp_program` in this
+    process (and all it starts; it cannot be removed): no socket of any
+    kind, no ``chmod``/``chown``/``utime``/``setxattr``, no ``ptrace`` or
+    ``process_vm_*``, no ``io_uring``, and no signal to the processes of
+    ``protect`` (the grader and the supervisor, by process and group id,
+    and ``-1``: where Landlock cannot scope signals, before Linux 6.12, a
+    student's process killed its supervisor, then left a daemon running).
+    Sets ``PR_SET_NO_NEW_PRIVS`` first. Returns ``{"sockets": ...,
+    "file_modes": ..., "grader_signals": ...}`` in words (``grader_signals``
+    only when ``protect`` is given)."""
+    arch = seccomp_arch()
+    if arch is None:
+        why = ("not restricted: seccomp switched off" if not enabled("seccomp") else
+               "not restricted: no seccomp filter for this platform (Linux x86-64 and "
+               "arm64 only)")
+        return {"sockets": why, "file_modes": why}
+    import ctypes
+    prog = _seccomp_program(arch, protect)
+
+    class Insn(ctypes.Structure):
+        _fields_ = [("code", ctypes.c_uint16), ("jt", ctypes.c_uint8), ("jf", ctypes.c_uint8),
+                    ("k", ctypes.c_uint32)]
+
+    class Prog(ctypes.Structure):
+        _fields_ = [("len", ctypes.c_ushort), ("filter", ctypes.POINTER(Insn))]
+
+    insns = (Insn * len(prog))(*[Insn(*i) for i in prog])
+    fprog = Prog(len(prog), ctypes.cast(insns, ctypes.POINTER(Insn)))
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(38, 1, 0, 0, 0) < 0:                       # PR_SET_NO_NEW_PRIVS
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_NO_NEW_PRIVS)")
+        if libc.prctl(22, 2, ctypes.byref(fprog), 0, 0) < 0:     # PR_SET_SECCOMP, FILTER
+            raise OSError(ctypes.get_errno(), "prctl(PR_SET_SECCOMP)")
+    except (OSError, AttributeError) as e:
+        why = f"not restricted: seccomp refused the filter ({e})"
+        return {"sockets": why, "file_modes": why}
+    out = {"sockets": "no socket of any kind: no UDP, no Unix socket (seccomp)",
+           "file_modes": "no chmod, chown, utime or extended attributes, no ptrace "
+                         "(seccomp)"}
+    if protect:
+        out["grader_signals"] = "no signal to the grader, its supervisor or their group " \
+                                "(seccomp)"
+    return out
+
+
+# ------------------------------------------------------------------ capabilities
+def drop_capabilities() -> str:
+    """Give up every capability of this process for good (Linux): the
+    bounding and ambient sets emptied, the "root" secure bits locked, then
+    the effective, permitted and inheritable sets cleared; with
+    ``PR_SET_NO_NEW_PRIVS`` no ``execve`` gives any back. A process of a
+    grader run as root then cannot raise a hard limit, read the grader's
+    memory or environment, change another user's files or bypass their
+    permissions. Returns what was done, in words."""
+    if not (IS_LINUX and enabled("capabilities")):
+        return ("not dropped: capabilities switched off" if IS_LINUX else
+                "none to drop on this platform")
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+    except OSError as e:
+        return f"not dropped: no C library ({e})"
+    try:
+        with open("/proc/sys/kernel/cap_last_cap") as f:
+            last = int(f.read())
+    except (OSError, ValueError):
+        last = 63
+    had = _effective_caps()
+    libc.prctl(38, 1, 0, 0, 0)                                   # PR_SET_NO_NEW_PRIVS
+    for cap in range(last + 1):
+        libc.prctl(24, cap, 0, 0, 0)                             # PR_CAPBSET_DROP
+    libc.prctl(47, 4, 0, 0, 0)                                   # PR_CAP_AMBIENT_CLEAR_ALL
+    if os.geteuid() == 0:
+        # SECBIT_NOROOT, NO_SETUID_FIXUP, KEEP_CAPS_LOCKED, NO_CAP_AMBIENT_RAISE, locked
+        libc.prctl(28, 0xEF, 0, 0, 0)                            # PR_SET_SECUREBITS
+
+    class Header(ctypes.Structure):
+        _fields_ = [("version", ctypes.c_uint32), ("pid", ctypes.c_int)]
+
+    class Data(ctypes.Structure):
+        _fields_ = [("effective", ctypes.c_uint32), ("permitted", ctypes.c_uint32),
+                    ("inheritable", ctypes.c_uint32)]
+
+    head, data = Header(0x20080522, 0), (Data * 2)()            # _LINUX_CAPABILITY_VERSION_3
+    if libc.capset(ctypes.byref(head), data) < 0:
+        return f"not dropped: capset refused ({os.strerror(ctypes.get_errno())})"
+    left = _effective_caps()
+    if left:
+        return f"not dropped: capabilities {left:#x} are left"
+    return ("every capability dropped (the grader runs as root)" if had else
+            "none (the grader does not run as root)")
+
+
+def _effective_caps() -> int:
+    """This process's effective capabilities (``CapEff`` of /proc/self/status), 0 if unknown."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("CapEff:"):
+                    return int(line.split()[1], 16)
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
+
+
+# ------------------------------------------------------------------ the grader itself
+_UNDUMPABLE = [0, None]                  # depth of undumpable(), the state to restore
+
+
+@contextlib.contextmanager
+def undumpable():
+    """While grading, make this process (the grader) not dumpable (Linux
+    ``PR_SET_DUMPABLE``): another process of the same user, a student's
+    among them, can no longer open its ``/proc/<pid>/environ``, ``mem`` or
+    ``fd`` (a process without ``CAP_SYS_PTRACE``, as the student's is).
+    The previous state comes back on the way out; nesting is counted."""
+    if not (IS_LINUX and enabled("dumpable")):
+        yield
+        return
+    import ctypes
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+    except OSError:
+        yield
+        return
+    if _UNDUMPABLE[0] == 0:
+        _UNDUMPABLE[1] = libc.prctl(3, 0, 0, 0, 0)                # PR_GET_DUMPABLE
+        libc.prctl(4, 0, 0, 0, 0)                                # PR_SET_DUMPABLE 0
+    _UNDUMPABLE[0] += 1
+    try:
+        yield
+    finally:
+        _UNDUMPABLE[0] -= 1
+        if _UNDUMPABLE[0] == 0 and _UNDUMPABLE[1] in (1, 2):
+            libc.prctl(4, 1, 0, 0, 0)
 
 
 # ------------------------------------------------------------------ processes
@@ -414,6 +718,81 @@ def reap():
             return
 
 
+def remove_tree(path) -> bool:
+    """Remove the folder ``path`` and everything in it, however deep and
+    whatever its modes: the student's own folder, in which its code may
+    have nested thousands of folders (``shutil.rmtree`` recursed until a
+    RecursionError ended the grader) or made folders it cannot list
+    (``mkdir(name, 0)``). Every folder met is moved up beside ``path``'s
+    top, so depth never matters and two descriptors suffice. Never follows
+    a symbolic link. True when it is gone."""
+    import shutil
+    import stat as st_
+    if IS_WINDOWS or not (os.open in os.supports_dir_fd and os.rename in os.supports_dir_fd):
+        with contextlib.suppress(OSError, RecursionError):
+            shutil.rmtree(path, ignore_errors=True)
+        return not os.path.lexists(path)
+    try:
+        top = os.open(path, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except FileNotFoundError:
+        return True
+    except OSError:
+        with contextlib.suppress(OSError):
+            os.unlink(path)                          # a link or a file in its place
+        return not os.path.lexists(path)
+    try:
+        todo, n = [], 0
+        with contextlib.suppress(OSError):
+            os.chmod(top, 0o700)
+        with contextlib.suppress(OSError):
+            todo = [e.name for e in os.scandir(top)]
+        while todo:
+            name = todo.pop()
+            try:
+                mode = os.stat(name, dir_fd=top, follow_symlinks=False).st_mode
+            except OSError:
+                continue
+            if not st_.S_ISDIR(mode):
+                with contextlib.suppress(OSError):
+                    os.unlink(name, dir_fd=top)
+                continue
+            with contextlib.suppress(OSError):
+                os.chmod(name, 0o700, dir_fd=top)    # a folder made unreadable
+            try:
+                sub = os.open(name, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC,
+                              dir_fd=top)
+            except OSError:
+                continue
+            try:
+                for e in list(os.scandir(sub)):
+                    try:
+                        is_dir = e.is_dir(follow_symlinks=False)
+                    except OSError:
+                        is_dir = False
+                    if is_dir:                       # moved up: depth does not matter
+                        n += 1
+                        flat = f".avblocks-flat-{n}"
+                        with contextlib.suppress(OSError):    # moving needs its write right
+                            os.chmod(e.name, 0o700, dir_fd=sub)
+                        with contextlib.suppress(OSError):
+                            os.rename(e.name, flat, src_dir_fd=sub, dst_dir_fd=top)
+                            todo.append(flat)
+                    else:
+                        with contextlib.suppress(OSError):
+                            os.unlink(e.name, dir_fd=sub)
+            except OSError:
+                pass
+            finally:
+                os.close(sub)
+            with contextlib.suppress(OSError):
+                os.rmdir(name, dir_fd=top)
+    finally:
+        os.close(top)
+    with contextlib.suppress(OSError):
+        os.rmdir(path)
+    return not os.path.lexists(path)
+
+
 def status_text(returncode) -> str:
     """``exit status 7`` or ``signal 9 (SIGKILL)`` for a process's return code."""
     if returncode is None:
@@ -469,18 +848,25 @@ def write_all(fd, data, deadline):
             select.select([], [fd], [], min(left, 1.0))
         return
     box: list = []
+    # the thread writes through a copy of the descriptor that it closes
+    # itself: given up on at the deadline, it may still be blocked in a write
+    # after the caller closed ``fd``, and that number may by then be another
+    # pipe's (the next student's) or the results file's
+    own = os.dup(fd)
 
     def writer():
         try:
             with contextlib.suppress(OSError, AttributeError):   # Windows before 3.12
-                os.set_blocking(fd, True)
+                os.set_blocking(own, True)
             mv = view
             while mv:
-                n = os.write(fd, mv)
+                n = os.write(own, mv)
                 mv = mv[n:]
             box.append(None)
         except OSError as e:
             box.append(e)
+        finally:
+            os.close(own)
 
     th = threading.Thread(target=writer, daemon=True, name="avblocks-lab-writer")
     th.start()
@@ -641,6 +1027,11 @@ class Supervised:
 
 
 # ------------------------------------------------------------------ the supervisor
+def _ignore(signum, frame):
+    """The supervisor's handler of SIGINT, SIGTERM and SIGHUP: nothing (it
+    dies only with the grader's control socket or its ``kill``)."""
+
+
 def supervise(argv):
     """The supervisor (POSIX): ``oscalls.py supervise OFF CTRL_FD CLEANUP -- CMD...``.
 
@@ -661,8 +1052,10 @@ def supervise(argv):
     sub = become_subreaper()
     # the grader's end going away must not kill us by SIGPIPE before we clean up
     signal.signal(signal.SIGPIPE, signal.SIG_IGN)
+    # a handler, not SIG_IGN: an ignored signal stays ignored across execve,
+    # and the student's process (and lab 6's emulator) would ignore them too
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
-        signal.signal(sig, signal.SIG_IGN)
+        signal.signal(sig, _ignore)
     devnull = os.open(os.devnull, os.O_RDWR)
     try:
         child = subprocess.Popen(cmd, stdin=0, stdout=1, stderr=devnull, close_fds=True,
@@ -699,8 +1092,7 @@ def supervise(argv):
             child.wait(5)
         code = child.returncode
     if cleanup != "-":
-        import shutil
-        shutil.rmtree(cleanup, ignore_errors=True)
+        remove_tree(cleanup)
     reap()
     with contextlib.suppress(OSError):
         ctrl.setblocking(True)

@@ -37,6 +37,35 @@ CSV_HELP = {
 #: Gradescope's visibility values (the specification's "Controlling Test Case Visibility")
 VISIBILITY = ("visible", "hidden", "after_due_date", "after_published")
 
+#: what a spreadsheet reads as the start of a formula in a cell (OWASP, "CSV Injection")
+_FORMULA = ("=", "+", "-", "@", "\t", "\r")
+
+
+def no_surrogates(text) -> str:
+    """``text`` with each byte that was not UTF-8 in a file name (Python's
+    ``surrogateescape``: U+DC80 to U+DCFF) written as ``\\xNN``, so that it
+    can be printed and encoded (a strict UTF-8 stdout raised on it)."""
+    text = str(text)
+    if not any("\udc80" <= c <= "\udcff" for c in text):
+        return text.encode("utf-8", "replace").decode("utf-8")
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if "\udc80" <= c <= "\udcff" else c
+                   for c in text).encode("utf-8", "replace").decode("utf-8")
+
+
+def shown(text) -> str:
+    """``text`` (a file name: the student's) as one line of printable text:
+    undecodable bytes as ``\\xNN``, other control characters (newlines,
+    terminal escapes) as ``?``."""
+    return "".join(c if c.isprintable() else "?" for c in no_surrogates(text))
+
+
+def csv_cell(text) -> str:
+    """``text`` made safe for a CSV cell that a spreadsheet opens: printable
+    (:func:`shown`), and a leading ``=``, ``+``, ``-`` or ``@`` (a formula:
+    ``=HYPERLINK(...)``, ``=cmd|...``) escaped by a ``'`` before it."""
+    text = shown(text)
+    return "'" + text if text.startswith(_FORMULA) else text
+
 
 @dataclass
 class CheckResult:
@@ -119,7 +148,7 @@ class Report:
     def as_dict(self) -> dict:
         ok, total = self.score
         got, most = self.points
-        return {"lab": self.lab, "file": self.file, "passed": self.passed,
+        return {"lab": self.lab, "file": no_surrogates(self.file), "passed": self.passed,
                 "checks_passed": ok, "checks_total": total, "points": got,
                 "max_points": most, "seed": self.seed, "limits": dict(self.limits),
                 "checks": [asdict(c) for c in self.checks]}
@@ -127,7 +156,7 @@ class Report:
     def text(self) -> str:
         ok, total = self.score
         got, most = self.points
-        lines = [f"lab {self.lab}: {self.file}"
+        lines = [f"lab {self.lab}: {shown(self.file)}"
                  + (f" (cases of seed {self.seed})" if self.seed is not None else "")]
         skipped = [c for c in self.checks if c.message.startswith("not run: the file did "
                                                                     "not load")]
@@ -146,13 +175,15 @@ class Report:
 
 
 def csv_row(r: Report) -> list:
-    """The CSV row of one submission (columns :data:`CSV_COLUMNS`)."""
+    """The CSV row of one submission (columns :data:`CSV_COLUMNS`); the
+    texts through :func:`csv_cell` (a file's name is the student's)."""
     ok, total = r.score
     got, most = r.points
-    return [Path(r.file).name, r.lab, "yes" if r.passed else "no", f"{got:g}", f"{most:g}",
-            ok, total, "" if r.seed is None else r.seed,
-            "; ".join(f"{c.name}: {c.message}" for c in r.checks
-                      if not c.passed and not c.message.startswith("not run: the file"))]
+    return [csv_cell(Path(r.file).name), r.lab, "yes" if r.passed else "no", f"{got:g}",
+            f"{most:g}", ok, total, "" if r.seed is None else r.seed,
+            csv_cell("; ".join(f"{c.name}: {c.message}" for c in r.checks
+                               if not c.passed and not c.message.startswith("not run: the "
+                                                                            "file")))]
 
 
 def gradescope(r: Report, *, execution_time=None) -> dict:

@@ -239,7 +239,8 @@ PRODUCERS = {
     **{f"editor-{shot}": (_script([sys.executable, "-m", "pytest", "-q", "-p",
                                    "no:cacheprovider", "tests/editor/test_browser.py"]), True)
        for shot in ("empty", "wired", "error", "run", "formation", "group",
-                    "group-inside")},
+                    "group-inside", "routing", "feedback-waypoints", "feedback-formation",
+                    "plot", "tune")},
     # the drone case study in simulation, and flown on the emulators in real time
     "drones-formation-sim": (_script([sys.executable, "-m", "avblocks", "run",
                                       "drone_formation", "--out", "{tmp}", "--quiet"],

@@ -219,7 +219,7 @@ WRONG_EXPECTED = {
                       "lab8_inplace.py, in ekf_predict)"]),
     (7, "untrained"): ("the trained policy on held-out episodes",
                        ["over 50 held-out episodes of 3 agents",
-                        "expected at least 72%, the hand-written controller's rate"]),
+                        "expected at least 72%, as good as the hand-written controller"]),
 }
 
 

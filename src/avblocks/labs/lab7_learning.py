@@ -29,7 +29,7 @@ Independent truth:
   clock, as lab 6 does, on the first held-out episode it solves in
   simulation without coming within :data:`MARGIN` of a contact: the
   robots, whose reported positions feed the library's sensors and task
-  block, must reach their goals without a contact.
+  block, must end within :data:`ARRIVED` of their goals without a contact.
 
 Training happens on the student's machine, never in a check: the grader
 takes one ``.py`` file, so the weights travel inside it as text
@@ -572,7 +572,11 @@ def check_policy(sub):
 
 
 #: the least gap to a contact [m] of the episode run on the emulator, in simulation
-MARGIN = 0.05
+MARGIN = 0.1
+#: how far from its goal a robot of the emulator may end [m]: the goal radius
+#: and 0.1 m (a pose a few ms old and a command a few ms late make the
+#: learned policy dither a few cm around its goal)
+ARRIVED = GOAL_RADIUS + 0.1
 
 
 def closest_call(res):
@@ -600,7 +604,7 @@ def _emulator(names, pose0, endpoint, log, tmp):
     src = str(Path(avblocks.__file__).resolve().parents[1])
     env = {**os.environ, "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
     cmd = [sys.executable, "-m", "avblocks", "robots", "emulate", "--names", ",".join(names),
-           "--model", "holonomic2d", "--router", endpoint, "--log", str(log), "--rate", "50",
+           "--model", "holonomic2d", "--router", endpoint, "--log", str(log), "--rate", "100",
            "--pose0", json.dumps([[float(x), float(y), 0.0] for x, y in pose0])]
     return oscalls.Supervised(cmd, env=env, cwd=tmp, stdout=subprocess.PIPE,
                               stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
@@ -620,18 +624,18 @@ def check_on_robots(sub):
     # the first held-out episode the policy solves in simulation, the whole
     # team, never closer than MARGIN to a contact (the robots' paths differ
     # from the simulated ones by what a real-time loop adds: a pose up to
-    # 20 ms old, a command sent a few ms late)
+    # 10 ms old, a command sent a few ms late)
     seeds = _episodes(sub)
     seed, sim_run = None, None
-    for s in seeds[:10]:
+    for s in seeds:
         r = run_policy(w, [s])[0]
         if np.asarray(r["task.success"])[-1].all() and closest_call(r) >= MARGIN:
             seed, sim_run = s, r
             break
     if seed is None:
-        raise Failed(f"the trained policy solved none of the first 10 held-out episodes in "
-                     f"simulation with every agent at its goal and never within {MARGIN:g} m "
-                     f"of a contact")
+        raise Failed(f"the trained policy solved none of the {len(seeds)} held-out episodes "
+                     f"in simulation with every agent at its goal and never within "
+                     f"{MARGIN:g} m of a contact")
     names = [f"r{i + 1}" for i in range(AGENTS)]
     p0 = navigation.navigation_starts(AGENTS, seed)
     session, endpoint = open_router()
@@ -659,22 +663,26 @@ def check_on_robots(sub):
         recs = [json.loads(s) for s in log.read_text().splitlines() if s.strip()]
     got = {r["robot"] for r in recs if r.get("ev") == "cmd"
            and (r.get("v", 0) != 0 or r.get("vy", 0) != 0)}
-    ok = np.asarray(res["task.success"])[-1]
     end = np.asarray(res["fleet.position"])[-1]
     goals = np.asarray(res["goals.y"])[-1]
     sim_end = np.asarray(sim_run["fleet.position"])[-1]
-    if not ok.all():
-        bad = int(np.flatnonzero(~ok)[0])
-        touched = np.asarray(res["task.collision"])[:, bad].any()
-        raise Failed(f"on the emulator (episode {seed}, solved in simulation) robot "
-                     f"{names[bad]} ended at {fmt(end[bad])}, its goal {fmt(goals[bad])}, "
-                     f"{'after a contact' if touched else 'without contact'}; in simulation "
-                     f"it ended at {fmt(sim_end[bad])}")
+    touched = np.asarray(res["task.collision"]).any(axis=0)
+    away = np.hypot(*(end - goals).T)
     steps = int(res.meta.get("steps", len(res.t)))
     over = int(res.meta.get("overruns", 0))
-    return (f"on the emulator: {AGENTS} robots reached their goals without contact (episode "
-            f"{seed}; {len(got)} robots received motion commands); paced {over} of {steps} "
-            f"steps overran, worst lateness {1e3 * res.meta.get('max_lateness', 0):.1f} ms")
+    paced = (f"paced {over} of {steps} steps overran, worst lateness "
+             f"{1e3 * res.meta.get('max_lateness', 0):.1f} ms")
+    bad = np.flatnonzero(touched | (away > ARRIVED))
+    if bad.size:
+        i = int(bad[0])
+        raise Failed(f"on the emulator (episode {seed}, solved in simulation) robot "
+                     f"{names[i]} {'touched something and ' if touched[i] else ''}ended "
+                     f"{away[i]:.3f} m from its goal (at {fmt(end[i])}, the goal "
+                     f"{fmt(goals[i])}; expected within {ARRIVED:g} m, without contact); in "
+                     f"simulation it ended at {fmt(sim_end[i])}; {paced}")
+    return (f"on the emulator: {AGENTS} robots within {away.max():.3f} m of their goals, "
+            f"without contact (episode {seed}; {len(got)} robots received motion commands); "
+            f"{paced}")
 
 
 LAB = Lab(7, "learning", "Learning to navigate: the task's observation and reward, a policy "

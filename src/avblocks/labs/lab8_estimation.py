@@ -117,11 +117,21 @@ def predict_truth(mean, cov, cmd, dt, q):
     return motion(mean, cmd, dt), f @ cov @ np.swapaxes(f, 1, 2) + process_noise(mean[:, 2], q)
 
 
-def correct_truth(mean, cov, z, landmarks, r, *, wrap_innovation=True, flip_bearing=False):
+def correct_truth(mean, cov, z, landmarks, r, *, wrap_innovation=True, flip_bearing=False,
+                  sequential=False):
     """The posterior in information form (module docstring). The keywords
-    make known mistakes, for the messages: the innovation not wrapped, the
-    bearing's Jacobian in x and y with the wrong sign."""
+    make known mistakes or variants, for the messages: the innovation not
+    wrapped, the bearing's Jacobian in x and y with the wrong sign, the
+    landmarks taken one at a time with the measurement relinearised at each
+    updated estimate (Thrun et al. 2005, Table 7.2; not this lab's stacked
+    update)."""
     n, m = len(mean), len(landmarks)
+    if sequential:
+        for j in range(m):
+            mean, cov = correct_truth(mean, cov, z[:, j:j + 1], landmarks[j:j + 1], r,
+                                      wrap_innovation=wrap_innovation,
+                                      flip_bearing=flip_bearing)
+        return mean, cov
 
     def h(y):
         return measure(y, landmarks).reshape(len(y), 2 * m)
@@ -305,14 +315,19 @@ def check_correct(sub):
     m_want, p_want = correct_truth(mean, cov, z, lm, r)
     m_raw, _ = correct_truth(mean, cov, z, lm, r, wrap_innovation=False)
     m_flip, p_flip = correct_truth(mean, cov, z, lm, r, flip_bearing=True)
+    m_seq, p_seq = correct_truth(mean, cov, z, lm, r, sequential=True)
+    seq = ("the landmarks were taken one at a time, the measurement relinearised at each "
+           "updated estimate (a valid EKF, Thrun et al. Table 7.2, but not this lab's): stack "
+           "the 2 L measurements into one update at the prediction, as the template says")
     flipped = ("the sign of the bearing's Jacobian in x and y is wrong (d beta / d x = "
                "(m_y - y) / q, d beta / d y = -(m_x - x) / q, q = |m - p|^2)")
     _hinted("mean (ekf_correct)", m_want, m_found, 1e-8, case, {
         "the bearing innovation z - h(x) was not wrapped into (-pi, pi]: a landmark behind "
         "the robot is measured near pi and predicted near -pi": m_raw,
-        "the mean was not corrected": mean, flipped: m_flip})
+        "the mean was not corrected": mean, flipped: m_flip, seq: m_seq})
     _hinted("cov (ekf_correct)", p_want, p_found, 1e-9, case, {
-        "the covariance was not updated: P+ = (I - K H) P": cov, flipped: p_flip})
+        "the covariance was not updated: P+ = (I - K H) P": cov, flipped: p_flip,
+        seq: p_seq})
     _symmetric("cov (ekf_correct)", p_found, case)
     return f"the posterior of range and bearing to {m} landmarks, one behind a robot"
 

@@ -103,7 +103,7 @@ def _page(page, *names):
         import matplotlib
         matplotlib.use("Agg")
         run_blocks(DOCS / page, IMAGES)
-        for extra in ("run.gif", "run.mp4"):
+        for extra in ("run.gif", "run.mp4", "lab7_policy.npz"):
             (IMAGES / extra).unlink(missing_ok=True)
     return make_page
 
@@ -226,6 +226,11 @@ PRODUCERS = {
     "lab5_swap": (_page("labs/lab5.md"), False),
     "lab5_flock": (_page("labs/lab5.md"), False),
     "lab6_watchdog": (_page("labs/lab6.md"), False),
+    # lab 7 trains its policy (about a minute) and runs it on the robot emulator
+    **{f"lab7_{name}": (_page("labs/lab7.md"), False)
+       for name in ("task", "training", "policy", "robots")},
+    **{f"lab8_{name}": (_page("labs/lab8.md"), False)
+       for name in ("dead_reckoning", "kalman", "nees")},
     "linear_formation_locus": (_page("linear-analysis.md"), False),
     "diagram": (draw_diagram_picture, False),
     "animation_frame": (draw_animation_frame, False),

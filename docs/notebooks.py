@@ -18,7 +18,8 @@ DOCS = Path(__file__).resolve().parent
 #: the pages that are also notebooks
 PAGES = ["getting-started.md", "tutorial-diagram.md", "tutorial-scale.md",
          "labs/lab1.md", "labs/lab2.md", "labs/lab3.md", "labs/lab4.md",
-         "labs/lab5.md", "labs/lab6.md"]
+         "labs/lab5.md", "labs/lab6.md", "labs/lab7.md",
+         "labs/lab8.md"]
 
 
 def notebook(page: str):

@@ -41,8 +41,10 @@ RUNNABLE = [p for p in FILES if _helpers().python_blocks(p)]
 
 
 @pytest.mark.parametrize("path", RUNNABLE, ids=[p.name for p in RUNNABLE])
-def test_markdown_python_snippets_run(path, tmp_path):
+def test_markdown_python_snippets_run(path, tmp_path, monkeypatch):
     import matplotlib.pyplot as plt
+    # small sizes, as the examples' test (lab 7's page loads a trained policy)
+    monkeypatch.setenv("AVBLOCKS_EXAMPLE_SMALL", "1")
     h = _helpers()
     try:
         h.run_blocks(path, tmp_path)

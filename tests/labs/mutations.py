@@ -125,6 +125,76 @@ MUTATIONS = {
                         '        return {"cmd": xp.where(everyone, law, 0.0 * law)}\n',
                         '        return {"cmd": xp.where(u["fresh"][:, None], law, '
                         '0.0 * law)}\n'),
+    # lab 7, learning: a crash on a contact; observations transposed; the
+    # progress term reversed; and the realistic mistakes: the collision penalty
+    # missing, the goal in world coordinates, unnormalised ranges, the other
+    # agents unsorted, a hard-coded team of 3, the contact history updated in
+    # place, a policy that did not learn
+    (7, "crash"): ("lab7_learning.py", "    first = contact & ~hit\n",
+                   "    first = contact & ~hit\n    if xp.any(contact):\n"
+                   '        raise RuntimeError("an agent touched something")\n'),
+    (7, "wrong_shape"): ("lab7_learning.py", "xp.reshape(rel, (n, 2 * (n - 1)))], axis=-1)",
+                         "xp.reshape(rel, (n, 2 * (n - 1)))], axis=-1).T"),
+    (7, "wrong_sign"): ("lab7_learning.py", 'params["progress"] * (prev - d)',
+                        'params["progress"] * (d - prev)'),
+    (7, "no_collision"): ("lab7_learning.py",
+                          '            - params["collision"] * contact - params["proximity"]',
+                          '            - params["proximity"]'),
+    (7, "world_frame"): ("lab7_learning.py", "xp.concatenate([goals - position, position",
+                         "xp.concatenate([goals, position"),
+    (7, "unnormalised"): ("lab7_learning.py", "ranges / max_range,", "ranges,"),
+    (7, "unsorted"): ("lab7_learning.py",
+                      "    rel = xp.take_along_axis(rel, order[:, :, None], axis=1)\n", ""),
+    (7, "agents"): ("lab7_learning.py", "    n = position.shape[0]\n    j = np.arange",
+                    "    n = 3                                              # our team\n"
+                    "    j = np.arange"),
+    (7, "inplace"): ("lab7_learning.py", "    success = at & ~(hit | contact)\n",
+                     "    hit |= contact                           # remember the contact\n"
+                     "    success = at & ~hit\n"),
+    (7, "untrained"): ("lab7_learning.py", "return {k: z[k] for k in z.files}",
+                       "return {k: z[k] * 0.01 for k in z.files}"),
+    # lab 8, estimation: a crash near a landmark; the corrected mean transposed;
+    # the sign of d x / d theta in F; and the realistic mistakes: the bearing's
+    # Jacobian with the wrong sign, the bearing innovation not wrapped, the
+    # process noise in the robot's frame, the covariance not symmetrised or not
+    # updated, the update predicting from the prediction, a write into the mean
+    (8, "crash"): ("lab8_estimation.py", "    rho = xp.sqrt(q2)\n",
+                   "    rho = xp.sqrt(q2)\n    if xp.any(rho < 3.0):\n"
+                   '        raise ValueError("a landmark is too close")\n'),
+    (8, "wrong_shape"): ("lab8_estimation.py",
+                         '    p = (xp.eye(3) - gain @ jac) @ cov\n    return {"mean": new,',
+                         '    p = (xp.eye(3) - gain @ jac) @ cov\n    return {"mean": new.T,'),
+    (8, "wrong_sign"): ("lab8_estimation.py", "[one, zero, -dt * v * s]",
+                        "[one, zero, dt * v * s]"),
+    (8, "jacobian_h"): ("lab8_estimation.py", "[dy / q2, -dx / q2, zero - 1.0]",
+                        "[-dy / q2, dx / q2, zero - 1.0]"),
+    (8, "unwrapped"): ("lab8_estimation.py",
+                       "    innov = xp.stack([innov[..., 0], av.utility.wrap_angle(innov[..., 1], "
+                       "xp)], axis=-1)\n", ""),
+    (8, "body_frame"): ("lab8_estimation.py",
+                        "    noise = rot @ xp.diag(xp.asarray(q) ** 2) @ xp.swapaxes(rot, -1, -2)",
+                        "    noise = xp.diag(xp.asarray(q) ** 2)"),
+    (8, "asymmetric"): ("lab8_estimation.py",
+                        '    p = (xp.eye(3) - gain @ jac) @ cov\n'
+                        '    return {"mean": new, "cov": (p + xp.swapaxes(p, -1, -2)) / 2}',
+                        '    p = (xp.eye(3) - gain @ jac) @ cov\n'
+                        '    return {"mean": new, "cov": p}'),
+    (8, "no_update"): ("lab8_estimation.py",
+                       '    p = (xp.eye(3) - gain @ jac) @ cov\n'
+                       '    return {"mean": new, "cov": (p + xp.swapaxes(p, -1, -2)) / 2}',
+                       '    return {"mean": new, "cov": cov}'),
+    (8, "predict_prior"): ("lab8_estimation.py",
+                           '        return ekf_predict(post["mean"], post["cov"], u["cmd"], '
+                           'self.dt, self.q, xp)',
+                           '        return ekf_predict(x["mean"], x["cov"], u["cmd"], self.dt, '
+                           'self.q, xp)'),
+    (8, "inplace"): ("lab8_estimation.py",
+                     "    new = xp.stack([mean[:, 0] + dt * v * c, mean[:, 1] + dt * v * s,\n"
+                     "                    av.utility.wrap_angle(th + dt * w, xp)], axis=-1)\n",
+                     "    mean[:, 0] += dt * v * c                 # move the estimate\n"
+                     "    mean[:, 1] += dt * v * s\n"
+                     "    mean[:, 2] = av.utility.wrap_angle(th + dt * w, xp)\n"
+                     "    new = mean\n"),
 }
 
 

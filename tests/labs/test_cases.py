@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 from avblocks.cli import main
-from avblocks.labs import get, run_checks
+from avblocks.labs import Lab, get, run_checks
 from avblocks.labs.remote import Submission, seed_for
 
 from .mutations import write
@@ -49,9 +49,10 @@ def test_the_cases_are_fixed_without_a_seed_and_drawn_with_one():
     assert Submission(None, {}, seed=1).pick(1.5, lambda: 9.0) == 9.0
 
 
-@pytest.mark.parametrize("number,seed", [(n, s) for n in (1, 2, 3, 4, 5, 6) for s in (11, 12)])
+@pytest.mark.parametrize("number,seed", [(n, s) for n in (1, 2, 3, 4, 5, 6, 7, 8)
+                                         for s in (11, 12)])
 def test_the_reference_solution_passes_every_seed(number, seed):
-    lab = without_emulator(get(number)) if number == 6 else get(number)
+    lab = without_emulator(get(number)) if number in (6, 7) else get(number)
     r = run_checks(lab, SOLUTIONS / lab.template.name, seed=seed)
     assert r.passed, r.text()
     assert r.seed == seed
@@ -89,6 +90,21 @@ def test_a_wrong_solution_sees_other_numbers_under_other_seeds(tmp_path):
         r = run_checks(get(1), f, seed=seed)
         msgs.append({c.name: c.message for c in r.checks}["derivative (eq. 1)"])
     assert all(m.startswith("port `pose (its rate, derivative)`") for m in msgs)
+    assert len(set(msgs)) == 3, msgs
+
+
+@pytest.mark.parametrize("number,check,starts", [
+    (7, "the reward, term by term", "port `reward (reward)`"),
+    (8, "prediction: the unicycle model and body-frame noise", "port `cov (ekf_predict)`")])
+def test_labs_7_and_8_draw_other_cases_under_other_seeds(tmp_path, number, check, starts):
+    """A wrong solution (wrong_sign) of labs 7 and 8 fails the same check
+    under every seed, with other numbers (N agents, weights, dt, q)."""
+    lab = get(number)
+    only = Lab(number, lab.name, lab.title, names=lab.names,
+               checks=[c for c in lab.checks if c[0] == check])
+    f = write(tmp_path, number, "wrong_sign")
+    msgs = [run_checks(only, f, seed=seed).checks[0].message for seed in (None, 21, 22)]
+    assert all(m.startswith(starts) for m in msgs), msgs
     assert len(set(msgs)) == 3, msgs
 
 

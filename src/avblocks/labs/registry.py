@@ -10,12 +10,15 @@ from . import (
     lab4_consensus,
     lab5_safety,
     lab6_robots,
+    lab7_learning,
+    lab8_estimation,
 )
 from .grading import Lab
 
 #: the labs, in order
 LABS: tuple[Lab, ...] = (lab1_kinematics.LAB, lab2_go_to_goal.LAB, lab3_formation.LAB,
-                          lab4_consensus.LAB, lab5_safety.LAB, lab6_robots.LAB)
+                          lab4_consensus.LAB, lab5_safety.LAB, lab6_robots.LAB, lab7_learning.LAB,
+                          lab8_estimation.LAB)
 
 
 def labs() -> list[Lab]:

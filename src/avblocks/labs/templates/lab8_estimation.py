@@ -1,0 +1,96 @@
+"""Lab 8: localisation with an extended Kalman filter. Write `ekf_predict`,
+`ekf_correct` and MyEKF.output / MyEKF.update, then run `avblocks lab
+check 8 lab8_estimation.py`.
+
+N unicycle robots, pose x = (x, y, theta), each measuring the range and the
+bearing of L known landmarks every dt seconds.
+
+Prediction over one step, the command (v, omega) held:
+
+    x+ = x + dt (v cos theta, v sin theta, omega)    (theta wrapped into (-pi, pi])
+    P+ = F P F^T + R(theta) diag(q^2) R(theta)^T
+
+F = d x+ / d x (the Jacobian: the identity plus the derivatives in theta);
+q = (forward, lateral, heading) standard deviations of the step's noise in
+the robot's own frame, rotated into the world by R(theta) =
+[[cos, -sin, 0], [sin, cos, 0], [0, 0, 1]] at the heading theta the step
+starts from.
+
+Correction with the landmarks m_l (stack the 2 L measurements, range then
+bearing for each landmark):
+
+    h_l(x) = ( |m_l - p|,  wrap(atan2(m_ly - y, m_lx - x) - theta) )
+    H = d h / d x,   S = H P H^T + diag(r^2, ..., r^2),   K = P H^T S^-1
+    x+ = x + K wrap(z - h(x))     (wrap the bearing rows of the innovation)
+    P+ = (I - K H) P              (or the Joseph form)
+
+Return symmetric covariances: rounding makes F P F^T and (I - K H) P
+slightly asymmetric, so end each step with (P + P^T) / 2.
+
+Rules of the library: the agent axis comes first (batched matrices: (N, 3,
+3); `@`, xp.swapaxes, xp.linalg.solve work on such stacks), compute with
+`xp`, never loop over robots, never write into the inputs.
+"""
+
+import numpy as np
+
+import avblocks as av
+
+
+def ekf_predict(mean, cov, cmd, dt, q, xp=np):
+    """One prediction step for N robots: {"mean": (N, 3), "cov": (N, 3, 3)}.
+
+    mean (N, 3) [m, m, rad]; cov (N, 3, 3); cmd (N, 2) [m/s, rad/s]; dt [s];
+    q (3,) noise standard deviations in the robot's frame [m, m, rad].
+    """
+    # TODO: the mean, F, the rotated noise, and P+ = F P F^T + Q
+    raise NotImplementedError("write ekf_predict")
+
+
+def ekf_correct(mean, cov, z, landmarks, r, xp=np):
+    """One correction for N robots: {"mean": (N, 3), "cov": (N, 3, 3)}.
+
+    mean (N, 3), cov (N, 3, 3): the prediction; z (N, L, 2): range [m] and
+    bearing [rad] of each landmark; landmarks (L, 2) [m]; r (2,) standard
+    deviations of a range [m] and a bearing [rad].
+    """
+    # TODO: h(x), H, S, K, the wrapped innovation, and the posterior
+    raise NotImplementedError("write ekf_correct")
+
+
+class MyEKF(av.Block):
+    """An extended Kalman filter for N robots, discrete with period dt.
+
+    Ports: cmd (N, 2) in [m/s, rad/s]; measurement (N, L, 2) in [m, rad];
+    estimate (N, 3) out [m, m, rad]; covariance (N, 3, 3) out.
+    States: mean (N, 3) and cov (N, 3, 3), the prediction for the current
+    step (at the start: mean0, cov0).
+
+    At each step the output is the prediction corrected with this step's
+    measurement; the update predicts the next step from that corrected
+    estimate with this step's command.
+    """
+
+    def __init__(self, landmarks, mean0, cov0, q, r, dt=0.1):
+        super().__init__()
+        self.landmarks = np.asarray(landmarks, dtype=float)
+        mean0 = np.asarray(mean0, dtype=float)
+        self.n, self.m = len(mean0), len(self.landmarks)
+        self.q, self.r, self.dt = np.asarray(q, float), np.asarray(r, float), float(dt)
+        self.declare_input("cmd", (self.n, 2), unit="m/s, rad/s", feedthrough=False)
+        self.declare_input("measurement", (self.n, self.m, 2), unit="m, rad")
+        self.declare_discrete_state("mean", mean0)
+        self.declare_discrete_state("cov", np.asarray(cov0, dtype=float))
+        self.declare_output("estimate", (self.n, 3), unit="m, m, rad")
+        self.declare_output("covariance", (self.n, 3, 3))
+        self.declare_periodic(self.dt)
+
+    def output(self, t, x, u, xp):
+        # TODO: {"estimate": ..., "covariance": ...}: x's prediction corrected
+        # with u["measurement"] (ekf_correct)
+        raise NotImplementedError("write MyEKF.output")
+
+    def update(self, t, x, u, xp):
+        # TODO: {"mean": ..., "cov": ...}: the corrected estimate predicted one
+        # step ahead with u["cmd"] (ekf_correct, then ekf_predict)
+        raise NotImplementedError("write MyEKF.update")

@@ -1,0 +1,644 @@
+"""Reference solution of lab 7 (kept with the tests, not in the template).
+
+Lab 7: learning to navigate. Write `observe` and `reward` (the library's
+navigation task, avblocks.tasks.NavigationTask), train a policy on them,
+embed it here (POLICY, below), then run `avblocks lab check 7
+lab7_learning.py` (its last check needs the ros2 extra: pip install
+'avblocks[ros2]').
+
+N agents (single integrators) go to their goals in a 3 m square arena with
+three boxes, sensing with 12 range rays, without touching anything.
+
+observe: what agent i sees, one row per agent, 4 + R + 2 (N - 1) numbers:
+
+    [ g_i - p_i,                 the goal relative to the agent   (2)
+      p_i / half,                the own position, normalised      (2)
+      ranges_i / max_range,      the R range rays, normalised      (R)
+      p_j - p_i for j != i ]     the other agents relative to it, nearest
+                                 first (by |p_j - p_i|)            (2 (N-1))
+
+reward: what agent i earns at a step, with d_i = |g_i - p_i|, prev_i the
+distance at the previous step, contact_i "touching now", hit_i "touched
+before in this episode":
+
+    progress (prev_i - d_i)
+    + goal_bonus [d_i < goal_radius]
+    + success_bonus [d_i < goal_radius and not (hit_i or contact_i)]
+    - first_hit [contact_i and not hit_i]
+    - collision [contact_i]
+    - proximity closeness_i
+
+closeness_i = sum over the other agents j of clip(1 - gap_ij / margin, 0, 1),
+gap_ij = |p_i - p_j| - 2 radius, plus the same for the nearest obstacle or
+wall, gap = clearance_i - radius (clearance_i: the distance from the
+agent's centre to the nearest obstacle or wall edge, given).
+
+policy: the trained actor's weights, embedded below by
+avblocks.labs.lab7_learning.embed_policy (see the lab page).
+
+Rules of the library: the agent axis comes first, compute with `xp` (the
+training traces your functions with JAX: no Python `if` on array values,
+no loop over agents), never write into the inputs, and take N from the
+inputs: the same functions serve teams of any size.
+"""
+
+import base64
+import io
+
+import numpy as np
+
+
+def observe(position, goals, ranges, half, max_range, xp=np):
+    """(N, 4 + R + 2 (N - 1)) observations.
+
+    position, goals (N, 2) [m]; ranges (N, R) [m]; half: half the arena's
+    side [m]; max_range: the range sensor's reach [m].
+    """
+    n = position.shape[0]
+    j = np.arange(n - 1)[None, :]
+    others = j + (j >= np.arange(n)[:, None])          # (N, N-1): the others of agent i
+    rel = position[others] - position[:, None, :]      # p_j - p_i
+    order = xp.argsort(xp.sum(rel * rel, axis=-1), axis=1)
+    rel = xp.take_along_axis(rel, order[:, :, None], axis=1)
+    return xp.concatenate([goals - position, position / half, ranges / max_range,
+                           xp.reshape(rel, (n, 2 * (n - 1)))], axis=-1)
+
+
+def reward(position, goals, prev, contact, hit, clearance, params, xp=np):
+    """(N,) rewards.
+
+    position, goals (N, 2) [m]; prev (N,) [m]; contact, hit (N,) bool;
+    clearance (N,) [m]; params: a dict with radius, goal_radius, margin and
+    the weights progress, goal_bonus, success_bonus, first_hit, collision,
+    proximity.
+    """
+    n = position.shape[0]
+    r, margin = params["radius"], params["margin"]
+    d = xp.sqrt(xp.sum((goals - position) ** 2, axis=-1))
+    at = d < params["goal_radius"]
+    success = at & ~(hit | contact)
+    first = contact & ~hit
+    diff = position[:, None, :] - position[None, :, :]
+    gap = xp.sqrt(xp.sum(diff * diff, axis=-1)) - 2 * r
+    warn = xp.where(np.eye(n, dtype=bool), 0.0, xp.clip(1.0 - gap / margin, 0.0, 1.0))
+    close = xp.sum(warn, axis=1) + xp.clip(1.0 - (clearance - r) / margin, 0.0, 1.0)
+    return (params["progress"] * (prev - d) + params["goal_bonus"] * at
+            + params["success_bonus"] * success - params["first_hit"] * first
+            - params["collision"] * contact - params["proximity"] * close)
+
+
+# Trained by tests/labs/train_lab7_policy.py --updates 300 --seed 0:
+# 5634 parameters, 83 s of training; 91.3% over the check's 50 fixed held-out episodes.
+POLICY = """
+UEsDBC0AAAAIAAAAIQBTv9vK//////////8GABQAYjAubnB5AQAQAIACAAAAAAAAYQIAAAAAAACb
+7BfqGxDJyFDGUK2eklqcXKRupaBuk2ahrqOgnpZfVFKUmBefX5SSChJ3S8wpTgWKF2ckFqQC+Rpm
+JjqaOgq1CuQDrszIi6VWktwOx47+953KumL/5jXMqiwzX+53Z22qseJ5bX+Fd9Z/3uDz9l/+LmP8
+Hfppf4XXpW/Lov7b6x4IFhAPEHO4/fYJ7/VDT+xrmNZcMm97aM85UV6lejWbQ+V5u2/LvRkdPj5e
+oxA295P9jt+H7s7K5nCoKvK/VHKH+4DYk4n8z/YwHRBa5KPMuvf//usqwdNOfX1k/6Pg4Yk9m67u
+f1gm+2Wd9I/983mql99MZXXgWDdZ2stjs70lD//y7XvEHUQ1ZdU+R7IeEFlw1G7nQyGH02FztVy2
+cDmoHzvTeaXsk/3UaGbruqQH+yuu+V/t2c3h4Dt9a/ziw1wOfBMMme+dU3QomHlWecKBn/sXJ7L8
+yORgd9i7hvOBudtfeyPXezl/jV/af2iZliNSzXSAucT4i0wrlwPr9E1dvIYCB5bcUzpTWf1qf7ed
+yFLvUB4HHUZWtq7gx/sf3c5vfTf3tf2f4pqYiElf7B+dLuP7NnfDfovq261nOEQPrLt7/oH/ZlGH
+5ui66UI9fAdOWfzPe2DI4xAnbcxrKPxmv6LtbfGaDAaHFUzn2ZeqNu7Xnn2qfdZ25gNijG9feOgK
+OPRlt5aKufAf6L4TfTZ4J7PDjckqJ28s4HTosOf6rNjBd+Arl7mG9EzeAwVFm633uXzYf0Nw0xbH
+zdwHXjKsUGtxFTjwQcD8nuFdFgfOCYdlF9eKOlTp/uoy3sp4AABQSwMELQAAAAgAAAAhAM+5pn7/
+/////////wYAFABiMS5ucHkBABAAgAIAAAAAAACfAQAAAAAAAJvsF+obEMnIUMZQrZ6SWpxcpG6l
+oG6TZqGuo6Cell9UUpSYF59flJIKEndLzClOBYoXZyQWpAL5GmYmOpo6CrUK5AMuBgYGh/+Xd+4H
+0gd0Xy61B9IKKwJSwPxttSvAfHmXzSB6wbSKrSDxhN1za0D8hJtGK8G0AetCEO3wwLMBLB9/qRqs
+70JCJ1iczWgqiG4IOrwARB/wP3QWrG/1+Rkg9Q2GcctB9IIO9XKwvNPCCWD9NRzmYPNsupaB1Vtx
+rQOrF7fuBvEZHI3mgNUL2W0Gq/O9AHbng4XMYHMTMrwrwPZGl28C8R0MFoP5C+rVIP56IAgxV9pn
+FdjceSsXgdWvikwE04fLmsDyIvlVYPPEroHdmZC0cj/Y3jkMa8HhpJcG1pdwNWQCiK+gt2gr2B3V
+L7eD7dv9agPYvLQ9i8DyFYebQfSDvCXrwOqO9S0Am6N8AWzegy1fjoHVb58zESwefGgj2L2TFcH2
+O/yy6QW7g5MxHBxuduvTwLTfXLA/FnSuA5ubkHd0MpguE9kCphl4OsD6yiJ2gd0v/HiDPQBQSwME
+LQAAAAgAAAAhALIyRib//////////wYAFABiMi5ucHkBABAAkAAAAAAAAABTAAAAAAAAAJvsF+ob
+EMnIUMZQrZ6SWpxcpG6loG6TZqGuo6Cell9UUpSYF59flJIKEndLzClOBYoXZyQWpAL5GkY6mjoK
+tQoUAC4GBgYFO4kaeyDdcN2kYT8AUEsDBC0AAAAIAAAAIQC2s7/q//////////8GABQAdzAubnB5
+AQAQAIAoAAAAAAAAwCYAAAAAAACdl/c7F977x42sshKJVEikkpUZbkpUREMqDVFGVjJCKsoq+21F
+RlaSTZR923tvstfL9iJ7fnz/he/57dzXua7zwznX8/l4+KvdvXHzASnJaxJ7vud6ls8s+KQ5+WT0
+JfnOcfLpv7SwstAx035p8Vzv/+ZKOiaWentzS0Mdc729/WkRoXOc4hf4z3G+4/x/rv06kg7fjss0
+gpuFqYVubRroFj/xffgqC1JObWxNQjOmpN+2CY3KwIZw7c1cFidQJqy6p2zOwbEawvrg404QKiH1
+etXTjb2nPr69TEFWVH8jha3k8jg6euYQLgyUw1Mhy6TA6W2Mf5ubVNpTBdy2A2O0hgsYVPU5c9N3
+CgNetPDK6JfjH/nLC/IdBkC9k1v7+VgpjvA9obVnm4bnA/vW7ybUQdlfvNzERIDqSc/d5d8EZF2s
+6beZcMan6pQCmtcmQOrMQ6Vk2yr0+poQP7Y7j9+XXWk4jUrR/m2eyzrbPIauWne9dGuHWenvF7go
+WjGRQlPdZKQd2xd+Jdsz5OPIm9NLCXHjYE0R9Dyreh7io36wdTl3AemRfU6b7wkYW2PHrNYegY3l
+kp/FhgchWLe7zTB6EVaJbs90jacwX7JyaZifAEpSQW0BJ2aB6hgZ/dbDcjjCRBLfVNgEwzQULw7u
+VuHyu463lxTmwaSQTG1HfwF+zb/Rr45cgy8cfbu3lAZg46JLv+dMA9QPZh1webOJJzmYRPjVW3Dk
+6ZWW+ZImOHkgPbt3bgTztPyNKXknYVlgLHchfhC+vuJS0ZZZhM9syvc0hggYkxFuN6fVjI6RKvcK
+vbJh5KZgMsfEJGowGPFHVK0Ag0r/M4MXzajIRvZdna8GpKpevvrGpY+xCo2bPp+noCfxvFr/LgE0
+34sW345MR1thAbpxsnV8RKMyUzOUi+Fn5w6mZHfCa6qVzO9y0+DuHqctVNmF7WddeNe0h6BanZ37
+au8IkkXFVL58N4V/fv8Q5X43Bt1mgZdcLqSh9D6l7OOMJPLyy06h17MqIPa6/aZPZhMalVgeOUq+
+iJ30h0qyGKZxIv2GQvrvYZyhkcU85zf4guzg255ffWDPf0CAuXsSGkPil6kCmtEmoG6HoXAV+hgl
+7UXVEvBApYP+GbkBEOE3PfRCsAPviDEc287pxHCrtfINnQpQ9dq+YnpxFDp+nBlMWEqFENa7lNG1
+3djw89ywCEUibsZ/JJxQGEXFBQ3LtX/xoLQz8zjThADCFeyXUbYJfRvkg8aMRrEFGpbuHW6Bxzol
+oqd6B3HHTkUoTrkd+ZkMNG5eJoD9xPhEBckODo4bDHzgmgVPhqgjDiF/UZfOvKAm5gVoVrf/ZXjZ
+DFpREgFtHqXw5cSVVBedERgM2hVXWprGeyQHzpFojsGIIveZ9z2eSE/+/UpldzPML1iWag0SoMbe
+x8rq/D9g+7FIK2y6DlmP7eqfTZWiu7N1clnTGHKvpPC4HSrGw6ShzTM8k2jOc9LrfMcEqn+TDLh2
+sQxK/Va8zznngFMRj+KF+QGsf+U2L8TegaufBLOyTP/D4x2tL8zb68D99nJo4sERyKAR1OmP+4E8
+fIMCW36j0I9MZ2P6+yF3XKnSTWgQBjI7/I5WLODkhRucxHfTMOh1+oX7ixZIPvSxy1chCmrZ2aLu
+WmRDYdFAMl9QHRiFnJI0LrAEc3OtEeUwBH/ayHvvj41iMQVdngqhDIQHfTd2ugmopyAUfn50BoIv
+iFz4ebYJA6/7ZV91SccDi2dk2UJ6MSSbIiSMtA13prRqnJdr8YGqy7qeIQGtLrJ0SWako16/wdcT
+z9Jg6EZ0WJzVNCrkrZ+zYllHlZ9H677rNQHN75lQAwEnOJ9kxixYlYunaw+stQfEwXNKy1671UX4
+4Sa7QhRvRnq9ipKqxiY4QBxFh64xHGkIXupqIML3b5/P1T2ZgrayazlnLk6DgqCs8L/VCnw1m17I
+qj0GaXLZnziV8/H9cttD34v9YG/cPJCgF4ftZ4S/dbmOINeO/5xBFhEYR/Suq6nNY4eHeebWajma
+jmvwcnNWolC/o6NPWSly9tDGAE03aERth7Q1REMgf/Bc6mArTqdQDo9+qod7bgwDHfS9qKDy7fXu
+zgiYerRmScSFYJnIpys169XIsvAg9CLDBJoP/BrfUSWi3/RvYxb1cagT9pYJ1q7F5f1PTXj8fqCE
+J6f5ic1ZUGmOWz8o1o8NLIuJ6rdjMdFv8an++WG85s6TeHu8Dcgrw20C3Fvx9fQnmuATJSjpLPhk
+NH0Cs3rXTi3QDcPKPZFqJvMWuFDLZhdfX4DHrjyukfzXDK6fbj4Jn+xEv6mzmpc9+tAFFZKFhebA
+a3vfqt9KI/Qaf9l0npmC1Z7SnqW9/P7FevJwkmsnkJC+YJjXr4Kvwqf6XqrXwgkHdV2O6lQ81i67
++FO4F5sUG0/L0HaiiMn+C5tqSyBNavmN1fs3KN4Zf7QRR0Rdo/oCZY9uvKcwH/Y7JRbV25O3pqNb
+sD4kb+SsTQ+Iup630TcbhCeinN6GgQXosCwyQ7nbjb99PnY5NQ9gpiN1aUpiN96/LKaq3DWKzq2x
+BRekZ2D18rdTU4wESGuZy357YQQVznZpXA3vxalK1hlq7XHsfTo2//PlDPb7yRXeP7mKtynuXN/P
+M4GvCDQU3tG9sBO19ID0UBPw0dfLOZH2Q4jhmd5fQlnImZJgX3uFAAL3C28zqo5DOOsg9cBGLPy8
+6R519dAiLNA2H+NqqUGDFiWNI3u9ILo9Hpvmfhufnsh3MBNoAsKpw8xNHaMQ0fd38MFYF35ZTxrV
+mKoFk2Y1LX6tbmh1qUh+wzqEPdPJkfu5OlD/vaaoldMUXl21emnTsAG/7+fX8SwNo3QrVeHH3l58
+xObhL9g2jI2xI7bG0n0oIszvM0Beh253kk3uK1fDAUpu+yDFXlw27i198ikKLm9cf90zuoqRC8KW
+1rTDCHY2kSk9JPKfjcSy+8mngTHfp7jw1jgulVPnyzxYxim/A01aJhPo7ispgQw92Cky/83SvQ4n
+KCXvRLwhYkjGPIPC0iSOsrLuDHAT4c9kIMEzsBoylFPJIrW/g8rgcqRuaR5y0AsKddtNY1azF8q1
+0RT5kFs/2/HLQGWTzJe+lauYsxzgt1o8hZl6jcP1g83IZPSVa+XDOAyXVs46UQ3hs21R5vmqFdTJ
+CZEnWRiGv3nPLM4fGoVWEsUf3mETSCoRFE2fMQpxrd8CZY9UQX96cAvTjVHQDxGQtiRfwLxqpj/m
+A2NgH5Hge5B6Fq6qJ4eZ0iTAsauJlMf7vYFhPWToyix10QHShk+VtQhvn6gPHaRPx+OZxwxPqUSh
+TaPoGfOkduT+b6EgLK8MMIvt1hOnXlg/ZjgVH12LBmP0gmU7QxjnIhGjGzACdxdpSQOViXiMYTw2
+0mIWXptGOJS+HAZzlTDbqckBXG6YqyUbbUbDdU+u01eHcDn61GOTlBF4FEL3N4WYBypBK8aEjnnk
+dpx5qT2/ghcDunUyrCpgvfvxx8i1ZZAezOOWlLCGsrGAdUbnGmi6eXjp9skZbPaTCqic7EX7fd8i
+Pm9N49h/dwOFI5vBQymgRe3QDqqcuivMcnkYvhnY9+rpDSCvea5gUX4/vBT/QHPY5gey/OQWNzo/
+AsMU10bOrpRgSOy5YQWpWSDO6kvKGW9jZJKV33v4h2cmGVQy3EuggWGigj54EbQCUx+/ZUsCo3Ue
++/6wVizT93D/JTWG1PzFLk/o67FAie+Hv9UoJpfpLTzevwrW3SbB0UbdkLOkal1tvItba3RvyyN2
+4NIF9RSP1gr80SJYe+jzBFYYwEdPqV1QfBh2/e1oDTIL/RRnl27Cv1/NJEuVauFo+47Cp/EVePtb
+0Cf1xiScXqDvb38xjvzj2TMcSCY/81DzkyLVLEgJy9QMm/SjBbmiN3l+H2o1aIfdVZzHpI7Cf/KE
+MnQZ3tcfKbSI17Kpy+yf7N2bZxjLrEiAI1GGhTQMHtjN/NHmSGclZL80+7h/axTq7pyl3A6Zhf7H
+aQKpFgvIUVyn7iUxivz0yfYpjUtAwsbMxhMxB93Mo09JH3bCLdHkwMtX1oHv5gv5rsAp7F1q8QwL
+Ii2qqQqc6uSdRVOumEH71BF4V02n5586g/xHnvuExvWg6fX3abXVRDRhL/1dqNiJeVVTL+IE2/AP
+B6fIu5c18F1V1j6SehTya7d5GuKnMY1B9ALDtTL03v6YXlrShpxad2a9xggg95RgkdOTBqLNn3xi
+3P7BH3Ft20qKFawvs13x/DYJbvvmpLfqW4Br+8Xtqtxc2GYwe1PYMgUfFWIe+uZtomjoBSYe9nXw
+zotlq2nexDXfoCOcLHv8qFksRLQdwSN3dNOtPi1Bxq5aCu3nBORh71qYFm6GD0aAai+i4I+c+38u
+uQRoPANVR+OzsdpFe+YayYEiE2nRn2Hew0iUKvmvIQfhgxJZ+knORiA5xCMxGzsNr1O+KDmnrUDy
+fHij/ptmzPIxt+a9s4UkZ2L7BVfXwBF/4s/v8/DmKUFJ50EOPI4u1ngiSyFvcmH92PqZVhiXntHk
+jepFs0tUWxwUf3E74avL218EyD179gShpw7f3a6dilhdgeW7qemOTAQsbfrm/KtzFBxGOjIK84fh
+sYH5YdvYVBgJv8yaMjIKP4bzrh79tovGxfTZ9yNW4VTQxNlTWe3YeFX1JFXZEF5aN3Zull0HUSDW
+xQKZ/MeoQ1ln2adBXEzYepd2n/wSrV1Cxq9VCHkU+7r/wzosSX9mVnMfQj2n3yEDY20gFyLeM34g
+BPj+3ZPdfN8MhvS/fXJkylDAK+i/7HOle96Vb3FzgQjcJOHC0ZKDsKaqc5SsORTF7tulyG79w3VS
+AyBLnEV9To+CnneL0LeGR43HsjHsyXmhVu1JuB1eoiNFsorLh/HueswmBg2aPHzzagkfloUxjG6t
+wdJ4oJNlDRHs6AXFehyJEJ8Tmjj4qBejfO9p2vMP4mX3zK+8RXv/vKf8FiQNINOjJeF9Qf8QJBbi
+T/wex7qiM/wbvIkQRatG6/x4FQy/3g+ktakHZ4t91hZus2ATf0Xp9JtiqDy+K/pw1R9VTgsTn3Ey
+FPleX1J2vWELKw5Dd31Gp8FvwNRILmcbLoyri7dqt6HH8nD1/RM9EBLmpbrYNogi3ybfnYteQB3D
+6pLuqRF8MstmWmdVC5KDA1YH7TfhvZhHrpN3EQr12TpxTHbjTT2KWoXKQOi1NKaRzo/AtadnfF9s
+jKNV/KNToc/n4br94Wjf96t4wmXQxGrvPTQ0xGrI3wzCxTrP5UShNYzjyNd4tcfJT3i4j9OFDcE+
+XQumw+pEIF1IZLZpWMb7pGb8uzfGkTrq4ej68Ap0clv81NZvgBNfSFqpyoshOY0y++jcLNxikJ/x
+nZ+GheCVFC6uQfRcrvlgfbQLkntqrgaPvsekl4qS1zIq8E81/ZNt31pIfvCjvpdkC07J891i4p7H
+U+qiReJBa3DAspdO23sF+H9x2U92/EOF8gLjS76teMgpYTRdbwSsKGN6qKMJaL9aTGV6ZRRrbKKJ
++tZDmHCOgS9Ocs+TY08MCjD9wyj3ZxYG31eBdII+mCa5FZaN3lQ9nA9CNVnzy4bvSOSjR0yddjcm
+wcp21mpcZxK4vjAkDSg2Iv0xyjVO/w34Oa4Rt/8CAajDfavYX5VhOEWcj4o9edHvlseaZ12z4fW1
+D6+dZdaR6Ycz+88kkiKPJKlx3bYhpOy3WMpYnYb3Yfw2goJTwJFznvyS+hjIXdVrLzw3BAXqZlYd
+elNobfsw5NQUQkVaawApCxFUHPYVStzohUP13GJNHxrRv/vDiBTdPERe8ScfyhzDWMrScpfne77s
+ncIfd2IQyHJ/f6kyW0FdJo3FeQtboFgTiPRRzYW8jyx/s07OI12g8oJPxwzkck+XnnIbw0SLGGez
+0F68tFvzNmKrG/8MNpwS0koHXuFzJRv3iXDqqljMkT+DKD2ua821MgFP9gs/2OhYAxfmTLPKhAHw
+ozpgJ72wBF3y4vojGwWgK+hI4edWChu027vcjF24FCAVX1q1Cc26jdlCNyaw/uHA9oZqHpLdP3Co
+ZWsOzOZJ+5XGfJCkve28aHEoWFz86ct2sAx0RwJsN2gmkWKNe57nwSIo6HuMHLKfQ9XUK+Jszu0Y
+lbbM+a2/GrR47bq0XMpRp7Rm7gFlGT57v0/9Cu8iCuddkLC8WYkl242CZz71YhbB1uKCZQ+wffTW
+efdvGS3067vu3fuEqx/3hS0xJwMh2FtD88woMrwK3fz6ZwKOFDDJ/umNA3EbckK37AKKu7mF3238
+hwURNbpIuYP6RMY/pV+MgXfkDMe28zJ2hOlwrn1fQYdLypqjzz+hJbG4yFt+E2Ru9wyEWjRCmP2Y
+3ZmdcTC598BiZ7MRMq4QHUZFl+CYptIvD4Zl/Nz3Lq3PpAvlPzhXfA9Khj/6NuLFezx4+HhBQtjm
+MGpZ/36RLz2B/TFyJ4e3WvBmLL/MRS+SIrZg9VVT5R289uSD67OISUw6ym/m3NIE96iuH3Rw2QWu
+FOYnfOrrwClGSar6xgW4CTP8NoE98MF/X9CNxCngK7xY+1yRgDF5TX+kIrbxSDdnzu/d+0B5umP6
+JN0cKj5/Nl+sPYiF+6ksiu4RwDWmN2qJuIzPVN1k/NJ+gqI5+XnVr/Mw46PTerctD+iOsqZWdTfB
+T7qoyAPpHSD9Y/Hb+ctbkCmpSKUjMgjsJP2qmUFEOFGQkKAB9yCMVfu3A7ah+1lHiopbQ3DphxWz
+lS4Rb/JK+9Gld2G3v21Rqngn2iu+rXEM2sV9QoNljEVN2JvHcfxc9yo+O8EhU6D2BRKV480e1K7B
+jAnDwa8U80junFUXdXEIUz4c7nsqQgQ1aDH91T4OD8RuP2b8MgXdvOsTx5OLYMH+92E+3TGYpbMW
+E43d8ymho+SenhMY9ku7XQ0GYPVDqGgRLKJ/uQ1XseUCnHjK5NGwj0ReW9fhOoX9KpKTk1xlO9aP
+WTS8NDfn9jx8dtJAwzgS+uIU315iWAZD4vuSz88ISKp1wf918QAIxVwRzBFJxEUfRrV6tlaIER35
+ZDBdBcKnIuLPbS/g9+V3Uklys5j9XOm8SfUiXNWRYVcz7wH1AeZW+9kinPfS3ffMpgwYr/JE8WpE
+wmnzgfKDwf1I5izOMPpqAq/QlM8pK6yBUNvpvP9U9vpUT5T5ZEQHeAWyLHwXmkVS/p8OwltLILKU
+O37X6i/s8tsM/qkahKfry7iPfgyyBz3N790hIM1+092QiQXsbaPtCwnd6wcRie37Qgvge+9QSKrk
+PGheHAlwSvyDSfsuKfuGJkOMbP8MPwxBEcVlO9VzQ+g3fp9449scmqiyr0hfXoCfZuuxT+L64FfK
+box0L2UR4/nh/eZ3qvDG6mumfJsxQJdnr48HEuHWJWnHI4K9kJLGG6vcsoispQcmN+XGQE2unvCi
+Ye9cpNxXN8MJpJQo4V060Qq8NjpnE7JXQT/FjexXbCN+oi987rvRg6eqRZnlSTbx5oVrbWg6A64G
+cXqcOwQQW2DEW8It8L6r4WKA0DSkF3VOCLv8gmfVJj2OZNngd+5mc+exWWBWPXST63oZqG22k7nf
+WAD64NmDoyHDQEwLf0DBt42PH6kFnqOegpMW8g3fDy7DUmlruUI1AQ84XpBQDqyFcHuBqJDdOVSw
+YxyRPVeOIZfu/vRerAO2XxeLO8fXUViq94HTkSYkHWvR9Hq6hiw0UkWvrAg4ma/xS9FtC5fvjUpp
+HBvDXEXegoxYIgqnFwyZscyDhaj7DVu5CTCJ6hA56bSKPXp6AhKlISC0Grp/hH4FD5DJpxeX9eBt
+cTjP4URalEvYrPTqnQfT1GvxfvHjKDvSsXW1phjELq/IP9okQrL/t/H3j//B1aF7xbErGzjz7go7
+T8QCyO1P7/nRu0/+RfpJzR/9I+CMctojCTvAIt/t9dyFAHf09RycPi6AdR/5v5m5GRyKvv/kztkJ
++Ba7ovSmugq1A7/ViB0l4pvsz2K/esjkzW+ucMoaR6KPGK/Nu+0u3BYelZb1GsLpR6R/2Q8PoIGA
+IvHvoRmIP+Z+V9BjGezkb30aCeoB4k1G5dNZq2jDlNaiz06An3ZJ/bfTG/G7/D8pD9N2bGemjeH6
+PA7ROWXqgeld8Orag9x19wl859Saw2lKIq9pSv9hdnYKc1gCnqomLuPbeFHtW1l73vPlw6XyO9PA
+ZK0pMRDSiXTf9hs1syxhRbzX04fcebCjIyxwUGIYe7ulLrBVx4BYeE7jwcPleHPHkPzNcB+sqgc/
+t7T5B6KrzUI/4v9h6qPTNBpfh9AmPfzYUe9OqH7PEV58exytN4bvnhweRp+JE1tPyfa8vOdFllro
+KvqLRxcv0JWhbV+NgzHfFD7U/is2LxUHd4TD7E+zFGC+0Su9/pw9rklnvfdaewTpXze5bLAW46IB
+s+4Aazsux7jJGtOXwvL9lcuXg5dwe6hfNnPjN9qQt7mRaM1Bl3qkonZcB579fkAomYFc3tbl1ouD
+b0owOF8sMePUGIDWgFMPTT2kfmkw0oZWUNdtCX8YPYOv/Fll7CuXwE5xeoC6rB8OmVZGLk6MwWKT
+b7j27BrSibWqKFV3YkmuxtzneiLmD3W4XEqZRln532czg6tRKrDfhE+rC/drf29uWZrApszzioPW
+ebB26Xlw4A0CViYLCl/XCsfNwWd6u3N9IPsfufVDGSKS/ffw5FxzKWwXWi67uFWjzahyR1zSKHj/
+zLjTtJaGS02p55N2W+C50cV7i8tTSKv+tTnI0xmKHFvx73//UHzMPqepvR/oPmXlXXYrww/0f+gH
+O1uRiuSt05LHAg7c1hJmHJiGozMPMs7VToLLr9tx2d6DoD//q8dedQeyfyRsdrIM4X7H1yqj54nA
+OmPT2n19EIsS9RPjq0vAOpiKlHItCLwpLnpHRpQjwfw0H4PzOHgOKTazXarDWqOERE27eezwCRSg
+KxwHwpPiXRplUvlKOT+BmKpBDE51nXkwtoxidWTDs6xNqNY3xZHo6gqNwhRc1vtq4UrSbd2Ju7EQ
+mOKvXOY8DSWh/YrJzf1ArX7TbNEhGx/J+pImvEsHYSFiwUuhITQRClum0Y9GGuPqY6I0vVg0Mnia
+lXUZTaNi6VSJUVh0hmpF5e0wPn/kr7+k3gdeHIZ29zg70Ve7Wkns2wic9mDiLj5biV+ZnLmYKbqw
+Poxc8ZfIGMjmxX3nV4nFY3PTPPwP2tGDuXWIXaoGmHSdDu84FAOzN7W3tGIGeOQxHQnf34eB9wpH
+eY1S8KIKGZ9MTD68ewQvCpZbUORsZ3lTrB/6cWqoV3KMYYkMS9Da/jnsdiu3Xs7bQqGG3izN/iFc
+TysJ5Dg9AzGueZNJZn2oaJjGfLZxGoqO3lk4a9AGH+mu9A3PLeHLV6Ryyc2LYH/fNjj1xQBI/LLx
+CTJbw8T9ZrEPayaAcrDw/LHECRy8fdma9+AXDJ19Ftk7NwSMRuG0n09momuQ9eqg+hK80ftg1Km6
+AEdPmHFyGu/iPbmxHcb9Y7jf/RO3AV0R5j0SmKHf6y2l93G+Yx7t+MlFYqNdnwhMV5rMA4+/BpUb
+/4Vusu/1vowB81WJIXh6L2mO59Y4io8aHWi22cJn3h+IEqyT2MdwxvVEyyj8+ZqgqHozHWR7bjmO
+f97LO0PHCpfQGVQ7apepoBsLn0J5uGNuLOJdTwEC6cl1fNhHvX1UYBDZ6fz+KJ5fwbGnNu+P8yRC
+vagnQ8z2PnmBWn8GncPFwFW32EkUWEED1wq+itQJfJwREOaw+g8NMrk+FrsMIzKnaZ+vI0C3lkN0
+y0Q9sI7LHN94R8Q0h0fxdwKq8IWXSWITcQYepHh38zCvA28cxbekWQL6qFQksWo14VFxNbognzII
+Om1uZnqGvsjreseTW3xL+DPWgc6IcgC13riuCqdPIEeein+k7waGEf9VqaiWwj8Xi9KxkRG8Sa7e
+VObbCTlhAR2B14g4k1aXZ3xnClepXsubSdWj3YsvJ1r+zsJx3Ofy1oG8SP4bbcdEOwHZ/ZlzJPln
+obNHW+KR4SheFW+U2OEgKSp7osm+aVmMEWIejreudkHvS7m0fqZ+dKAb1Dyeu4RkoWrbjooLeDVz
+AMxis5BwgHQx0HAKdXwD+vWU/2GO/XkBwco5FImiuX80uRgoY55pniFtxUmfP+Er+Afc1tzqjiv9
+RiY9YuqX9b8gXmnXUOxKIb/+4aaXH3EEWH6OxVAGLiO9/UmmOmm6IuF2QalLp5JQQPfi8EzIINbq
+2FIF8xCQct9Lti3ZdPzaIhowq7SCv6mzTiprl0C5rvFH6+JhpHClnnfxycOjgrskuSqL2LVhNdTp
+0IWijzhUfN+3oZev9Krmnr+IRrrERgSRyjdo+/Izbo5je4tzVpXNErxSORf5VWEOW+Vn5bluDqH2
+WRu77alJaBAhxnkyzULCRVsRDuIkZkTIsCu0tYO/sHTCnPYUsnvx80TojuPu2BkytqQFzKeb9cx2
+7UO16/XeQmaDSF+RknpCPAM39Q5avYlJAi9WJXFGyb8QXi5LuS0/gtK+QykBiVM4PWJz7efBRVx3
+NI4S8ZjFB8+1WPKPT0NZ9Re5Q6vtoNPLd0V6YRjIWcOkia+I8Na8IEhrYAmHe1jq6OtbQHy03O2X
+yQSWyhxY37fxHdxXiKdf6VTDeChvevDjTqgg7316v7UaLVYjRU98TkF2yVNjGzLdYJhReIJ8z/d1
+/C+Zh1MHANtdRnFGxQxMlg3tecaajUYTvYQduxws6GQlJpp8RIoEFpf1+lb0dB4pImPLwGtgvZYp
+1gDclS8yobAVBWsu2vn0lUPUq7xM8cJ6qKTy9IxVqESWghjjmcAG1L3UmS+wWgnjWvq2qaNf8I+t
+xxyxZhg1aEUtb603QZwVp5UtRRpMXJ6lVrMbgsdrk1vHvyBO1lzaf5fRFR7IF4yufpgGz9uUdzRu
+ZKHTq3kPFqUa7GF+rMOyVQAhRvE2VKRtoPe1WXgOelCSe1bm3VY9iq04OSVda4TwW5Z2gaEENHrQ
+sdhm3IYSUix3c0r2eHdx7Wk1Vwk+ZLL77aPTgtO1Txekfdvged0TK4/GDpT7Vvx1yTEH3a+535Hs
+LsGgbY5wOr1UuONfNPbGoQafFJj1nyzJBOkEqgg+6jQo6zkplzwbAv8EvsvkGpfgHf6X4lqOY8j9
+c8m3YOQzdgt8dzdWb8Em+92x+vYujPRme9Nj1A/FEQpPedcbcUI7IVUFbZBhVEth+0M0yjEJTOeZ
+leHXsf7jlix1kO96fiKTugQ1b7/nIIh+xWhSq0bNQzmg5iYiGbfVCYelemMlGYrQc8wiWCi5Frr0
+hB11gxtAzDXTlD+lAwzDrrmmpiSAYqJuaohLBRzkS2HoeLqXWxxBF3rCB0FTm4lVp60Yz9UVh//R
+LIEFnij23KOlEO3N+C/jSTSaZLxUKMwKgfrvvuumZ36Dyv385+tqZaD0fpxbRy4A+ZPUWP+qlwLx
+vQF1ilEnDNKMzLXcdoSfoX8deV6XANG18+SpqWrIuDn+vG9/F7CPbSXu2lQCi2DB/Mi5dIj2/9Oc
+l5uK2hMLK1SkOej0UOuHMHk2TLQG0XOkVCFV0fgBOnXER561ctmny8DklEU4vWsUNES43+87ngsw
+3vdfDHccvrc69O9BXwd8rJO8XEqWjCf+g6eM9C1Q03jf6cNaFfSKOdYNX0gDpa4wfVLJZEyp5NJL
+kM5Gsu2gAveTxeAV7pnu9a0CIp7eW7t4vhYryIT4M80b4ZfNX/YrrulILbej+WW5CxrC2XXnP5Yg
+L+0Q2+GNWvCtXXdeMczDsAXuS1Ff8jCI+uRdB4VszKU6myJ8sBDJOfKfZRYE4t9Jnzi69kikDSsb
+vVk9hM7POq59EWne8ySl5243yuGr+MHeSbpCdAbVyz3v61DqhCMhb7QOD5xF50aXOggN2Wc+5J0J
+x39fduqaCcIwRonbejQNUMJXvXFNowH9vdk3dwQSkN+8a/7j7RhotjppWvj5K8jVOTn3eGfh/lK7
+bbOVfox6RD5eOVIE00EqPyqDk0B4XO6mo0Idnm1fcyGZDARJrvvhOu45aL31wMCLOgo38qJWmK2z
+oMVGwmRS4jcmHD7ud+1YPjhuTom0X/kCtAc/2ni5FcNTbwGC7+k6GB3vY7p81R/ABh5BVj56ZLGV
+5QT3gNSii1dMSRM+M/vCRXWxAM2OPzK7spuLyRm+yoEYBsAXdf/stxJI+8RWUCPTBB9IYCDROROk
+SGb9aE3yMXL2j+LBI5n4aHHR1kI0HtnSirsFxGpAVZIQ89y+DB/mDVQoLZcBqUd38OK9AKjdx5hk
+d8sD7FDKO0W0HsodPV+tu8egI+dWcvVEM2gPMzisOtTivOWt7Oduldj+nyUlt20XWq6K9Iq5IzZG
+O3E/ulIMbxYm2111C0HOm6/Wv+cX/HzkPiZjEgZU05Z5s/wV2HDd7ILMSA1qjLKMWjoXIkMYQT3O
+pAZILLv9aMTTsStX9DlTRhWKFOUo/1Da46GIVkWOT4V4yKoiptmlGcJUFqmF9OwgSvMjq4jHH5Si
+Imk9HPoHjcXD2oi0RZh84PhjpzdFkNz57K0hRxGS6qk9JqqX4qvSAwJ3za3Bp8PsEOnp73D3to69
+72IF8A2tX4iaSwOOBnaDdYZ8jKeWkKJea0NJLZV3pOMZKNTUZsEQVgg2xiNiWToNuMPXXdd/8jeU
+bdMwX2MswCTVabmXBjmosBCq8cAL4dD6v5B3yhlAaanyhjtrz+fDQUHYshpJWmxYlkiyoUeHPIXm
+cyUIz76LXRsawKUskVPjpGHYQCZA23qwBVyorsi6PGwFz1XVpoLKXExqWhtdk83CsqjFGe7OMoxs
++XguDNygZ3vI6dPVBqx9f4Lzg34Z8u1fH3z9qgGWPr0pvhrviwmfHveNP0vDjrXiNxYQCawbDRNR
+tH1gyEhPG/a3CtJnh6X8h9NQLJJ858Z8HazMPFS28NeDHclkgQWeYqByj2fnW4pAOq83pe96SnFT
+Ne22BmcWXCIXs71AXYXpxwSPnn6Ui29F3+YaOZXAtdB2Zaf2CjS1v/rgjEE9Fvne0hfbXwOjw4Fj
+7QwdKKb4l6snLAE5V0X+yjQHoGspg+HFu51YLZRhte9aDfrxXR0WI8sA0jPb01X6eUBXtULUKWhF
+2cOv2q/cCgfDANvyKyONwHvopUPI61p8LRAlPvrAA+jvTAR8DO+EnuiG5zwH/CCfxYDXVKgA+Lkz
+bJL//Yd0q84S2np/UOWe2qnKyxXwP1BLAwQtAAAACAAAACEAYNwSYP//////////BgAUAHcxLm5w
+eQEAEACAgAAAAAAAAL1HAAAAAAAAnZ31X9bu28ZnYgsm9ixsxG6dil0YqJgzwMBAsDFmF3ZhD1Ts
+7oIpBiAmolg4VOzuQH2+n/PNX/D4y17gfW/XruuM4zzOYHl7z3YeXmmUsUpgmYHeAQP8y9RVy9T3
+qV2molrGZ6T/aP9+I/qO9B/o/d/vm/cbFuD9v98HDO7n5/2/n8vWrF5RrVm9XEV1svr//JdFURQ9
+Z3RoxP+uVp8dnf+76obnsf+uale3c/9dtd615WcrexdLrj1Lb/rvqiTUv9jofxdj8YgdjeTnKof/
+u2ptj93572qt+hElv19+aNd/nzd9v5yXa5dx9+X3S4LV/67msrRyf8Mx74X/frYLjYiU+5RbECj/
+n9Jjr/x/3u5X5Porl6xD98sWJverdMCQdWVrO13+v+HRnbL+Po1vyHM2f18u95tRacF/V7VUnjHy
+Xta9o7LOoiER8pyyKyLkvgvr7pf7Ni92Ud6zTsBk+XxbtyD5fpvKp+R7ZW6xXhdn+VnNqcq6dS+3
+k/y8Q55rHk2Q++sLLl397z72pHlrZZ1JG/zl///Mvin3PzL9iLyH1va47Gv511Gyjm26JT9XbsJ9
+2+p7ZJ3fZsg5GL19eb5T2wvy+z+ON+V940/J+ZlZo07I/Uf7HZPfr/eXz5tRc3j/K5fkZ8MzZae8
+z6zysr/KiaVbZT1eaqx83uXdDPn9g8bX5blxTeT89TYtb3Beuy/Jz22/HpD97xx2QH52yn5Nfs7b
+N07u82DzDVnXpyPyfLNSv2hZf9Oq5+W6Zn+I7NORpnLe6r16q2Vda0/JudjlSu+VdYcPXC/XOV3C
+5JzvZ4mXz+1Pd1aujTOYck1ZLHKopw/mew/rye/1H8oquV+Ouo9k35Jc5D6WSzeRE12vsFre8363
+DfL/eUJi5PpXlX0wy1eS9SpvawTIfRY1nCr7UN7vnLyHHcH7Xr+K3HfLJL83Q77tl8/1dr8qzzvw
+GTlqWnyp/Dwx3ynZd6ck+bx1vPM1+V5cOvSvtcch+X3B7mdlfc+cAzifqbFyPg1bzZb7N2+zVd7j
+3Ee5ql8PynlZUx2OyOerjxW5VPJ9PC0/DxnD/TY8aSm/H/79pMhNxAuRV6t6FT95/+l15b2NtIc5
+r+cLI+X9Vu44yP1Oihwbf2eFyvP6DuGaphv74rBcPm8fWifyprq5id4YPY/K95Q4bzlHfXEuOXdN
+HSTrsPYP2i3r9HYXfVdvtRH9NFr1HSfPvd7vunxv6xiRR2N5X9lHXfc6i96O2CSfW95Y9NLea4he
+6Skj18nn36Q/JM/pOWGHvHd0Q9kP5XhhkTv9QNs9cp8367CXs/uIPplvf8v5GYd+xcl7jTh2WdY9
+eeUt+f6EV+hD0oLN8rxqs45yLmOj5b7bl46Vz++bJXqlumYLkfVl7T9P9nVqx3h+3/eMPG/qcHlP
+tdAQkQf1ayl5D/V0k+Xy/P6DuM/MjfI+Zp4g2Ue104pwuR58vR69ziv6oPV7IOvT3NKL3pnDXsr5
+qO1PHpT77ZgpdtHy7SV2xGi4V/5f8dq1UX5/IDvy+q7NCbl/SvMV8v3hneTz1utNA+XnK22R+4Lf
+5HzNJtfEXhklJ53l88Pl/82XE+W8jKs3RG+N4WuXyLkNrin2Xn3XS/7fMnLK/ZXegSJXev3vYq/s
+6Z+Qr9hAuWpnf6yS5+b+eVl+b1cXfVTilRPIXd9d8v2OL7E3FdzFHtrlEvfJetZuOy77EjUGuS/Q
+Z5mse75+WO5/owZ6dqq2yL/15eMZeU6pcujTuzixU9qVt1vk/qMyh8v/t9wj+6ssSyN2XGs9c538
+/k8N2QdjnzP7k/IKe5lx5AS5rvMTu2r+0MR+6Ksjxc5b90fHyLrn/BT/a7rGrJTrhD3B8r1x7fzk
+fFYGir6Zo0fgLxZ54u8GzxL7rU4vhZ7vKybvrTvNmCvrvucr9klbe533GRco+2PsHyT7pSup/uTZ
+efDDiD2yP8b9muI/lPBeyP/oPcjB9a1ih7QnzcUOGL0bnZb9uOYtz1WC04q9NQZ+vSKfCxnNuW1e
+L/ZE26EJLlDPpYhe6A5nRO6tyftFL+wsC8RuWr++in6YZZbi55/kmy/37d8W+3zeFb8cHIk9W75d
+3kvrnyVY7tt/6BbZ15jqi+T/Y9Ej7XkLkXstewPs8vbqsm41fusyeW67RQvkOedfgocW2NiNJXXF
+v9tblmMHNrSXdRgpP8QeWOeyy/3MKq9lP9RGd8WeGBf/yX7qb1eJvBsZvorftO4myftZm6atke91
+XCjyYlzKLLhLOZgi91XTtBL9UIr9EHtvDD4r+mOPBrdY10fy/Z4xl+R63xc70fc8evM4/QHk7AHn
+NqubnIPqmne+7KNDMfmeVrTaLfn/nRtET83P78ReKZPWidxrw3xEj7UtOW7LOh7eQV973BT90eZM
+keepYZnAhT1c5fyNyh5iz4xeKn5y0Sw5TzvvJTkH++JP7GndE2J3tfQuIt/q82PyvvaLrWKv1Dc+
+4s/0BUlyHsatVeDYk38EXymGx2hZx9n17P9JU35vf7oP/prbGDmt7r5QntP8kryn4vcKu7bSR97H
+Gp1PcJ1+Oxm71HYYeDqtLn7EmHpA5Fdrsw689neovL/dcAry1fqVfF6fE57AuT4WebQXNRWcrbd3
+3iCfy3AZ/R9ZVp5rZMwreqJahcRfWq9/iV5rNUvLvuoHOoqfNU+/Rb9jMgpuUKtskvM0/WrJ+f5P
+MTzke3PD5P726pXb2JeLsl4robHYH9v/juiF5lFnplwT6osd1fpvEzlUv2/Hvj2sgJ9qgj5pv3KC
+64/9lufr2/6KHmox0XJeVp8PguP1Cv4i51q9HXwu/SjRB6tXGeyAZ6Tsh2KH4a9CowXfKcc0sQe6
+WfIs+x8v56R9jRHcYP4tLPKqzPYUe2qPrcQ+LkIetdvqJFlv4yn4sWp3BT+oJabuk3U38Jgj+/U+
+k+yL/iej+G2rxSbZF8MxA3HMmC0P5DlBcSLPytoYwcN61roir1q+4uCx33dFv5Wjk8Edw9OI3tgD
+9st72O/OtJN1Nz2InLz6K+dr5Gsr97EdF+M3vDTsgU818H6XvitlvdUroo8dBiyVzy8OAD91z9Ze
+Pr/Hf6N8f/VLWZ/l1YDnDP8p+6P6FMWOzA8VPTadCovfVLYdBD8GViLO2NRF9FWfFSn4RR/helQ+
+H1t3rHx/UG7kwL4Orpqba7s8t0pt4spBPQRPWS2Py36o526Ad9ZVlJ/tUq7i55SLpUUv1K3dtsn9
+9Wpy7tqHjeDxxabIk7XugdhXteFd4rN399Dn2sNEf+wtTwVf2pWzyjr0k5VFvpRmz1L3JwW97hwj
+8mo16yR2R4vPIHbI2LlD9NUo/hH/s/uVvJdxMS240tNR4lI1cKesTzV+ib1R+5YSOdKcB4mfswc2
+EPk1BqwSO2VMS8UrmUtiF0/6ix3Rf6QXvTCrDBO8Zh3diZ68rCvfN2vvFdykjQhfK88vfQM8cqdp
+L3nezwHg4kB3sY9ajpmybq2PO/Fk4ZyyfutIDLj+fHtZr1LvreiZNc4JfOQ+BbnaHIjfCFwoONFu
+np64v8hk7Evl28jz4EKCA2znJw/k/592x84cqwOe3+gudtt8dBy/NriY+GElc+Pbsr7f9Yif2mUW
++2EuyIVcRXeV81fbFI9FX3vgZ7+MlKsSX1HOX9sVIHJszG0v9ldJ05a446cv+9PqKnauTiT28v2S
+nnL/q5fFXyu2J/yGnV3OTXnVUc7dOnBhuzw/3SfRC2Nlevm+lS079schD3FW5n+yfrvdNuzbx5Xo
+e5MH4Lsh9WW9+rRLEl/qExzlnJSOz0SPreX3BMcZ7aJEPuwvd0UudHO07KP9ttlueW9v7q/tfIu/
+PzAYvDx6tOAvbcd48HyUJXJuFz7OvqfLAl6t/lb2U+t+VfCx5uUG31KnErg/y1mRD23WBeTuVTXh
+U6zePeX71griEb3GAtEbbXoL+Zz9ahF8yql8+LdFNeT/re37sa9FX8s69TQfn8g60ukSx5kpnyQ+
+V6KSJY5RTtW7I+sdfxpepMBV4qtqWfCvjm0ER6u5iV/NlUlyDsryYhLXmZvHyfeNrsWwC7/7iR7b
+oV7wOsMbCk63PTxk/9U09wRfGqeuCZ5SC54UXkbN/A6c69sZvOI9Td7L3DUSuz+ogVzV8ssl/rBb
+buU9H7oSX92ei92pkOwr67naTs7H9LwHPtfPCH7XH9WSuNLsGEz8nn0/fMb3XSI39teDnMfLWYJL
+tEV+/eV952QSe6BtcUuUdfi1vC/P8c8Pvp7QReyj4TdE5FbJGoH/P3gJPJDntNhJq+cg8JfdFX/7
+qQVxWcycUfK5QW83oz+tBM+pLhXYJ79X8n29XzvZTyt/YeKph/PFnmslu6BX1kb4r25VkNfmY+Q8
+zbh64PgH3uC6YuNnoN9zRF+t1X+Fv1G7HJoj33+7U+TfXBhNHGVnBZcXyS3nbZ1oK3KvrXgn+qJW
+7SHvZa8LhrfYfw77dbIcceGUZHitjznhM17cxA+264c85QlAnxYkynOMf9ngh0Jvod8tfoIvOi7C
+3p57wPnlmE5cN8IXfSg7C7828a3wOko1N/Fr9va9+H+lK7ygw8TF8j3vT5xfpzsSN2lhzWSd9qft
+8IbBJ3jeGRfBA2rkIIlPzQ7ThKc1VjXEr82ewPkl9ZXPKWsbs8/J4YLfrPgqol/K+jJiJ9QNC+R7
+mupEPDxjjMipPSaM+Ox7e/iycfd5z0vDJJ7S8q4WvVTHfGXfrr4XudSPrBQ8q/VPlP02s82T91QL
+T5J9VFeHyPPsrJsFj2iDCwhvozi8kd/r8zWJB9SOjyL52RSeQOu6jLh42Wg5F23AF9EjbVWy+Eu1
+ZpSci/ptKfp5sQ5yWt2Rc6h1WHhepfwI7NmVWsjDr+b4wyaaKb+/Nxl/8zcRPFGgEvHh9BnEZ97x
+8v/adOTDis85XN6/RJS8p17uhciptvKd4B19aH/wcsHr4MfDLsInWp9Hyv20y6Filw2vdZc5h27g
+iKGlBe9bCan+KG6W8JhqA6W/rOu0IXKiX/Uk3nM6ILy6/ueu+EGtYZDwyWam8XXl+Tt+Yjejc0gc
+p85/Dj7YelfkR1taS+TUyDpM8Ixx5KbIm9mpli7PL5wk/6+NnyBxgu7bcImse2WQ4BEltzd49/pW
+ic9tYw54+OY58av28OVi79R7pYin7/QS/bUfdxP/ZzfMKv7KmBUtdkI/VUHsuPWklsivEdtS5Nd2
+GAGPnWu+7J9i5xR8bn7t2kDeZ81h4t4CJbrL58NCxY4Zrk+QgwJPJT43vprwfNfPiTzrx/pz7gMT
+Bf8ayR+FDzJ3JcFzvLrM+tMuFntkTLjYS/aj+Dr4oU01Rb6toHqi32al4+B0p49iJ/UsTbEb/v8E
+3yhlyoODZgcS/9cuKfpjVZ0jP1tLusIPv4wVPbQCt4NHDh4B7xRwTpCrGSY8ouX2hXjoWiPi1Fvx
+Yj/1s2H4gTV18WfVrwl+VSv1lHjY/ncAnu5RTrnq3ZeJnde2XRE5NAvdFb3QVuuCf8wVn8Su238S
+0OcORdHbDrvhNy90Ejxl79OEt1S7p66nxlPwbo2G4q+tfWclzrabxYEjupRj3yeGk0eZn0vuYxSJ
+Jo+QkPee7FfrAPzHosnggsq26IlRe5f8bNTYQjxUXScum/NKztc6E49fOlKBfFAWT8G52pQX8D2f
+JosdUsdGyznZLmdk/7Vh10QebW9f/Mu4+vBhrbbJ54w4J/xk627EL0Ht4FP2eopeK3v2yv5Yy5Ox
+Z0mbxO7qCRvRiyxRsq/K+3bkQWq9BZfMPgEPuuAZ/qluCvmmzkVkn+yF/uQR3N7JuWnfR8t5G48u
+iH7ae1vCY568HCTPTVdd9F+vkY7f5/cQeTBz3EWfRnck7zPHQeyG1u0geYdqO+EdcnUCb15JJ/GS
+ubkI+L/2KfitewHYz4D38AgXk6fJ/w/Jhvw0jJZ9UH2ew0fOviLnYwbaxJml5vJ9rw0rZB0FtkyR
+z328J3jG3H5U9Mb2nwKOX3QVHujjB/m9XjNQ4jz1aD1wzYwb8HN1TghvbYUXxr96VSM+cf6CnVw3
+RM5ZCW0idkMp8Y59ciwvdlxfv0Xsnp4mhLg2/Xf8XmOVOOtZZvBarmPkIXIWkauZ5x48p+eCifL8
+F6U5//hMck5mr0cih2Z28IL5fAn29+/TAfLzrUacU95R7Ne704LD7JXxxAUT/sIXrWoqeqfmcIGv
+T6MIjtJ6e2OvPNoTL75oI/kIK/yyvK9q9YRHTbdO7KY6ewk8yZJZYvfU3n+HyHtdHyo8iBFSGz5T
+7wiuq9tD3l9p9E54Y7XFAtlvLX3/M8hZNni+tPHCp6hNyHvpGadIfKA0OC3PU0rVJH66V4k4YeUY
+8odfPsv3NR8FfV+Wmmc7X514pvwi8HE7A/3Kl078jfntp9xfnZEDe9ZzM3Hdz5GSn1Y9PoMzFSdZ
+t964FHaraweRcz0xFU/2uw8PllaBhzlUAz703uV78vwc7uQVhtZGXrbmkH1R8vmInTOyuovdtXZ+
+5nttJoF/uzchHt1+VHC9ca4q+3X8EucafEH8stkzC/mSem3gVb46Yj9nOomeagfbg+MXDRe7qOXN
+I3ZVCXsCLiq8HBxV9QR5yCcj4Heiy6I3ZceeQe6PCQ5SvjVm/4v1hJ8ZeVfOzS47UPRJ7VQQO36n
+DXztkAD+/0QpcOrhMdQLpP8pz1H7VgR3esbJ/fWRo/EHv/ZJvKcvCJb4zAzZQr4wOQ57M+uV6Ku2
+LUrORb/vLvjOqJpV9FzrNUH8g5YrCL9TeRT+cHNTifOUzgOFJ1IrBoq/NOuegK+tlxV+d8wv5Diu
+uzzP3BEu/sFcdGCePK/yfNEbPd0O8d//c2joX7fKEn9p7uQdjJs3AuUcx8ATKsWiybN/2s2+//QC
+Z09wErtkOUSdYV1pwaUXV4od1V0Lo7/3bos8q8GX5X2swflusE/x4Lba7SQ+1U+lhzcr00vsjJXw
+izxP7iji++KXwdfHVpEvT+oODslUS87bOsh72cX7Cv+iTzqEPExtt1D+3zNEcJgVfQe+wu8L+Hib
+t/CS6vtagu+VF/M499whEj/azYtIvlZdEktc0+Sv6JcyLRR/sCxC9EU5cQYettVJ8jfN/SWO0cqm
+CO7QD7+Cn6x0SuRJjR2IvZ1ZTfyA2q8F8t+2CnZt4RzsdtBgcNzPavilw73k/vb4u+xfMS9wUMdO
++IHTW2Q/rQIhsh/qu4vgea8aqfnPGIlLtUJpkauPw/FfQf/A5c4VsVvfhvI+iePAFX7RnN+3w+TF
+Dv4WeTYP5JD8m+Z5Ex7vDfUalpYE711JJU5sFEN8p9Y4w35VlefZUWmry/f+PINPDNklflqZ09NN
+fp9QQeTK7P8DHrvcHnhP4z18RpqS8nl11nrwe+UN5JnDa1AfET9nqKzP6zm46k1VeNWlG3ifyPmS
+N1KHbyev8a0Qcce0jeRZe1XlHKO+gluOFxQ/Yh86R9w2pRlx0IxM8AGeoyRvaTUrBl8WlQPc1Ksc
+9qNRK/jCkaVFv6xGboJb7T/13ORzvU8Kr2YeaSr3UeoM8pZ923OJ83f4h384/Re+v20BkWs7z2nw
+99yy4Ozn3UV+jfet4Hf/UqeiZtwtV21U4DTZ1xhfcOXcSNkvu58TuDNHCrz8XCfySF/zgsMrzQGn
+rLkgv9dmN5F90gpHSt5Vn26TJ4oaTVzilwm+K9SVOGjBSHBKWvJOtstA4Ud1hyLsz4BF4v/V74Xw
+87c/E7cVfUC+bsQo8lePEgbKuscZ1Gm0viL2RtnfgftMm3YT/T9PHFAorVzN/ufhSaodFp5bLzgc
+PmXZLuo2XgXKetSRMfD8zTqgT6NbpvIjXsRB7abAM6avSDz9ITVe7eGNfmdivWrFzPJ5Y+8I+KsZ
+pcG1D6qLXbPGlCNf4kdcbi0Fh5sFXdiHNUvx42Fu5Akn3CTO35mZeP1BffLbl4qDO3fuAs8vzi/v
+o4wfCq/r9Qwe73UteR/7VGXee8VC/N40eC5z6i7xq1qvEIkbrBWJ1F3kXM36IgPQn7ah4LK5x0Vu
+jFfELcqJIujFn9Xj5f51L8Hfuv8Fh42lvsk4XkzsgNGkMnHinVT7GRrNfdpWYv96FINHuO8n+6vb
+RfEfjqfFDlnWc0PW96aNxI1KUNRDeY9B1H1oi0JSeaArxFGF3wlOtb2mib6qFy9zzi1T42T/YPjE
+MuSlzPp/uB7/gT57NQS33FPBFzsH4vcOUk9m1imDvyy1W+ydNXiH6Ls+JgZ727UP/3/qE/HB/JJi
+H83+1CvahUuTf55skI9wvUzerXsz4Q+tTyp1dnvJB9sbm3H/OR/Fb6gXcoMnvY3Z8h6TqotdsMp0
+lnha2Tga/X3qIPl+dcrcu/L5wA3CV2gXMsjn7Jg81Fs8bMZ1zmPqDu4kEEdvzyd2S1cHEV+1P02d
+QJAhcY5ZahZ+vdwJOS8rfCbPH7wb/7vMVfIwxsDp2IXfO/G7Tr7kwf69hO9Kmil+xHSw2K+Bl8Ru
+a1sWpfKXteCRgkdQ95cpC/zm4XXYsd7Z5bn6e3fix/x7wEUpDcHLVROpt+oegt2cOk30Qq0/RT5v
+vNsvfke/R77QWlud/MZGF/BP4yuCP7RKvtibhWU5z+kh8FT9qoyS+5R4DG/U/zz7+GsG60wcjt1O
+lxe+cMFu4bGMRhXJ97x5BK4p6Aw/WE4nnr7qBa6JLkAdWtM35HGK+Yg9Nq93o04q01nyPHVfkK+Z
+sUziUbtWiOBGs8Nq6k+TylF/6l+K+HFAOOvJoMBTzAyi3ulnuWHy/weuUDdy8x88UvuX2JkFYdir
+Vyp1DM6DwM9Z95Ln+nkSfivDS+znp1fY5Wgn4q82peGLgobjf2IGkued9lT03Ug4yLl+LYB+jx1N
+/NVhMfU2e0+IP9c/NgbXxxaU+MFOTo9dL2d5y/fTBlIv0ayx8LDmxzXyPtqev+DLxVNFT5X4BtTn
+XRouem5E/AIHrjlPPnTZYuzjjGn4vyId5JyNfwepywh1xO6XyIM+Lxgj+mQ7HZPzMXxakh/5E4Dd
+9K3L+pMXEmfdLwBPnqcN/GnOaxNkXd0ywEet8JPPm0E9RH7NsdR12ZHdqbucTJ2geewq++DkTN63
+UYjEOfrT5sh9y7nEpZ9zwae3eI7fy3yE+tnaz+GR5t0Ft3X0x99+z0CdWcov6kYOJRA/R5QRvVB/
+wuvrr4LII9z9N1fW1zAd/HkGZ9Ff5WR/4Zn0q+AmtVE5eP57u+7KfX80Frm2+iro2eKm8KhbN5JH
+b1MR/cjfSvyXuioDz1sdLPU7er8wOV81r4bdfzma9UYdph5imR95hvOe1CFV3kDdx/Zw2W/dpwx6
+OKod9cjvygo/pnoT3+p9YvD706dzrtFFO8pz2zwSO2n1aRTEvlUVu2c3WiB6ZZ9uRz3m0IPyOe39
+F3jca+Wpp1m9TORAnx9KXaxSGrsQUAeef8BEsWPmncbEd6+WC/+h5/Am35FhAHzLkq9iL4w1e6hz
+/vtd9MryjicPP7CV5EXtS/VT6+ufUE8Wu5L8QPq88nyj3EPqrT6+oT5z0m3xI/a6G7JuxXOW2H/l
+KXU9yu6sIo9mljTUu6z4J3plblgp8a6Z7QE4JrENuLYIvIORG95Sy+MFj/cyzyHOryX7qXeQ97d7
+FRK7oBQNk33VWiahX297il7Z4Ttk3cqe6diJPQOID/JUIt4cfJZ6qo3wxMrW55znz4PkkcaWhTe8
+uA3eq4H/GrnfjN7wKN+H4p99nlBnkTBI5Mnu7U/8unPAaDmXH4nUUzxqTvyc05O8SL2y+JFadyQf
+pdWdThz2w/EuekW/gW0HizwarycLT69PXUeeY+8u7M1YcKXh7CJybeTbCv8ShZ1Sp3xJrW/6if4F
+92Adm2KQIx+FOpbfNeHHLy8hH7bMZp+8VlGf/64X9RxBiWLPjBd/0Btfh9Q6wVPg+6K1iIeU97Jv
+ysp4sVemf07qrvznS3yit/QlLsnjiP/OeR7/tT0RO9UiQuRK3VWEel7/btQfTCwm+UA7NLPYVyVP
+LdlP5WJhXa7pkslrx/SgPqj6HuoB1s7BT40KR856X4Sn2VtX8jZq9b/s87475P1OaaKnyszi+Mca
+NnVFNeOx6z7f0d/2faSOXe8WI/bG7r4ZO/z2Mvix41fqdMr715bv10oUP6qPmU39dkIJ+gOKfhR5
+sOuXED3UyowVPkON7QffMay36Ju+sQ358mE1iReKVhEcbjb/Rj7p3iPhNewu9eX7VtOaY+TnFhnw
+vx/mIA+DJst9jVwKdismWvRScRsvfQTGo3bkgaqUoj6qZkXxN4YrdsMo4iD1qfbMK/iFPJPAz62e
+kD9Nfwb9sKuD/3dOEr+rT24O/28MpL628g+ut5zBC04d4F8iNXBxuWySl1NDS1BnNIk+BfXpYeL/
+nz8lLtfPzRB/rMb7iP1Sayo15L6ThiDvvsnkXXv9hK+700v8jtkwhjrDa6fFX2pZ3mHfQuFx1fXr
+U/NV2elfyXoDPOg/ReJoI/wNdVPPXVnXsP1SR27vqih8i15qEDj9y374m/zdySc2KyB2RPmWpZp8
+r0WY3Fftsxa/fO+y5NmMHsGCR82AOrL/2vtkzmV+Rlm/McoT3t71+0RZ35qD0+X6ZjJ5w8Cz2Lcs
+V4kPGy+Vc1ESy8q6jGr5qXPwaS/7bG+vAD9V7S5+tlF+7NP/8Jf8PCUE/infK/KQlqPouVnVVeRR
+a/yKOhAzTNZlzq4IH/egySx5X+c6YseUTL/BcyndyY9kuA3+yvwD3HE2TORQedMXnmIW/kg5PFn2
+wW7dIhUnJFLH4dwLXnOti6zLOlddzs1s3FfykmpQBH0Tr9VB8vlv+bG3+R6ADw+3kP3WThSkbqtG
+LP60bUt5ju3QRvTcvLhR7LK+ODP1yb++Uf/TOQGc/G4Z8nXJkTzYxfHI7TqNuvjC9SQuMRzOU2e2
+thT27m1O6pQSh4k82k7LeP7V79RLHR0tcbdR4CHx6rN/Iqe2y7Yucj3xh7zjNX/45LbfwGMz2sl7
+6ws+Sv7JOhsD3ug0dCl6MQp845/K2xeNwg/0bEs8lFJc/Km6sIfEmZqdFT7hzwjy97lmwWsUfUYe
+9MFR+kGCWsp+2cnR5LvrW+InrR4jwO81qYezcv1ErppEkF9pVlzuq0Wepl7u7DCx05ZLZeTsSbKc
+m1b7OfmJQPpwrPnVsZtOrtT11X9EnrrkUfyI+1X29bE7PMOpsnJ+iusr6tBu+1Cn3L6Y4CNtVbLI
+q9asKHmFrLbItVXsLfFFVAbyXBXaEyf8uEu+fHA14qbPrlIPZh3PjHwMWk0/xfhV5LMcK1MXMLcn
+9TkBfvBsO9rjlzI/BYc/jKC+LS5glvz/y2+CZw3Hjdj7v0uJm5RD4MXgavDHt+aRP7rTAj9+/Ci4
+2G00edfjSbeQi3Po55S88M3fN8Pz7KRO3X5SkrxsRJjoqdEthLikwEDqwibmlvtbsaXkPIzQ7+Ao
+8yY41+UMfSDfl5BX7tQRfxcURn+TW2Gp/zCaRAruUTo6Ut+1KpD81dOM9Ou5/CPumVwV/9Z4Ibjh
+V+PUOr9n2G2rmeQRtKx9wZuKO35hso79m+4r+MXeM5FznfcIHiPoLPYkshH2sIYT9Zwxs2Sdethk
++IwszuRvRtQBByr94TfKt4JHrbiK+jE/6jXV0ZPoB61YSvKV9prb+O1xs+mTarYBP7GypPhP40x6
+4oyQ48T1CZ/gYXqOJT54lBH+tFQkeDbyMHozMh/1ZKOpI1eP74N/HLmZ8+49EH2tEAUuGedAH1p0
+W/bN9yF65ZhIXHS4jOiP2buR4DY7fUfxA1alZYLT1JnvqV/s3Rz9n0Adtln9J/twnP4M9aE7dcmO
+c1n/dvpQ9Eeu8r7aP2fOb0Jl4v7MCeCvfU7o8exC4N183xbLfdKXFdxlts2AHCz3o880Og/9HvUj
+ySuWOwo/23sh9WR/HpCv9utGnYnbVXj9US3hRSf1od7z3VPyi56bFsn6r8wR+VUW7xD7YD0vThzi
+tUrkVm92FH4vZiD4uvUSsdf2zG6Cv801HWT/DY872L/HjamT6NZM+BilRhB1qDkiyf8NbQeez7tR
+9EyfflbiH3tkCeEBzQ45yOuMSyf8qnq+Dn0FDbaDV/JQJ2fO7UyfxZlE7Kf6eriso6ITPM9+f/qR
+cw+eiL7Mk3Vo7wfjp9zgkc33K7GbTY6TD7j9SL6vf3AlLnI7/Yhz3XeN9wSXaSXTUI/kMkh4LtX/
+j/CMapetyJ1TVfz9+Er0nZ76B24fXQjc26qZ2BNrVCPxA/aD6tS/bEoRnszKEAFurB1A/nLGU/zZ
+tt/ksWb8hu+rvUk+b6/sAg6/dVzyqFqR+uhVK+pVlWxniH933UM+LjkMlWstf/IDftvIS1x7An/e
+OBbe3F5Cv86xQPRqcTb8YK8roi9Ks4bIZQS4TrH/IG8xlXn+h6n0I9Z6wnOSB8KfNevDOT3cDG8Y
+tp787qb26MvEZB9Z340h+O8vz8U+W5Yr+G7bWXiVJ0uo80i7CX+yeBs83V14BH32cPFz5oMk7HX/
+BPmc4dmafOER8oV6nxbo3fTJ5K+CGxJvf28g+FQpRF7DnHyKPE2FEoLL7M1D6bN4dlhwuXkwlv61
+MTtF7uzLq+T76sWu6I11BXnzSkd/zpnC8N6FU+X+/RXqI867wSPsOAEfl68ROGfuPnjUbV3xG+op
+8ogNPlGH1D4v9SCrdoC3ex+ib27AefDri2H4yw9+6MOLluxnkfHw2q+LSDxv1TPBYaPmUHekthH8
+ZWyvSV2k+hHeItIdnvZcHfEfqgH/aGXxI/8Tdpx4ePBcfr+pPf741mLw/ZXV1EvXv4+/+NaJuqGG
+J4lX3Pagp5120Gfotg/+YtYc7Kl/FdaZKQ39Ej/f8f3SA0RO9WMXJC5Sf/2U+9vl8yNPm2PFb9op
+B6iDSVeaOqD3ZcnrnE9kfycUJV5YXJy4Zc838hi/d0g8YVXvRJ5pXnvhobSTVdFXyyNVr7pRX7As
+kTon/yAPWd8U8Ip2I534aysyEfvqMgwePKg7PH2nNPT3KK2Eh9Xe1xT8ZnrclbkFWmFX6pdnjWN+
+wMME6vA6/KHfIdiSuFtzGUZ9XPA68iSe1D/bh3LDF7fwRu6Ol6auuBP1oVbQAvB7vwuiH8r43fAO
+i3YijzOZz6A+P36I+8Vybpma0Hf9w4f66S2X8eOj6qEP5xeRf7/0j3rW3dHyXqqfIryS0bIm9vFK
+M3iHkx7Yz+At4DefteI/zEI/4enDssLj9s5NnibiCnnywF/y/8b0HfT5Dz1BXmv9GOSt6ha+X7oh
++6Sm+s2ll8h/OJ6X5yu5w8CPOc+Qh7p0H55l/WryhP0bifwYG5phB90HkNfxrCU4wQrsR9/81E/k
+rTN7Ck40bgfBY46oJvWN+tU39COvj4cPfZFV7ISZZ4jU42jjQqQO01j4SORaPx1Dfn9dOvB2+hLi
+d9XibbArHveED9G1kujhqdPw6SMOUs/qmIb4uX4dcMtlQ97Tzhgq+6VmW059/7eW6Ou1UeSvamal
+j+/MfcHt1vDXfWV9axpR9/OjtvDwSuuxyE3hB+RjfqcjDjheXPrfdN9q9NfsP4deTo8Xf6Oswc+Y
+XSv1k3270xQ9OuMt565FOlLfEvC4ply7d6K+a8FA8Nq5S/C0H+7gn6bXln0xht2lrmbXItEPNVfi
+bPQ3XtZn7drP+tO8Iz/TOZb4akcf9j9dan3fzo3UpXSYTt/zCSf2rd8k8pev3ZlL8cZF/LFx+AA4
+2bkhcjU1C7x6UC36oH7Ddyj1flFXUrUe/eJLnuDPthWFl3pzS/yO4V2KvE5+A/tfwoF5DTUcsQcX
+tpCHyPpd4hKt0XfsyouB8j0l+6/U+rdN9AGbO9H73O2pD2w9H3zfZRs8xeQB8IH9mnFOWz+Rb+hx
+i/xWDYU6htX75ftmCHU82pBD1NH1/ECfU4cF1CnMf02fwlNf/MeDNvAtq93J3917K/umGHFSL2Kn
+700c2CmcupVCj5Gnkb3Igw94Kfy1HvcZv5Y5lfc+nto3ss2FOpuctanj2ddY6vrteaUEF+tlV0nc
+o3R+C4+1/T54qV9p9L9zFs79o4LedMoBz3fhPn1309oQj2VZIXqvq8/os86e2j++gXpnrVpl+jM7
+F6NfY35b6ivS18YuFX4q560ldcRubl8PDojsDs+Qsz56fmjoJFlfZGeRT/vpI/JiU9qjH/3byzwS
+Za1Jfdn2stRTPQzDb1bbRv1aWCTx35lm5P/v3CdfXbM78f/hVly9ruEXZ9Wg7uUqcyTsJTWQm9uh
+1D+VSKEu6GxzeJ26n6grG5Fav3o4hL6qQeTXzF3Jgpssn0rkV5Z2oZ9ugqfog3aiPXnMMq7Iz7Sb
+0heircpBPmz7K+RgQRVwwu4t1G88C4Cf/7AIOzq/AbzFj3b0S5bNBV5oXqST/H5GBs73dkXJb6re
+eajnHP6WuqXk+uSXKqWn/9kxvfBg1mdH3n/PePgKx+bYoc2pc3cW+pN/mO4OPxCUE96m1CHqJYcz
+v8HuFE3d0b7Gsj7l9xPsca6RseznFuTy5QzqJz1Pwj8GfAa/3fQRnGaEVhF7YtZayLnfHE3/609f
+8HW13aJH6trW1LXm8ASvBOvwo+EPpB7TKJw6V+lGP/DufOZCWHWPUZfwug780a6N+MXM8wQ3mzHL
+qdfoyHwIfWkUfUUFk+nDqF0SvWr9gboV/8XkI982ZJ+W6vA2eeeLPGjlvam78skCbuybi33ovYb4
+ryd9Sfq8Qan9OcvAHeVise8V28N/FtsleRBt/Gbq66JXSvyrTylfTZ7rUom6YL/P+Oe2PsjVxyri
+pyyzj8wjMifmQb+ejQb/DM6MHbiYD5520y14g995yOvufIwclDCxpzuWkDe2VlHn8cOJvvdRn5iL
+0ULHftR3hRdrlsQcoaenyfcOukCdUWYvwUna0JnkmbeuZx9TalGnrpQQubKWbIUHfPoP+U96zTms
+oa5Di9sJD1ToDnH1mS3kv1u1oH7pWEnwXKk34O75Ofg56RLnXnouPJYVR1/ukm7kNT1rg4OqVhAc
+oRW7JH7VyLoe/7aTfI2+I73gGXNKKq9RYDP2r5of/sH3J/1p7fPi12o2h3/pHEWfZ6S36K3R+Cq8
+Qt2XIu/muO/wV8dnSLyr5+xNncGWYM6l4gn41zJXqTdc2Ym8XkhP8ss+98hTZ+0+Va5VE4mjZ69h
+vsCGqawjVz/spuNu4tFyI+A5lu2mv6wQOMyIaQRuPv4Z/mdXZvIevSpjX9OZEtcpr9rAbzolggdG
+q9Sdu6bgf9ck871Wr+U8zScd4LOdC8ALXFpBvO1xnbih9SPyaXUOY/c/r6DOaFBN6kRb5Rgg13z5
+uN+m0yLv5jDqwMxHGUSulKSOxEP3SxDf/u0M/lrnC48WEyf+2vLfCX/x9bf4aetsCXDCq9/kezY6
+kOfIUgtee8xv7KWrh+i7Onsp/Qf1z4Obl34kXhi3kvj93QTytweaSrylLHUU+2A3bUr+K2US+bLi
+xaifqNuO+SausdQzH3WAf8z4kH70EvfBG87EA4ZDT/Co0p94ZfZN+vFdx1IXXWgXfvnYCfBV3qng
+5EvFqFOY+BL8efkFce3jGuTzMzgzJyHrVPJ+hZ6IPzCb+eFH9wwVu20diyZ/4dkZ/1azCrxShTvw
+jaPLkq9eXQs7qYVS955pEHnZ0h/gBdWO9H2/XSn2THlajvxQhbTk5VpOjEJuOD+lTU/8Yu01xB+t
+u2LnaoSQt7n3Erv19Sc88+RX1DfkKEn9zYQNzNH5kCC41gpZAF/vqcs+K7Xf4992VCBOGpcb3vSk
+A/tfMCP1QqUDwTdFjhC/HQ/lvnlbYW9mZWD9t5vC+8S+Ib9ZrzRzCJb2J17p70L+Let5nnN5J/ms
+rlHkKZbCp2gN72A/Vp2W/nC90FDy4p2fYp9a76d/7JcHuP1WBvpqIzYy18D1Lbygd0bsy3z6MZRa
+m7DfT+ry/e1P4OF7hQvPqt+cyByX6+7Y4T2tme8Y5QVffmEFef3JMbx/xY3UpwR8ot/tSiD8y831
+vPe1/sStCS7EySsfwAM5fxE7Ys1eSt5leXNww9f1cm7G27cj5fm5b8Lz3BxFX/28SPoI5jYi71T7
+tuSBla6LqFdrvYE+spdtqbesc47PDUzls9oNoN8pp4PgVLXpWOoMToQLz21kukUee/Na7MqrKOT1
+e376abaG4N/rUm9hlQuhzu9JezlHdetj6kwyfCcfuewOdb3pctAPVHY59VSf0lKfEUs9oFarC3PC
+wgYzR6bBE+q8Y6/wPl1V4Xetb6WoU8vjJ3ZN3+UBjzv2F3YyD/WyVoYNzNU0u0icrW3Ih33u1o65
+k8Yx+g7r76KPNlsi+dLy98DrS73Y57h73K/PVeToaTxx26uJzCsLbil6pEd4Es+Mv0K9ypFEyY8a
+1dfCL5TZwPm+DqH+Z1Q2/KTX3dT+r0b0B+V7Qv681m14Os/W1JefnMD7PLXBNSfbE7e025SAvldm
+flGaFuDM0VeJK3yDhsm6pu6hL27aIuqmDlQSOVNPXyPvuDWKfMLLTNTV9KB+W79Hv7paoC78cPnv
+Eq+bMb34XK3SzN+asQi5UEOkz9ks3pw6qbGpfYwD0pEfK0OcYw5tKHk3K7EbdYA5MuM/Lp7EH22q
+SX9kpjfEdW5dqOdYNQK7+amN4EJ1agg8kvtr4s2ZNfjcqLPkN+4fYX5H7YHgaY/p1BO3Pc33qjyF
+h/EtT97LdxN2f1cEn3/VQ85byRZIHaaelT7KJZelTtBaPlBwkrrwk5yDmfca+YG6TvCSoXGl5Xn1
+c/rL91KuMe/zQXHqHmsMBpc9Majnvn0OfDJ0gfS72U7bee7cZOoEZ+WmvsDXxm51qQ2fkiZM5Eyp
+rOHHbwcw36pliFz1cG/m44zxwV9kyUD8MqkJ+H3cK/j48Dn4h4wJwkeYGW2xh2rfYPqeb96hT2u2
+E3x1kwh5H+VL3dXoUXrikevniYsbviFuuqRKvlJLmU9+t1gG8PDdYiJPeuZt5DUO/hL7aHksYr7H
+sWrwuNcaEBd9GACe8aok9sJenjrnqfcxwX9G9tfwp61S5/SmxBN/PRkleRp98A/ssGcs89u+MifN
+KLANnOiclnOrlAt+eRR1BtbKwvDoM2KwlwVX0sfb9Sd641EQnqBGEvkNl3vYBfOI8NlKJp262R1b
+kdPc2ajDK52dPOmBAPLdNwuR5xl6Az9nveH9PRyZN5B1KPPr2nmBF7cyX0qNXsicnlzwxPrztNQ7
+XP3LeW7qBS9auTJ9EM43qAe60Up4PKvvG+SiXB76eOd6kHfwO0IdTA4n8OCoD8zrCi3OPK1Gn8jj
+tvWg/8B4S93lpIzY0T+nmPsZ+tSW+zuux77X2Ei/5eH+zC9L6cp+tnDmvbcXFb9v/J6KvWwej/3O
+u1F4SHNWP/qosrQQfkmt6kZfQdXK1PPHtQKfFmK+oKb8pY91diHyDeHfiQcbjMO/NWSuiBKajXW8
+Zk6bEdeJeoYXh+HHvh2nL+Q580mNdAZx0+vzzFWLa0c8ds6kPjtxFfYqQQWf1GMOm3Xdlzxyw5Fc
+cy4l/9f5JXNiHG6k1jsuh+eanIv8+pchg+X/6w+WvKq+OauB3G8FV7k5gNdiXsD7PUpLHmOtN3Mn
+PErRn/r9HnMQPj5nTmB8W3jIJtnQwzKOxBMNI+ABK4bC91ROEPuujGpNHfbebOR5nD6K3tvBI+Vn
+q3I7/ETXreRbo05KvKyuTwGntKyJnSg/lvklSV1YX732zHdMHEbdyOJC+KnkweBkrx/MGejSh30/
+kJnz7FcCPjiMum2zYhX6zX8/ZC7qv+3MFcy1Ts7N/JeJ+hfv1fCZ7aaRb/BjnpAS3ZF6h4FlRH7s
+xaXB16dKwJetSgH3tPRh34sep94kC/VL5uS31APXG0Ke8oYjcv2uPH7ayk3c/HsFcem+anz/WjY5
+L61iZ3BSWSfw6shw5jgOnU9ftnEaPrdqAvI7aSN2zudwKk/YhzqZRoHYG4243t4/knjlVy/O+X0/
+/O/7OHilIuclf2W798Uv1CjBfIoWf6XuUHOuIDjMiD0HLzfgMPUggcx9MWaPgscKbCJ233pWBBxV
+vyV5+wcB8L2lq4H/KpXlfeYsoi7tVG3wSpPc5Kvj7nIOxT4jbyfTUh9+dAL99w2yYv83OlFvuVzB
+/iV/oI7w4GL43PBVrNOpNrx3/WXI6+B25Nd+HsI+DAzErukl4auLZGD+zNPx6FOu7czTXrEYXiqp
+Hfbr+5DUvFdW+h98CxNP1s+Rqm+PkLvlicJbWFf7IZ9f88EjjCwifIf59hq8cu2N9JkVawZ/6l4J
+/1HvCXVFU8sy93jOOfp/6jGfQ/VyoA+25lHmmWQqwFyH/mOFR1RWxuO3H+egD3T1Z/Tz2nzqRB6F
+IpdxG5hnlf4wfczntkv8r+3cJLy/fuAX82oKXmPu5q6e1AtfPER8PVihXz9LFeo9e2akfuvoY3ic
+zLeCWP8YcNC5nnxu9mp42NHZmNO0uWwqL1oCvFA6D3GQvwt5f7cJ1FPFmfDSN8vQbzOrAfFkXFvB
+JXaHnviDawb1z25u8BEuF4lTz91Gz+6mZe5856PwNweoi7IePpF8gh5ShHplP3h5Tcsr/VZKLR95
+jh7gSvy9fY/gav30a/rhznoQx3Q+K35Nic/F+eVmjpz6JJx68rAB5GtPnaGvPOb9OLkm0PdubPoJ
+P3I2Bpw8bAX4ZSD1gkaGmcT1d7fLe6i5jyMXw8IF1xiTcxE/jKmK/AbS92+vGom8jarIOTQ9CJ58
+fhPedeVv5pH+HCFyqvV4Sv7ktxM4ctRc8g+LmAtuTL6J3p8ZRh9chy+pOKordZzT4OdsrzvE4Q7L
+4MMOOTNHsf8H6iNjMlKvMqA5fP7VcHgU99Lk1fdfIg4yA+FluntgV2pFoTejDzI/5lBreK2IhdSV
+RN/EDuaqKH7fSshCveSjeOpc7Fb0n4ygTsg4lZn48vks6QM20v+l33U0eWCjyyHmimzzFr1Sio6l
+rmt4GerTy5/dgByk5ee65eEJ3uSVfnE1cAx5910tyd/ufdtG1tGQ+cb2lvYyF8Cq8oY6h2v94DOK
+JzGPYkJf7P2lVqLn+qqr4MOA3tzvQmZ41Ct1iBeSiwtuMoe+Z57z9FPkIWq5kG+7Ewb/c30i+/Jr
+NnXKWSLEjmv3usGfTb0t76X2fo/cv3kg8xzUtNT7qF7/iA9edUVP2hZA7vcMxz5+KgTOHrKK/G5g
+Wf4OwU4X6vS27eNcA06LXqtletAP6d6a+HlMCPFTPwv/7FGDuPxrktRtaNnihNcxPT/SBzvjD3Hf
+EXgCc1M/4d0176XoQf/GYl+0EvCSVqIbc2wveKA/jb2IYwv8wg/lnEQeZmKA+EP7QwD8VX/qj+3S
+SfQpDO5CHVnEVfqqG1SjHvjnevpfy48n3jzSEXusTIc3zE/fhO7jjT0rfQv/3vYdPFLcRfj5nOuZ
+I+gaQX/gn0bI+7WC4PISlVL52gv0E8T8BnfNof5SiVTBTcWHMI/xSyx+bYgv9cX3snL+nTzIv09g
+rrDtX5H+mL3u5Pe22eTHVvSmLmDQCPjyxCCZq2a5VScfP8eZutOxz+T71ucW7PuHQ/T5GinYD9cd
+PvLeccx10yfmoM//2y72qUh/5mxnok/QmNcDnOVcgTzJRC/qAdTZzH//9Yz5VXk2YG8rjYEnXbud
+fMi3O8xJrLuD+ecXMlP3YKGHat4H9Jn8W438ndgFf3olFTe3nU/df/R8+m2HrEavYjsTR39fJ3qn
+PdpAf2fUc3meOmEF+dD8g8Dvh+fB1/fvyjynkV+JT30rJ8k+DSmL/41InY+64AO4p1Os+A3jxXj4
+DHfmjRkvqXsy570hP9r0OH0xQRbzqY0AsYd6ztXYG+U3/XhzTOLqA4P4fI0EeL2gBbx/tY3oTXFn
+eKu0kdSDlrhL/+C0nsSvbmeRl6rdyc94bQO3Ox8Eb33+TZxyoRL533SfkKOT5en38zjK3LL9n2W9
+xpdQ+isdE2UeiDHBgJdImgnfmbsr80L33pS4zL7pSJ117HXiyXjm1ur+baWOVK9SlTnDDp3gOT5l
+kKvls4r1r9qDfA/ZSz9Cyi5wTNG6Yr+tq2exl3dqUV9yN7WeZek2+JdLOahDrvCE+X5rKsCbz30A
+X+RziHxftkbgGJ8I9u9lCno6rCJ27/Rh+pS2pmEe55ms4Mo1Y9Ffh03MrzgeMVm+P3hlI/n+dZM8
+YskI5sMMCcKfFliBf8hcSeJm/WEG5GSnC3Ub9wpTp/i8KPa10Hnm/mQ4Snx6aTJ8TZUk8gOHq8h6
+7XDmy9h/T1KXci4PecMQV3DRI+pZzTTZ8It5N5LXz+ZGf6i6BP453Q7i7D05wElLixBfXv1FXWBK
+FfKmvtfB774DsFPJ4+AvW9Ylv2luRp5iw+FB/TyoC3iTQD9g8myRJ/vFF+qEf8Whz6Ppv7UWj4MX
+uL6EuGvPTvBMWBLx1WPqq/T8Y+nTKZaOuSsrOs+U+4ceoe4lqRT+s9xH9D2BeM26v0/iULt8AHVD
+LZ3p+4ycyZygafPQw0e9+PszaTOLvVTmJMPvJDcjTt/fHvlrFYncHC7C34+o1on7L25OPuHlJ/IS
+2buAaz+cIr+U/w58Ttaz2KuNjeCdO5Yjj+9MnZhulqffqUgv+K6kBdRBrc1N3V0Sc4Ds7PdYl2cP
+cH2+OuDg18fJA3s2gdcKmwovcGoI/mlDGPvvfJ36tpMb4Psn36V/v7tOvvZRRcFF9pNtyOXYS8TN
+J9rAT7+/DX5sHkSexicjvHCflfCJby8i393pE7ZqjsC/hY2SfjblShLzFdPvpj5ib1PqzCvfoA6u
+B3/nyL7+jL7oIcw/Uw68g7/46wDOXeGEf4v8Aw/0Yyp8yGd37FCpzuR9Th8IY1+DwM2BuVP7QBfB
+o7qvZD7VplDyKXHTwHnB/D0qbQxzdM2QMeTNjh/m79as+YDe3J9PfWzKSup5VPqWrYq5id/0FsK7
+Gr+f0Dd3cjx5SLsmcfTEALEDhqfKfJqe5ak7HLQJnqznIXBIVEfw4IUS8Kbt6BfXQsnfmQMPkj/q
+XonzbJcLXP4tLeuIHst1037wTzzzX8zy7bGrjl/xe4O2ki/911PqHM19d0QudQ9v/Gt8b+ZEGXfw
+j/VaI5erBqTmRV9Rpx/8knqQ066SpzTWl+PvMpx1IF4b7wK/YqVLzed+o9/oY3b4UY+Z8B2/06Xm
+00rKPFvtI3Nw9X2TZC6adTU7fUv15tHXq12kvqT9XImXLXf6UM3zB/HHMdGSZ7ZW3iY/0KG28IR2
+xCXyI9cPUne+tSXxeuf0+JfFNagji8qOfLesDl4yy0oeWF9q0Z/ysyd2t3s+5mW908kbNRvC34Nz
+ZQ6ZPT0aPOVcD/05Hcc8zOAQ8mfdBmIHZiUy5+RcP+LMYjPgZwqB543mwdTzj8whdZtWr1702+y/
+wZydVasFvxqbe0v9pxmwmbncqx6Sh0ksmfp3ZNJTp+1SBLsyfj91BZ5TwN/Pa1OPeRt9MfNUod/z
+LXNGrcTf2M+D3bELTZw5N0/iGjWTA/NwOwxjrkrwBOYUef6h390/h/SDW1f6guvrkw9T+heB12lL
+n4z2rj51dCWciYtbZCQ/frgL/arbZuKPAsqQl73uKnW75p1x1LnUu83f15swkfmYNxyxczWYv2Wn
+T+2PmB9Af+c45sdanRPxqweKkZ/YOQb+bZqOfXq1n3xPy4/UHbfoKuekZf5NnDG6M/dJb1Mv2icH
+cfU0D+oDWy0jXvv9nvtd7E7eKesbeW9lw27mQ5VIR16w5iTqxrudEP7AOlARnqicTh2IXzf8RzcF
+PuxAG/qyR30FZ/39CJ5euo94pgfzC60TE+Vqv51I3J61PHozl3mF5pucxP+rTlNvFrBM5sip5cuw
+7n1jyHNEx4oeaeGZ0ZtZ5Ev1b+lF//QWzJWz75+Ch8n+Cz3bPxH+60ALiTOVgql/p2d6eXD8por4
+95pZyUs2C6XfIOPdh3Lfp3vIX88sQj9Zo7HUEeTsT/1Rm+zIR8cc0j9sp1tBv2L5WcSfTSrDf625
+jB2KWM1cqoOV4KlDsbPqJnCeEjuC+vr3VzjXmsfh9ZWO8C2L4uiff9RH1mN3GyB6rrWeQB3+lZ6C
+l80V65hHUiM1TirjS57HAb9qfG1KvFWuvfTbKEfHU2czmbnnxoGp8C8108BrLyaONabC82tf03Nu
+Q8KxUxnfi75pQzMypyOxDXb9xlv5vOJ4hLxP2rLwFeoF5gb2mY2+l1/IvGXvQtSZZYjk79U5ROOX
+Hu8Rnv9/AST9+dnSUK//bxh9bg+jiStdmXuuVDlJXqHNP/hJ78vUyfr+kv20v7QSe2ffygQudLlI
+/ujVH9lPq2e/IfK5td7oU7FvvE/Jk8yDOH0BnjaR+YrqwrfY74JpmScR3VzmAuvhftivu+2lPsXY
+48Z8jlgTO5atuMxrNQ5fJ//atC361bo2vOG1ZvQZVkkhbh1eBX5ua2XqbWIvgqOmTIO/XbWbvogM
+Kriha2H82D0X6iN/DGfe0z/yo3pSb4nfrbHEt2ZIMvLq/JA4oGop6iZ6nkM+9w+Ed2tCfKi93yw4
+1azvSD1fmd+St1Pmvie/GFAJ/JOmDfa5jTt4os974rWhAeh3/2zIw6ZIid/035uZI5HC39MxEpgX
+Zv6tLjyoleYv/dJx/P0AcyA8jvk2dS7L7SmyH//bJ5lja7qOoq+oQDzx5d5i7rLO7cwx1NJMAc/m
+zAbucrqIPU35iZ86exXcX5O5Z0boYfiXT3Xp6538jPq/JfxdBr35E+KSzkUlL6P69IVvcZsCPo/v
+Tx7gVHPwaf1r5GWXJGAnB99gnf/yk/ebcQU8u2MLcW/lwvBZvtQRa+sU8jMRq7CjremHNhZOJh+9
+2Jn6+amlqK+IS0HuB12E36tYHn1uMJG6qunhyN1U9FTpkzrHNO4O827fDhS7YvdJnee4fgd9YUOz
+kZ+uO5H9+ZMs+qBuPwd/n64oelM+iTqOoGDquV9yPkZSOfDbx9zUXweWIY5t1o58Q6HXnKPjMM7N
+OQP+q+xJ8la7qDPTaj6GT9sfCx8/uhX+LjS32Cv78GPy/q/Bk0puP+p/Vu4g7gtdjL0eGSV/70e7
+QXymjD3L/DlncJq5rCj9kx0PIu/f3eDjv6Xn77Ht6sLcih/hzNXJEI39dPiB3Yh4DH5WFORerUXc
+e+sH9XdtrtKPNvwv9i7venBeh/nMFVk7QOy2cXQm8yEfucNnDtgG/ojYRxxWPx/x8Nzd1PktnYa9
+PNeBuP+0G/F4g/7wCB9s+JadfviJMpfhCQoXZ05o4Df4kbUvwId+ccyl+LUY3DRsDPm8nmupZzKZ
+s2c8cUeedy4Dd99K7QsqnQY5bJ8MH9dDYw6ufZk+38S55FPCD8IPd9X4e7WHI8B1TwqLHCp+v/Fv
+9akHt6IS2edzs8V/GL/zw6fPZD6hleWG9DXr+ZfKvthuS6mXmpZH4l/zhp067yITc4wKuMMHNYyE
+v43n7wgrL3+gV31cpO5ID8zG3LI/WehTr1SSOdxurZnPmW8BeeTlHYlzP1OfqDzrjH1ce0rmZRrz
+TeR4whf+jl4G6tHMjPmQh6bB1IUUnAuPdZL5XnbDaObvf3tCXdFt+mXMfIOZE97pK3U4nXaA3+89
+Yv55wfx8buhX5gJ07k8eJCJc6uaUTfmpi/80Ef6umwHflUS9kfngKPFKub6C4+xst+D/utejj7dR
+N+qfW8bCRx5g3q3m9Q4+4+Vn8i/LrhDvmZGCP5U8zBU3xn5CD9vulLklyuz5+G3LX/y9edciTsh+
+mXi/fE381iny4JrDIPxh3830Tb5YDa7v3pr4xMUUOdAWn6cPKc8H7FFL6n7sAdHUIV6Opn6nuiP2
+cP5q5qkF75X5cMZJb+rPxjajbvBqJfp7vgxi3mXd2eTDH/Tm77Hmy5bajzOCfoeyd5lDefc7eS3f
+zPDYzgvxu3UrwB/1us57fqqJn8xwmby5cw/s0YtJ2NXTXvSJxJ+iPvNMgY5y/wHfyNsmN0G+74cy
+V/xLH3DP1ETyUo320X/odof6+ARn5sr404ep7KLOyao9mfsUf0P+pFk9+PQOV9Hfeqlzpl4NIU44
+8Ri7kVRQnqvPoJ5U/9gBXv9Weup5C66T+N0+z9xr8+QG+v9OtAGXJy4D9/34Q5zVj/ey83YnL3pu
+MHjgXyL79Gc98Uf2URKHmRerMo+pyHmed/MffVkB7en/dQ2m36tPMvmvKC/yr/NHwNN+icJeDWpM
+X+DNfSL/+u5D3K9OfvqLx2Sj/r3gFokT9OA6zNsqOFX+PpI5rpDwO1bhBfChoVVEjrRJr8Grw/YR
+75ubwH8bU/OAIyfDL5VOJ/ttPQoT+2SYH+mjGN7SU+53KYJ83Bf+TrzRIYj8VrNt8FHJ5APMwQOp
+K7k0ivW3w19qdYvRF3pr/wL0Lhi+Z+AG4mbXt/iZPhp8rf6WudP7muD/j8Ib2yERUu9nbjyDPJ9s
+ST4kbWHmfXc/C7/kelvyGeaZUvxd6pPunOebHHsi/g9QSwMELQAAAAgAAAAhAF0xPcr/////////
+/wYAFAB3Mi5ucHkBABAAgAQAAAAAAADXAgAAAAAAAJ1T7UtTcRT+TXtDgoIwKLFuoM3IyKRcLcmJ
+aGqoJZqEwa7ppoZM28SyVd6ICkOHL+FLMr3OrdTNtzltOt1u0wjNIg3pg19u36IiI4PC0uXv2X/Q
+/fJwzvmdc57znHMb07PTzl+SkAqilxaodPlaqZyRxqpPSiMZqbpUW67N0yhLtQUq6k/KK9GpNvy6
+orwy1YYdEXM8kok+FMncZv73CyKEsKTJHbeBzOXFFg+1ZS6OosKWI1AUV+InaVwhX3LCvpPdBnyY
++pT6xent44ibL9iBa9YRxKM6pyjym7t7KQr3fg5RZDrLhvBOPzWBdzXzXmpzshNl4BHmRB9euTYO
+HinBqMuudoCHuLtmjPq5+upR5A9/0iE/axY2cyrjCWyD5C3yX3s86K/faoO/JwR9+dX2cvgNi8+p
+X6jI5CmS4LQryPOFGv1512bAN+fdK/CbWe5H33Ap5hBkTS/ht+2ro37S8rUOfCXvK9FHc24MfeVy
+6ET6DkzC3/LAgroZKwPIG/Zeh/4fDvp1TfQN4v2yrBb5Bb0uoH2sF3HRBD2FikIB75prB8DHwGAe
+njd3oK7aPoG81KVp8DbvxF6Etnp/3iMj+JDkecwv/DiMfZBhixN5f5PMqBcyOwd74M8g8oW9buhd
+dRTv2ABjK3SoNHRDv6DiIsxTWz2KORe/+fdv/QL+wrauGsS/s82YxxH9Argj4TH2GxiO++MCzqK+
+uFCI/bG73NCb77HMQUdvtwPxz2dwN6Sh4S7q3tC0o99+fT/muW9Ff86ixt5Y5XoXeHovIs5FTNkQ
+j1Vh7yJ7Gu/FhagqoEKCPmzlOuYWrubi3hRHOsCP/D5mR79GJ+6ffeaDzgqSiD1wYXvwn4nNIUbg
+Lxfi3MQW3AUXL0BXMTDB/99l2JtQR8yCzc/dbAV6bpmQtynUBF37Pr4Bn/R15LMxKSOoF5WLe+Xc
+ybgjkZRAPzG/2H+3BrUj7h9QSwECLQMtAAAACAAAACEAU7/bymECAACAAgAABgAAAAAAAAAAAAAA
+gAEAAAAAYjAubnB5UEsBAi0DLQAAAAgAAAAhAM+5pn6fAQAAgAIAAAYAAAAAAAAAAAAAAIABmQIA
+AGIxLm5weVBLAQItAy0AAAAIAAAAIQCyMkYmUwAAAJAAAAAGAAAAAAAAAAAAAACAAXAEAABiMi5u
+cHlQSwECLQMtAAAACAAAACEAtrO/6sAmAACAKAAABgAAAAAAAAAAAAAAgAH7BAAAdzAubnB5UEsB
+Ai0DLQAAAAgAAAAhAGDcEmC9RwAAgIAAAAYAAAAAAAAAAAAAAIAB8ysAAHcxLm5weVBLAQItAy0A
+AAAIAAAAIQBdMT3K1wIAAIAEAAAGAAAAAAAAAAAAAACAAehzAAB3Mi5ucHlQSwUGAAAAAAYABgA4
+AQAA93YAAAAA
+"""
+
+
+def policy():
+    """The trained policy's weights {"w0": ..., "b0": ..., ...}, from POLICY."""
+    if not POLICY.strip():
+        raise NotImplementedError("write POLICY: train the policy and embed it with "
+                                  "avblocks.labs.lab7_learning.embed_policy (the lab page)")
+    raw = base64.b64decode("".join(POLICY.split()))
+    with np.load(io.BytesIO(raw), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}

@@ -610,6 +610,44 @@ def _emulator(names, pose0, endpoint, log, tmp):
                               stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True)
 
 
+#: a paced run is "disturbed" (the machine did not keep real time) when more
+#: than this share of its steps overran ...
+DISTURBED_OVERRUNS = 0.2
+#: ... or one step was this late [s]; a failed disturbed run is flown again
+DISTURBED_LATENESS = 1.0
+#: times a failed, disturbed run is flown again before it is judged
+DISTURBED_RETRIES = 2
+
+
+def _fly_on_emulator(w, seed, names, p0, Robots, open_router, stop_emulator):
+    """``(results, emulator log records)`` of policy ``w`` flying episode
+    ``seed`` on a fresh robot emulator (real time, over Zenoh on loopback)."""
+    session, endpoint = open_router()
+    with tempfile.TemporaryDirectory() as tmp:
+        log = Path(tmp) / "emulator.jsonl"
+        emu = _emulator(names, p0, endpoint, log, tmp)
+        try:
+            t_end = time.monotonic() + 20
+            while not (log.exists() and log.stat().st_size) and time.monotonic() < t_end:
+                if emu.exit_code(0.0) is not None or emu.proc.poll() is not None:
+                    raise Failed("the robot emulator exited before it logged anything")
+                time.sleep(0.05)
+            time.sleep(0.3)
+
+            def robots(d, p0):
+                fleet = d.add(Robots(names, kind="holonomic2d", router=endpoint, timeout=0.5,
+                                     speed_max=math.sqrt(2.0)), name="fleet")
+                return fleet.position, fleet.velocity
+
+            res = run_policy(w, [seed], vehicles=robots, realtime=1.0)[0]
+            time.sleep(0.3)
+        finally:
+            stop_emulator(emu)
+            session.close()
+        recs = [json.loads(s) for s in log.read_text().splitlines() if s.strip()]
+    return res, recs
+
+
 def check_on_robots(sub):
     try:
         import zenoh  # noqa: F401
@@ -638,48 +676,37 @@ def check_on_robots(sub):
                      f"{MARGIN:g} m of a contact")
     names = [f"r{i + 1}" for i in range(AGENTS)]
     p0 = navigation.navigation_starts(AGENTS, seed)
-    session, endpoint = open_router()
-    with tempfile.TemporaryDirectory() as tmp:
-        log = Path(tmp) / "emulator.jsonl"
-        emu = _emulator(names, p0, endpoint, log, tmp)
-        try:
-            t_end = time.monotonic() + 20
-            while not (log.exists() and log.stat().st_size) and time.monotonic() < t_end:
-                if emu.exit_code(0.0) is not None or emu.proc.poll() is not None:
-                    raise Failed("the robot emulator exited before it logged anything")
-                time.sleep(0.05)
-            time.sleep(0.3)
-
-            def robots(d, p0):
-                fleet = d.add(Robots(names, kind="holonomic2d", router=endpoint, timeout=0.5,
-                                     speed_max=math.sqrt(2.0)), name="fleet")
-                return fleet.position, fleet.velocity
-
-            res = run_policy(w, [seed], vehicles=robots, realtime=1.0)[0]
-            time.sleep(0.3)
-        finally:
-            _stop_emulator(emu)
-            session.close()
-        recs = [json.loads(s) for s in log.read_text().splitlines() if s.strip()]
-    got = {r["robot"] for r in recs if r.get("ev") == "cmd"
-           and (r.get("v", 0) != 0 or r.get("vy", 0) != 0)}
-    end = np.asarray(res["fleet.position"])[-1]
-    goals = np.asarray(res["goals.y"])[-1]
     sim_end = np.asarray(sim_run["fleet.position"])[-1]
-    touched = np.asarray(res["task.collision"]).any(axis=0)
-    away = np.hypot(*(end - goals).T)
-    steps = int(res.meta.get("steps", len(res.t)))
-    over = int(res.meta.get("overruns", 0))
-    paced = (f"paced {over} of {steps} steps overran, worst lateness "
-             f"{1e3 * res.meta.get('max_lateness', 0):.1f} ms")
-    bad = np.flatnonzero(touched | (away > ARRIVED))
+    flown = 0
+    while True:
+        flown += 1
+        res, recs = _fly_on_emulator(w, seed, names, p0, Robots, open_router,
+                                     _stop_emulator)
+        got = {r["robot"] for r in recs if r.get("ev") == "cmd"
+               and (r.get("v", 0) != 0 or r.get("vy", 0) != 0)}
+        end = np.asarray(res["fleet.position"])[-1]
+        goals = np.asarray(res["goals.y"])[-1]
+        touched = np.asarray(res["task.collision"]).any(axis=0)
+        away = np.hypot(*(end - goals).T)
+        steps = int(res.meta.get("steps", len(res.t)))
+        over = int(res.meta.get("overruns", 0))
+        lateness = float(res.meta.get("max_lateness", 0))
+        paced = f"paced {over} of {steps} steps overran, worst lateness {1e3 * lateness:.1f} ms"
+        bad = np.flatnonzero(touched | (away > ARRIVED))
+        # a real-time run the machine could not keep up with says nothing of
+        # the policy: fly it again (a few times) before judging
+        disturbed = over > DISTURBED_OVERRUNS * max(steps, 1) or lateness > DISTURBED_LATENESS
+        if not (bad.size and disturbed) or flown > DISTURBED_RETRIES:
+            break
     if bad.size:
         i = int(bad[0])
         raise Failed(f"on the emulator (episode {seed}, solved in simulation) robot "
                      f"{names[i]} {'touched something and ' if touched[i] else ''}ended "
                      f"{away[i]:.3f} m from its goal (at {fmt(end[i])}, the goal "
                      f"{fmt(goals[i])}; expected within {ARRIVED:g} m, without contact); in "
-                     f"simulation it ended at {fmt(sim_end[i])}; {paced}")
+                     f"simulation it ended at {fmt(sim_end[i])}; {paced}"
+                     + (f" (flown {flown} times: the machine did not keep real time, "
+                        "grade again on a quieter machine)" if disturbed else ""))
     return (f"on the emulator: {AGENTS} robots within {away.max():.3f} m of their goals, "
             f"without contact (episode {seed}; {len(got)} robots received motion commands); "
             f"{paced}")

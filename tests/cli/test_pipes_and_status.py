@@ -25,7 +25,8 @@ def _cmd():
 
 def _env():
     src = str(ROOT / "src")
-    return {**os.environ, "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    path = os.pathsep.join(x for x in (src, os.environ.get("PYTHONPATH")) if x)
+    return {**os.environ, "PYTHONPATH": path}
 
 
 def run_reader_gone(args, timeout=120):

@@ -18,7 +18,8 @@ SRC = Path(__file__).resolve().parents[2] / "src"
 
 
 def _start(args, cwd):
-    env = {**os.environ, "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""),
+    path = os.pathsep.join(x for x in (str(SRC), os.environ.get("PYTHONPATH")) if x)
+    env = {**os.environ, "PYTHONPATH": path,
            "BROWSER": "true"}
     p = subprocess.Popen([sys.executable, "-m", "avblocks", "edit", *args], cwd=cwd,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)

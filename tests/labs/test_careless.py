@@ -47,7 +47,7 @@ SOLUTION = HERE / "solutions" / "lab1_kinematics.py"
 
 def _cli(*args, cwd=None, env=None, timeout=300):
     env = {**os.environ, **(env or {}),
-           "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+           "PYTHONPATH": os.pathsep.join(x for x in (str(SRC), os.environ.get("PYTHONPATH")) if x)}
     return subprocess.run([sys.executable, "-P", "-m", "avblocks", "lab", *args],
                           capture_output=True, env=env, timeout=timeout, cwd=cwd)
 

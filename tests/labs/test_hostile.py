@@ -82,7 +82,7 @@ def _cli(*args, env=None, src=SRC, timeout=900, cwd=None):
     script, the current folder is not on the grader's own path, so the
     grader can run inside the class folder)."""
     env = {**os.environ, **(env or {}),
-           "PYTHONPATH": str(src) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+           "PYTHONPATH": os.pathsep.join(x for x in (str(src), os.environ.get("PYTHONPATH")) if x)}
     return subprocess.run([sys.executable, "-P", "-m", "avblocks", "lab", *args],
                           capture_output=True, text=True, env=env, timeout=timeout, cwd=cwd)
 
@@ -310,7 +310,7 @@ def _grader_on_a_sleeper(tmp_path, token):
     tmp = tmp_path / "tmp"                   # the grader's temporary folders go here
     tmp.mkdir()
     env = {**os.environ, "TMPDIR": str(tmp),
-           "PYTHONPATH": str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+           "PYTHONPATH": os.pathsep.join(x for x in (str(SRC), os.environ.get("PYTHONPATH")) if x)}
     p = subprocess.Popen([sys.executable, "-P", "-m", "avblocks", "lab", "check", "1", str(f)],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     end = time.monotonic() + 120

@@ -180,7 +180,7 @@ def _emulator(endpoint, log, tmp):
     # not the grader's environment: a student's process of the same user can
     # read the emulator's /proc/<pid>/environ (the instructor's tokens and keys)
     env = {**oscalls.child_environment(tmp),
-           "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
+           "PYTHONPATH": os.pathsep.join(x for x in (src, os.environ.get("PYTHONPATH")) if x)}
     cmd = [sys.executable, "-m", "avblocks", "robots", "emulate", "--names", "tb1,tb2",
            "--router", endpoint, "--log", str(log), "--rate", "50",
            "--pose0", "[[0, 0, 0], [0, 2, 0]]", "--drop", "tb2@2.0"]

@@ -602,7 +602,8 @@ def _emulator(names, pose0, endpoint, log, tmp):
 
     from . import oscalls
     src = str(Path(avblocks.__file__).resolve().parents[1])
-    env = {**os.environ, "PYTHONPATH": src + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    path = os.pathsep.join(x for x in (src, os.environ.get("PYTHONPATH")) if x)
+    env = {**os.environ, "PYTHONPATH": path}
     cmd = [sys.executable, "-m", "avblocks", "robots", "emulate", "--names", ",".join(names),
            "--model", "holonomic2d", "--router", endpoint, "--log", str(log), "--rate", "100",
            "--pose0", json.dumps([[float(x), float(y), 0.0] for x, y in pose0])]

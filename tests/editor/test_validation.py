@@ -145,3 +145,22 @@ def test_save_says_draft_only_for_drafts(svc, base):
     assert saved["draft"] is True
     with pytest.raises(av.ScenarioError):    # and avblocks run refuses it
         av.scenarios.load_scenario(str(svc.root / "bad.yaml")).build(svc.root / "out")
+
+
+@pytest.mark.parametrize("key", ["name", "parameters", "blocks", "wires", "simulation",
+                                 "editor"])
+@pytest.mark.parametrize("value", [True, 5, "x", [1], None, 1.5, [[1, 2]],
+                                   {"x": {"type": 3}}])
+def test_any_value_at_a_top_level_key_is_an_editor_error_never_internal(svc, base, key,
+                                                                        value):
+    """The fuzz found ``parameters: true`` ending export in a TypeError (a 500):
+    every top-level key holding a value of the wrong kind gets the editor's own
+    error (or validates, where the value is allowed), from validate and export."""
+    from avblocks.editor.errors import EditorError
+    d = copy.deepcopy(base)
+    d[key] = value
+    for call in (lambda: svc.validate(d), lambda: svc.export(document=d)):
+        try:
+            assert isinstance(call(), dict)
+        except EditorError as e:
+            assert e.kind != "InternalError" and e.status == 400, e

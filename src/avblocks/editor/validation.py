@@ -393,9 +393,10 @@ def _fields(errors, data) -> list:
     None when it is about a port, a wire or the whole diagram) and ``refs``,
     the diagram parameters it is also about (see :func:`_references`: an
     error of ``drive.v_max: $speed`` is also ``speed``'s)."""
-    blocks = data.get("blocks") or {}
-    sim = data.get("simulation") or {}
-    params = data.get("parameters") or {}
+    def mapping(key):       # a hostile document may hold anything at any key
+        v = data.get(key) if isinstance(data, dict) else None
+        return v if isinstance(v, dict) else {}
+    blocks, sim, params = mapping("blocks"), mapping("simulation"), mapping("parameters")
     for rec in errors:
         field, value = rec.get("field"), None
         b, p = rec.get("block"), rec.get("param")

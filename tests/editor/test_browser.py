@@ -682,13 +682,39 @@ def ends_on_ports(geo):
     return off
 
 
-def open_builtin(pg, name):
+# The page settles in steps after a document opens: its nodes are measured, the wires
+# routed and drawn, then the view is fitted (a move scheduled a moment later). On a loaded
+# machine (CI runs two workers on two cores) a test that reads the geometry, or zooms,
+# before the last step saw no wires, or had its zoom undone by the late fit.
+SETTLED = """n => {
+  const v = document.querySelector('.react-flow__viewport')?.style.transform;
+  const paths = [...document.querySelectorAll('.react-flow__edge path.react-flow__edge-path')];
+  const key = v + '|' + paths.length + '|' + paths.map(p => p.getAttribute('d')).join(';');
+  const now = performance.now();
+  const s = window.__avSettled || (window.__avSettled = {key: null, since: now});
+  if (s.key !== key) { s.key = key; s.since = now; return false; }
+  return paths.length >= n && now - s.since > 400; }"""
+
+
+def settled(pg, n_wires=0):
+    """Wait until ``n_wires`` wires are drawn and the view and every wire's path have
+    stayed as they are for 0.4 s (React Flow draws only the wires in view)."""
+    pg.evaluate("() => { window.__avSettled = null; }")
+    try:
+        pg.wait_for_function(SETTLED, arg=n_wires, timeout=30_000)
+    except Exception:
+        seen = pg.evaluate("() => window.__avSettled")
+        raise AssertionError(f"the page did not settle with {n_wires} wires: {seen}") from None
+
+
+def open_builtin(pg, name, n_wires=0):
     pg.get_by_role("button", name="Open").click()
     pg.locator(f'[data-builtin="{name}"]').click()
     pg.wait_for_function(f"document.querySelector('[data-testid=file-title]')"
                          f".textContent.startsWith('{name} (built-in)')")
     pg.wait_for_selector(".react-flow__node-block")
     wait_checked(pg)
+    settled(pg, n_wires)
 
 
 def test_no_wire_under_a_block_in_any_builtin_scenario(page, editor_server):
@@ -700,8 +726,8 @@ def test_no_wire_under_a_block_in_any_builtin_scenario(page, editor_server):
     names = [b["name"] for b in files["builtins"] if b["editable"]]
     assert len(names) == 11, names
     for name in names:
-        open_builtin(pg, name)
         status, loaded = editor_server.post("load", {"builtin": name})
+        open_builtin(pg, name)
         n = len(loaded["document"]["blocks"])
         zoom = pg.evaluate("parseFloat(/scale\\(([\\d.e-]+)\\)/.exec(document.querySelector("
                            "'.react-flow__viewport').style.transform)[1])")
@@ -710,7 +736,7 @@ def test_no_wire_under_a_block_in_any_builtin_scenario(page, editor_server):
                          "return t.getBoundingClientRect().height; }")
         assert px >= 10, (name, px)
         show_everything(pg, n)
-        pg.wait_for_timeout(150)
+        settled(pg, len(loaded["document"]["wires"]))
         geo = pg.evaluate(GEOMETRY)
         assert len(geo["wires"]) == len(loaded["document"]["wires"]), name
         assert wires_under_blocks(geo) == [], name
@@ -759,8 +785,10 @@ def test_no_wire_under_a_block_on_random_hand_placements(page, editor_server):
         pg.wait_for_function(f"document.querySelector('[data-testid=file-title]')"
                              f".textContent.startsWith('{name}')")
         pg.wait_for_selector(".react-flow__node-block")
+        wait_checked(pg)
+        settled(pg)       # wires outside the view are not drawn until it is zoomed out
         show_everything(pg, len(doc["blocks"]))
-        pg.wait_for_timeout(150)
+        settled(pg, len(doc["wires"]))
         geo = pg.evaluate(GEOMETRY)
         assert len(geo["wires"]) == len(doc["wires"])
         assert wires_under_blocks(geo) == [], seed
@@ -784,7 +812,9 @@ def test_feedback_wires_are_drawn_round_the_blocks(page, editor_server):
     """waypoints' fleet.pose -> drive.pose and formation's fleet.pose -> lf.pose (the two
     the issue found hidden under blocks) run outside every block; the docs' pictures."""
     pg = page
-    open_builtin(pg, "waypoints")
+    wires = {b: len(editor_server.post("load", {"builtin": b})[1]["document"]["wires"])
+             for b in ("waypoints", "formation")}
+    open_builtin(pg, "waypoints", wires["waypoints"])
     geo = pg.evaluate(GEOMETRY)
     assert _wire_visible(geo, "fleet.pose->drive.pose") == (True, None)
     # the feedback runs below the row of blocks it returns past
@@ -804,9 +834,9 @@ def test_feedback_wires_are_drawn_round_the_blocks(page, editor_server):
         assert pane["y"] <= r["y"] and r["y"] + r["height"] <= pane["y"] + pane["height"]
         assert not any(_boxes_overlap(r, c) for c in covers), (r, covers)
     shot(pg, "feedback-waypoints")
-    open_builtin(pg, "formation")
+    open_builtin(pg, "formation", wires["formation"])
     show_everything(pg, 6)
-    pg.wait_for_timeout(200)
+    settled(pg, wires["formation"])
     geo = pg.evaluate(GEOMETRY)
     assert _wire_visible(geo, "fleet.pose->lf.pose") == (True, None)
     # it does not run into the supervisor's u port (the issue's misreading)

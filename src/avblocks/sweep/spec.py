@@ -23,8 +23,9 @@ person resuming names (``modules=``).
 The scenario is stored as data: a built-in by name, a YAML/TOML file by
 its text (read with the scenario reader's limits) with its path and
 SHA-256; a ``.py`` scenario by its path and SHA-256 only. A resume runs a
-``.py`` scenario only when the file at that path has that hash, and runs
-the bytes it checked; a store's text is never executed.
+``.py`` scenario only when the person resuming names the file (a store
+never chooses one) and it has that hash, and runs the bytes it checked; a
+store's text is never executed.
 """
 
 from __future__ import annotations

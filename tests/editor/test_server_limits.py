@@ -56,6 +56,26 @@ def test_deep_json_is_a_400_before_it_is_parsed(editor_server, op, depth):
         body["error"]["message"]
 
 
+@pytest.mark.parametrize("encoding", ["utf-16-le", "utf-16", "utf-32-le", "utf-8-sig"])
+@pytest.mark.parametrize("op", ["validate", "save", "export"])
+def test_a_body_in_another_encoding_is_a_400_and_cannot_hide_its_depth(editor_server, op,
+                                                                       encoding):
+    """JSON travels as UTF-8 (RFC 8259, section 8.1). ``json.loads`` of
+    bytes also reads UTF-16 and UTF-32, where an escaped quote (``\\"``)
+    threw the depth scan out of step with the parser: a document nested
+    900 deep in UTF-16 reached the service and was a 500 ``RecursionError``
+    (attack42). Any body that is not UTF-8 text is now a 400, and so is a
+    byte-order mark."""
+    deep = "[" * 900 + "]" * 900
+    text = ('{"path": "a\\"b.yaml", "document": {"blocks": {"a": {"type": '
+            '"vehicles.Unicycle", "pose0": ' + deep + '}}, "name": "x"}}')
+    status, body = _post_raw(editor_server, op, text.encode(encoding))
+    assert status == 400 and body["error"]["kind"] == "BadRequest", body
+    small = json.dumps({"document": DOC}).encode(encoding)
+    status, body = _post_raw(editor_server, op, small)
+    assert status == 400 and body["error"]["kind"] == "BadRequest", body
+
+
 def test_json_within_the_depth_limit_is_answered(editor_server):
     deep = {"x": 1}
     for _ in range(90):

@@ -233,9 +233,20 @@ def json_shape(raw: bytes) -> tuple[int, int]:
 def parse_body(raw: bytes) -> dict:
     """The JSON object of a request body, within :data:`MAX_JSON_DEPTH` and
     :data:`MAX_JSON_VALUES` (checked before parsing); an
-    :class:`EditorError` (400 ``BadRequest``) otherwise. Empty: ``{}``."""
+    :class:`EditorError` (400 ``BadRequest``) otherwise. Empty: ``{}``.
+
+    The body must be UTF-8 text (RFC 8259, section 8.1), without a
+    byte-order mark: it is decoded first and the text is parsed, so the
+    depth scan and the parser read the same characters (``json.loads`` of
+    bytes would also take UTF-16 and UTF-32, where an escaped quote put
+    the scan out of step with the parser and hid the nesting)."""
     if not raw.strip():
         return {}
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise EditorError(f"the body is not UTF-8 text (byte {e.start}): JSON is sent "
+                          "as UTF-8", kind="BadRequest") from None
     depth, values = json_shape(raw)
     if depth > MAX_JSON_DEPTH:
         raise EditorError(f"the body nests deeper than {MAX_JSON_DEPTH} levels",
@@ -248,7 +259,7 @@ def parse_body(raw: bytes) -> dict:
         raise ValueError(f"{name} is not JSON")
 
     try:
-        data = json.loads(raw, parse_constant=constant)
+        data = json.loads(text, parse_constant=constant)
     except (ValueError, RecursionError) as e:
         raise EditorError(f"the body is not JSON: {str(e)[:200]}", kind="BadRequest"
                           ) from None

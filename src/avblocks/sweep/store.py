@@ -50,7 +50,7 @@ MAX_DEFINITION_BYTES = 16 * 1024**2
 #: Codecs an array avblocks reads from a store may use (what zarr writes by
 #: default for numbers and text); anything else is refused before reading.
 SAFE_CODECS = frozenset({"bytes", "transpose", "zstd", "gzip", "blosc", "crc32c",
-                         "vlen-utf8", "sharding_indexed"})
+                         "vlen-utf8"})
 #: Most values of one stored metric (what a case may write, see runner).
 MAX_METRIC_VALUES = 10_000
 _CASE = re.compile(r"^c(\d{7,9})$")
@@ -338,9 +338,12 @@ def scan_cases(root, n_cases=None) -> dict:
 
 def _checked(a, name, limit):
     """The values of array ``a`` once its data type (numbers, booleans) and
-    codecs (:data:`SAFE_CODECS`) and its size (at most ``limit`` values)
-    are checked: a store cannot make avblocks decode with another codec or
-    allocate without bound."""
+    codecs (:data:`SAFE_CODECS`), its size (at most ``limit`` values) and
+    every stored chunk (it inflates to no more than its own size: no
+    compression bomb) are checked (:func:`avblocks.core.stored.check_zarr_array`):
+    a store cannot make avblocks decode with another codec or allocate
+    without bound."""
+    from ..core.stored import StoredArrayError, check_zarr_array
     md = a.metadata
     codecs = [c.to_dict().get("name") for c in getattr(md, "codecs", ())]
     if getattr(md, "zarr_format", None) != 3 or not set(codecs) <= SAFE_CODECS:
@@ -351,7 +354,14 @@ def _checked(a, name, limit):
     size = math.prod(a.shape)
     if size > limit:
         raise SweepError(f"stored array '{name}' has {size:,} values, more than {limit:,}")
-    return np.asarray(a[...])
+    try:
+        check_zarr_array(a, f"stored array '{name}'", max_values=limit)
+        return np.asarray(a[...])
+    except StoredArrayError as e:
+        raise SweepError(str(e)) from None
+    except (ValueError, TypeError, KeyError, OSError, RuntimeError) as e:
+        raise SweepError(f"stored array '{name}' cannot be read: {type(e).__name__}: "
+                         f"{str(e)[:200]}") from None
 
 
 def read_metrics(root, case_id) -> dict:

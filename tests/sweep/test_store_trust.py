@@ -426,3 +426,12 @@ def test_metric_references_import_only_from_named_modules(tmp_path):
         resolve_metric("avblocks.sweep.store:MAX_CASES", "m")
     with pytest.raises(SweepError, match="not 'package.module:function'"):
         resolve_metric("avblocks.sweep:_finish", "m")
+    # a function another module imported, or reached through another module
+    # (attack42: shutil.rmtree and subprocess.getoutput were metrics)
+    for ref, home in (("avblocks.core.confined:shutil.rmtree", "'shutil'"),
+                      ("avblocks.viz.diagram:subprocess.getoutput", "'subprocess'"),
+                      ("avblocks.core.confined:os.path.join", "'os'"),
+                      ("avblocks.analysis.model:dataclass", "'dataclasses'")):
+        with pytest.raises(SweepError, match=home):
+            resolve_metric(ref, "m")
+    assert resolve_metric("avblocks.sweep.metrics:min_gap", "m") is av.sweep.METRICS["min_gap"]

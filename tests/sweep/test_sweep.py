@@ -274,6 +274,13 @@ def test_grid_parsing_and_case_numbering():
         {"k": [0.5, 1, 2], "name": ["a", "b"], "x": [0.0, 0.5, 1.0]}
     with pytest.raises(SweepError, match="name=v1"):
         parse_grid(["k"])
+    # a count that NumPy refuses or that would not fit: one clean error
+    # (attack42: ValueError and MemoryError tracebacks before)
+    for bad in ("k=1:2:-5", "k=1:2:0", "k=1:2:100000000", "k=nan:1:3", "k=1:inf:3"):
+        with pytest.raises(SweepError, match="a count from 1 to 10,000,000"):
+            parse_grid([bad])
+    with pytest.raises(SweepError, match="25,000,000 cases, more than 10,000,000"):
+        av.sweep.make_spec(SCEN, {"a": list(range(5000)), "b": list(range(5000))})
     spec, _ = av.sweep.make_spec(SCEN, {"a": [1, 2, 3], "b": ["x", "y"]}, seeds=[5, 6])
     assert spec.shape == (3, 2, 2) and spec.n_cases == 12
     # row-major over (a, b, seed): case 7 = a index 1, b index 1, seed index 1

@@ -98,6 +98,13 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
     clash = set(g) & set(fx)
     if clash:
         raise SweepError(f"{sorted(clash)} are both in grid and fixed")
+    from .store import MAX_CASES
+    n_cases = len(normalise_seeds(seeds))
+    for v in g.values():
+        n_cases *= len(v)
+    if n_cases > MAX_CASES:
+        raise SweepError(f"the grid and seeds make {n_cases:,} cases, more than "
+                         f"{MAX_CASES:,}", hint="split the sweep into several stores")
     names, custom = _metrics_spec(metrics, src["name"])
     if log is True:
         log = ["*"]

@@ -36,6 +36,10 @@ def parse_grid(items) -> dict:
             except ValueError:
                 raise SweepError(f"--grid {k}={v}: lo:hi:n needs two numbers and a "
                                  "count") from None
+            from .store import MAX_CASES
+            if not 1 <= n <= MAX_CASES or not (np.isfinite(lo) and np.isfinite(hi)):
+                raise SweepError(f"--grid {k}={v}: lo:hi:n needs finite numbers and a count "
+                                 f"from 1 to {MAX_CASES:,}")
             grid[k] = [float(x) for x in np.linspace(lo, hi, n)]
             continue
         vals = []

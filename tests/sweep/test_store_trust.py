@@ -396,6 +396,21 @@ def test_a_huge_definition_is_refused_before_it_is_read(tmp_path):
     _refused(out, "root metadata is 17.8 MB")
 
 
+def test_a_case_padded_with_huge_metadata_is_refused_before_it_is_parsed(tmp_path):
+    """Case records are a few kB; two padded to 164 MB each made opening the
+    store take 1.9 GB and 42 s (attack42). A case's metadata file over the
+    definition's own limit is refused, by size, before zarr parses it."""
+    out, d = _store(tmp_path, cases=(0, 1))
+    meta = out / "cases" / "c0000001" / "zarr.json"
+    j = json.loads(meta.read_text())
+    j["attributes"]["error"] = "x" * (17 * 1024**2)
+    meta.write_text(json.dumps(j))
+    with pytest.raises(SweepError, match="case 'c0000001' of the store has 17.8 MB of "
+                                         "metadata"):
+        Study(out).counts()
+    _refused(out, "17.8 MB of metadata")
+
+
 def test_crafted_case_groups_and_arrays_are_read_as_data_or_refused(tmp_path):
     out, d = _store(tmp_path, cases=(0, 1))
     cases = zarr.open_group(str(out / "cases"), mode="r+", zarr_format=3)

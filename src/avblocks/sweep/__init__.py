@@ -307,8 +307,10 @@ def _named_python(scenario, src, out) -> dict:
         path = src["path"]
         raise SweepError(f"this sweep runs the Python scenario '{path}' (SHA-256 "
                          f"{src['sha256']}); a store never chooses a Python file to run",
-                         hint=f"name the file you trust: avblocks sweep {path} --resume "
-                              f"{out} (av.sweep.resume({str(out)!r}, scenario={path!r}))")
+                         hint="if you ran this sweep, name your scenario file: avblocks "
+                              f"sweep FILE.py --resume {out} (av.sweep.resume({str(out)!r}, "
+                              "scenario=FILE.py)); a store someone sent you may name a file "
+                              "it brought along: run only code you have read")
     return {**src, "path": str(Path(str(scenario)).resolve())}
 
 

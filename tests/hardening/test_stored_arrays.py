@@ -96,8 +96,9 @@ def _peak_mb(code):
     tail = ("\nprint('PEAK', [l.split()[1] for l in open('/proc/self/status') "
             "if l.startswith('VmHWM')][0])")
     # a regression must fail here, not take the machine's memory
-    head = ("import resource\nresource.setrlimit(resource.RLIMIT_AS, (6 * 1024**3, "
-            "resource.RLIM_INFINITY))\n")
+    head = ("import resource\n_s, _h = resource.getrlimit(resource.RLIMIT_AS)\n"
+            "_cap = 6 * 1024**3 if _h == resource.RLIM_INFINITY else min(6 * 1024**3, _h)\n"
+            "resource.setrlimit(resource.RLIMIT_AS, (_cap, _h))\n")
     run = subprocess.run([sys.executable, "-c", head + code + tail],
                          capture_output=True, text=True, timeout=300,
                          env={**__import__("os").environ, "PYTHONPATH": src})

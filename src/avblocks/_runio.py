@@ -162,8 +162,8 @@ def estimate_bytes(compiled, sim) -> int:
             if sim.get("log_every") is None:     # simulate() decimates to the cap
                 log_bytes = min(log_bytes, int(sim.get("max_log_bytes", 2 * 1024**3)))
             need += log_bytes
-    except (TypeError, ValueError, OverflowError, AvError):
-        pass            # simulate() names the bad setting itself
+    except (TypeError, ValueError, OverflowError, ZeroDivisionError, AvError):
+        pass            # simulate() names the bad setting itself (dt: 0 included)
     return int(need)
 
 

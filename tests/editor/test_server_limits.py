@@ -56,6 +56,79 @@ def test_deep_json_is_a_400_before_it_is_parsed(editor_server, op, depth):
         body["error"]["message"]
 
 
+@pytest.mark.parametrize("encoding", ["utf-16-le", "utf-16", "utf-32-le", "utf-8-sig"])
+@pytest.mark.parametrize("op", ["validate", "save", "export"])
+def test_a_body_in_another_encoding_is_a_400_and_cannot_hide_its_depth(editor_server, op,
+                                                                       encoding):
+    """JSON travels as UTF-8 (RFC 8259, section 8.1). ``json.loads`` of
+    bytes also reads UTF-16 and UTF-32, where an escaped quote (``\\"``)
+    threw the depth scan out of step with the parser: a document nested
+    900 deep in UTF-16 reached the service and was a 500 ``RecursionError``
+    (attack42). Any body that is not UTF-8 text is now a 400, and so is a
+    byte-order mark."""
+    deep = "[" * 900 + "]" * 900
+    text = ('{"path": "a\\"b.yaml", "document": {"blocks": {"a": {"type": '
+            '"vehicles.Unicycle", "pose0": ' + deep + '}}, "name": "x"}}')
+    status, body = _post_raw(editor_server, op, text.encode(encoding))
+    assert status == 400 and body["error"]["kind"] == "BadRequest", body
+    small = json.dumps({"document": DOC}).encode(encoding)
+    status, body = _post_raw(editor_server, op, small)
+    assert status == 400 and body["error"]["kind"] == "BadRequest", body
+
+
+def _still_open(sock) -> bool:
+    """Whether the server still holds ``sock``'s connection (no end of file,
+    no reset)."""
+    sock.setblocking(False)
+    try:
+        return sock.recv(1 << 16) != b""
+    except BlockingIOError:
+        return True
+    except OSError:
+        return False
+
+
+def test_idle_and_slow_clients_are_cut_off_and_others_are_served(editor_server,
+                                                                 monkeypatch):
+    """A client that connects and sends nothing, or its headers or body a
+    byte at a time, held its connection (and the body read so far) for
+    ever: 200 such sockets were all open after minutes, 50 slow 8 MB bodies
+    held 350 MB (attack42). Now a request must arrive whole within
+    REQUEST_TIMEOUT, at most MAX_CONNECTIONS are held (a new one cuts off
+    the oldest still sending), and the page's own requests are answered
+    meanwhile. Truth: the server's side of each socket, seen as end of
+    file or reset by the client."""
+    import socket
+    import time
+
+    import avblocks.editor.server as srv
+    monkeypatch.setattr(srv, "REQUEST_TIMEOUT", 1.5)
+    monkeypatch.setattr(srv, "MAX_CONNECTIONS", 16)
+    port = int(editor_server.base.rsplit(":", 1)[1].strip("/"))
+    host = f"127.0.0.1:{port}"
+    socks = []
+    for i in range(45):
+        s = socket.create_connection(("127.0.0.1", port), timeout=5)
+        if i % 3 == 1:                                   # headers, never finished
+            s.sendall(f"GET /{editor_server.token}/api/new HTTP/1.1\r\nHost: {host}\r\n"
+                      "X-Slow: a".encode())
+        elif i % 3 == 2:                                 # a body, never finished
+            s.sendall(f"POST /{editor_server.token}/api/validate HTTP/1.1\r\nHost: {host}"
+                      "\r\nContent-Type: application/json\r\nContent-Length: 1000000"
+                      "\r\n\r\n{\"document\": ".encode())
+        socks.append(s)
+    time.sleep(0.3)
+    status, body = editor_server.get("new")              # the page is still served
+    assert status == 200 and body["document"]["blocks"] == {}
+    assert sum(_still_open(s) for s in socks) <= 16
+    time.sleep(2.5)                                      # past the deadline
+    assert sum(_still_open(s) for s in socks) == 0
+    status, body = editor_server.post("validate", {"document": DOC})
+    assert status == 200 and body["ok"], body
+    for s in socks:
+        s.close()
+
+
 def test_json_within_the_depth_limit_is_answered(editor_server):
     deep = {"x": 1}
     for _ in range(90):

@@ -164,6 +164,43 @@ def test_a_chunked_600_mb_body_is_refused_with_bounded_memory(editor):
     assert status == 200
 
 
+def test_forty_slow_bodies_hold_at_most_eight_bodies_of_memory(editor):
+    """40 clients each send the headers of a 7.9 MB validate and 7 MB of it,
+    then stall. Before (attack42) the server read them all and held them as
+    long as the clients liked (50 such: +350 MB); now it reads at most
+    MAX_BODIES_READING (8) at once: the peak grows by well under the 280 MB
+    the 40 bodies hold, and the page is served meanwhile."""
+    status, _ = editor.call("GET", "files")
+    assert status == 200
+    before = editor.memory()
+    host = f"127.0.0.1:{editor.port}"
+    socks, sent_all = [], 0
+    for _ in range(40):
+        s = socket.create_connection(("127.0.0.1", editor.port), timeout=5)
+        s.sendall(f"POST /{editor.token}/api/validate HTTP/1.1\r\nHost: {host}\r\n"
+                  f"Content-Type: application/json\r\nContent-Length: {8 * MB - 100}"
+                  "\r\n\r\n".encode())
+        s.setblocking(False)
+        sent, t_end = 0, time.monotonic() + 0.3
+        while sent < 7 * MB and time.monotonic() < t_end:
+            try:
+                sent += s.send(b" " * 65536)
+            except BlockingIOError:
+                time.sleep(0.005)
+        sent_all += sent
+        socks.append(s)
+    time.sleep(1.0)
+    status, _ = editor.call("GET", "files")
+    after = editor.memory()
+    for s in socks:
+        s.close()
+    grown = after["VmHWM"] - before["VmHWM"]
+    print(f"\n40 slow bodies ({sent_all / MB:.0f} MB sent): server peak RSS "
+          f"{before['VmHWM'] / MB:.0f} -> {after['VmHWM'] / MB:.0f} MB (+{grown / MB:.0f} MB)")
+    assert status == 200
+    assert grown < 8 * 8 * MB + 40 * MB
+
+
 BIG = {"name": "big", "parameters": {"agents": 4000, "seed": 1},
        "blocks": {"fleet": {"type": "vehicles.Unicycle",
                             "pose0": {"random_poses": {"n": "$agents", "area": [100, 100],

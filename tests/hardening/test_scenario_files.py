@@ -248,6 +248,22 @@ def test_bad_agent_counts_from_the_command_line(tmp_path, capsys, value):
     assert not (tmp_path / "o" / "results.nc").exists()
 
 
+@pytest.mark.parametrize("where", ["--set", "file"])
+@pytest.mark.parametrize("dt", ["0", "0.0", "-0.0"])
+def test_a_zero_time_step_is_one_line_naming_dt(tmp_path, capsys, where, dt):
+    """``--set simulation.dt=0`` (or ``dt: 0`` in the file) ended in a
+    ZeroDivisionError traceback from the memory estimate (attack42)."""
+    if where == "file":
+        f = write(tmp_path, BASE.replace("dt: 0.1", f"dt: {dt}"))
+        rc, _o, err = run([str(f), "--out", str(tmp_path / "o")], capsys)
+    else:
+        f = write(tmp_path, BASE)
+        rc, _o, err = run([str(f), "--set", f"simulation.dt={dt}", "--out",
+                           str(tmp_path / "o")], capsys)
+    assert rc == 2 and err.startswith("avblocks: error: ") and "'dt'" in err, err
+    assert "Traceback" not in err and err.count("\n") == 1
+
+
 def test_huge_generated_arrays_are_refused_with_the_figure(tmp_path, monkeypatch):
     text = BASE.replace("wires:", "  w: {type: blocks.Constant, value: {random_waypoints:"
                         " {n: 1000, count: 1000000000, area: [1, 1]}}}\nwires:")

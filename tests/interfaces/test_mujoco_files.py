@@ -112,6 +112,28 @@ def test_a_nested_include_that_escapes_is_refused(mj, tmp_path):
     _refused(case, "'sub/a.xml'", '<include file="../../other/assets.xml">')
 
 
+@pytest.mark.parametrize("tag", ['<include xmlns="urn:x" file="sub/a.xml"/>',
+                                 '<include xmlns:m="urn:x" file="sub/a.xml"/>'])
+def test_an_include_in_a_namespace_cannot_hide_a_nested_one(mj, tmp_path, tag):
+    """The standard library's XML reader names ``<include xmlns="urn:x">``
+    ``{urn:x}include``, so the check never looked into the file it
+    includes; MuJoCo's reader knows no namespaces and includes it, and its
+    nested include escaped (attack42). MJCF uses no namespaces: any is
+    refused."""
+    case, other = _layout(tmp_path)
+    _write(other / "assets.xml", '<mujoco><asset><mesh name="tetra" '
+           f'file="{case / "meshes" / "tetra.obj"}"/></asset></mujoco>')
+    _write(case / "sub" / "a.xml", '<mujoco><include file="../../other/assets.xml"/>'
+           '</mujoco>')
+    _write(case / "scene.xml", f'<mujoco>{tag}{DRONE[8:]}')
+    if 'xmlns="' in tag:
+        _escapes(mj, case, other / "assets.xml")
+    with pytest.raises(av.ScenarioError) as e:
+        _scenario(case).build(case / "out")
+    msg = str(e.value)
+    assert "s.yaml" in msg and "namespace" in msg and "scene.xml" in msg, msg
+
+
 def test_an_asset_dir_that_escapes_is_refused(mj, tmp_path):
     case, other = _layout(tmp_path)
     _write(case / "scene.xml", _mesh_scene("tetra.obj", '<compiler meshdir="../other/meshes"/>'))

@@ -23,6 +23,9 @@ def test_a_library_function_is_resolved_by_name():
     ("avblocks.scenarios.honeybee:MOVIE", "is not a function"),
     ("avblocks.blocks:Function", "is not a function"),         # a class: never built
     ("avblocks.nosuchmodule:f", "cannot import"),
+    # names a library module imported from elsewhere (attack42: these ran)
+    ("avblocks.analysis.model:dataclass", "a function of 'dataclasses'"),
+    ("avblocks.viz.scene:to_rgba", "a function of 'matplotlib.colors'"),
     (["avblocks.scenarios.honeybee:choose_command"], "expected"),
 ])
 def test_anything_else_is_refused_naming_the_entry(ref, match):

@@ -263,3 +263,46 @@ def test_report_signals_must_be_logged(tmp_path, name):
     with pytest.raises(av.ScenarioError) as e:
         load_any(str(p), {}, tmp_path / "o")
     assert e.value.entry == "report" and dropped in str(e.value)
+
+
+def test_a_figure_never_follows_a_link_out_of_the_output_folder(tmp_path, capsys):
+    """A project someone shares can carry ``avblocks-out/<name>/figs`` as a
+    symbolic link to another folder; a scenario whose figure is
+    ``figs/paths.png`` wrote through it (attack42). Resolved, a figure's
+    name must stay inside the output folder: the run stops with the
+    scenario's entry named and nothing is written where the link points."""
+    import os
+
+    from avblocks.cli import main
+    outside = tmp_path / "elsewhere"
+    outside.mkdir()
+    project = tmp_path / "project"
+    (project / "avblocks-out" / "demo").mkdir(parents=True)
+    os.symlink(outside, project / "avblocks-out" / "demo" / "figs")
+    scenario = project / "demo.yaml"
+    scenario.write_text(
+        "name: demo\nparameters: {agents: 2, seed: 1}\nblocks:\n"
+        "  fleet: {type: vehicles.Unicycle, pose0: {random_poses: {n: $agents, "
+        "area: [5, 5], seed: $seed}}}\n"
+        "  drive: {type: controllers.PointToPoint, waypoints: {random_waypoints: "
+        "{n: $agents, count: 2, area: [5, 5], seed: $seed}}}\n"
+        "wires: [[fleet.pose, drive.pose], [drive.cmd, fleet.cmd]]\n"
+        "simulation: {t_final: 0.2, dt: 0.1, log: [fleet.pose]}\n"
+        "figures: [{plot: trajectories, file: figs/paths.png}]\n")
+    cwd = os.getcwd()
+    os.chdir(project)
+    try:
+        code = main(["run", "demo.yaml"])
+    finally:
+        os.chdir(cwd)
+    err = capsys.readouterr().err
+    assert code != 0 and "figures[0].file" in err and "outside the folder" in err, err
+    assert list(outside.iterdir()) == []
+    # the same name in a real sub-folder is written
+    os.unlink(project / "avblocks-out" / "demo" / "figs")
+    os.chdir(project)
+    try:
+        assert main(["run", "demo.yaml"]) == 0
+    finally:
+        os.chdir(cwd)
+    assert (project / "avblocks-out" / "demo" / "figs" / "paths.png").stat().st_size > 1000

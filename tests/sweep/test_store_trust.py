@@ -122,14 +122,15 @@ def test_resume_writes_a_complete_dataset_in_every_order(client, tmp_path, first
     _first_run(out, client, first, interruption)
     assert Study(out).counts()["missing"] == 1
     study = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
-                            metrics={"m": final_x if then == "done" else fails_long})
+                            metrics={"m": final_x if then == "done" else fails_long},
+                            scenario=SCEN)
     assert study.last_run["ran"] == 1 and study.counts()["missing"] == 0
     ds = _check_dataset(out, [first, then])
     if then == "failed":
         assert LONG.strip() in str(ds["error"].values.ravel()[1])
     # retrying the failed cases with a metric that works rewrites the dataset
     again = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
-                            retry_failed=True, metrics={"m": final_x})
+                            retry_failed=True, metrics={"m": final_x}, scenario=SCEN)
     assert again.last_run["ran"] == [first, then].count("failed")
     _check_dataset(out, ["done", "done"])
 
@@ -149,7 +150,7 @@ def test_resume_over_a_dataset_an_older_avblocks_wrote(client, tmp_path):
     zarr.open_group(str(out), mode="r+").attrs.update(keep)
     assert zarr.open_group(str(out))["status"].dtype == np.dtype("<U4")
     av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
-                    metrics={"m": fails_long})
+                    metrics={"m": fails_long}, scenario=SCEN)
     _check_dataset(out, ["done", "failed"])
 
 
@@ -186,14 +187,16 @@ def _set(out, definition):
         json.dumps(definition)
 
 
-def _refused(out, match, capsys=None):
+def _refused(out, match, capsys=None, scenario=None):
     """Every way of opening or resuming ``out`` is refused (or, for opening,
-    reads only data); nothing runs."""
+    reads only data); nothing runs. ``scenario``: the Python file the
+    person resuming names."""
     with pytest.raises(SweepError, match=match):
-        av.sweep.resume(str(out), summary=False, plot=False, workers=1)
+        av.sweep.resume(str(out), summary=False, plot=False, workers=1, scenario=scenario)
     if capsys is not None:
         from avblocks.cli import main
-        assert main(["sweep", "--resume", str(out), "--quiet", "--no-plot",
+        named = [str(scenario)] if scenario is not None else []
+        assert main(["sweep", *named, "--resume", str(out), "--quiet", "--no-plot",
                      "--workers", "1"]) == 2
         err = capsys.readouterr().err
         assert err.startswith("avblocks: error: ") and "Traceback" not in err
@@ -221,19 +224,60 @@ def test_a_stored_python_text_never_runs(tmp_path, capsys):
                      "text": evil}
     _set(out, d)
     _refused(out, "gone.py", capsys)
+    _refused(out, "gone.py", capsys, scenario=tmp_path / "gone.py")
     (tmp_path / "gone.py").write_text("# another file\n")
     _refused(out, r"gone.py' changed since the sweep started: its SHA-256 is [0-9a-f]{64}, "
-                  r"the store expects [0-9a-f]{64}", capsys)
+                  r"the store expects [0-9a-f]{64}", capsys, scenario=tmp_path / "gone.py")
     # the same attack in today's format: a text next to a path and a hash
     d["version"] = 2
     d["scenario"] = {"name": "goal", "kind": "py", "path": SCEN, "text": evil,
                      "sha256": hashlib.sha256(evil.encode()).hexdigest()}
     _set(out, d)
-    _refused(out, "goal_scenario.py' changed since the sweep started", capsys)
+    _refused(out, "never chooses a Python file", capsys)
+    _refused(out, "goal_scenario.py' changed since the sweep started", capsys, scenario=SCEN)
     study = Study.open(out)                       # reading it is fine: data only
     assert study.counts() == {"done": 1, "failed": 0, "missing": 1}
     study.to_xarray()
     assert not marker.exists()
+
+
+def test_a_store_that_brings_its_own_python_file_never_runs_it(client, tmp_path, capsys):
+    """A store can carry a Python file (inside itself, or next to it in a
+    shared folder) and name it with its own SHA-256: the hash matches, yet
+    resume never runs it unless the person resuming names that file; the
+    file they name runs only with the stored hash, and the CLI takes it as
+    the scenario argument (attack42: a store naming ``crafted.zarr/notes.py``
+    ran it on `avblocks sweep --resume`)."""
+    marker = tmp_path / "pwned.txt"
+    out, d = _store(tmp_path)
+    evil = MARKER_CODE.format(marker=str(marker)).encode()
+    (out / "notes.py").write_bytes(evil)                 # inside the store
+    (tmp_path / "beside.py").write_bytes(evil)           # next to it (a shared folder)
+    cwd = os.getcwd()
+    os.chdir(tmp_path)
+    try:
+        for path in ("crafted.zarr/notes.py", str(out / "notes.py"),
+                     str(tmp_path / "beside.py")):
+            d["scenario"] = {"name": "notes", "kind": "py", "path": path,
+                             "sha256": hashlib.sha256(evil).hexdigest()}
+            _set(out, d)
+            _refused(out, "never chooses a Python file to run", capsys)
+            # naming another file (the real scenario) does not run the store's
+            _refused(out, "changed since the sweep started", capsys, scenario=SCEN)
+            # nor does naming a scenario of another kind
+            _refused(out, "is a sweep of py scenario", capsys, scenario="waypoints")
+    finally:
+        os.chdir(cwd)
+    assert not marker.exists()
+    # the sweep's own file, named: it runs (CLI: the scenario argument)
+    scen = tmp_path / "goal_scenario.py"
+    shutil.copy(SCEN, scen)
+    (tmp_path / "mine").mkdir()
+    out2, _ = _store(tmp_path / "mine", str(scen))
+    from avblocks.cli import main
+    assert main(["sweep", str(scen), "--resume", str(out2), "--scheduler",
+                 client.scheduler.address, "--quiet", "--no-plot"]) == 0
+    assert Study(out2).counts() == {"done": 2, "failed": 0, "missing": 0}
 
 
 def test_a_changed_python_scenario_is_refused_and_the_same_one_runs(client, tmp_path):
@@ -244,10 +288,12 @@ def test_a_changed_python_scenario_is_refused_and_the_same_one_runs(client, tmp_
     scen.write_text(scen.read_text() + "\nprint('changed')\n")
     got = hashlib.sha256(scen.read_bytes()).hexdigest()
     with pytest.raises(SweepError) as e:
-        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                        scenario=str(scen))
     assert str(scen) in str(e.value) and expected in str(e.value) and got in str(e.value)
     shutil.copy(SCEN, scen)                              # the original content again
-    study = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+    study = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                            scenario=str(scen))
     assert study.counts() == {"done": 2, "failed": 0, "missing": 0}
 
 
@@ -261,7 +307,8 @@ def test_an_old_store_whose_file_is_unchanged_still_resumes(client, tmp_path):
     d["scenario"] = {"name": "goal_scenario", "kind": "py", "path": str(scen),
                      "text": scen.read_text()}
     _set(out, d)
-    study = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+    study = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                            scenario=str(scen))
     assert study.counts()["done"] == 2
 
 
@@ -293,7 +340,8 @@ def test_a_builtin_name_that_is_a_path_is_refused(tmp_path, capsys):
     (lambda d: d["scenario"].update(sha256="abc"), "scenario.sha256"),
     (lambda d: d["scenario"].update(path="x\x00.py"), "scenario.path"),
     (lambda d: d["scenario"].update(path="a" * 5000), "scenario.path"),
-    (lambda d: d["scenario"].update(path="../../../../etc/passwd"), "changed since"),
+    (lambda d: d["scenario"].update(path="../../../../etc/passwd"),
+     "never chooses a Python file"),
     (lambda d: d.update(grid=[1, 2]), "grid must be a dict"),
     (lambda d: d.update(grid={"goal": []}), "has no values"),
     (lambda d: d.update(grid={"a": list(range(5000)), "b": list(range(5000))}),
@@ -322,7 +370,7 @@ def test_junk_definitions_are_refused_by_entry(tmp_path, change, match):
     change(d)
     _set(out, d)
     _refused(out, match)
-    if "may not import" not in match and "changed since" not in match:
+    if "may not import" not in match and "never chooses" not in match:
         with pytest.raises(SweepError, match=match):
             Study.open(out)
 
@@ -346,6 +394,21 @@ def test_a_huge_definition_is_refused_before_it_is_read(tmp_path):
     meta["attributes"]["padding"] = "x" * (17 * 1024**2)
     (out / "zarr.json").write_text(json.dumps(meta))
     _refused(out, "root metadata is 17.8 MB")
+
+
+def test_a_case_padded_with_huge_metadata_is_refused_before_it_is_parsed(tmp_path):
+    """Case records are a few kB; two padded to 164 MB each made opening the
+    store take 1.9 GB and 42 s (attack42). A case's metadata file over the
+    definition's own limit is refused, by size, before zarr parses it."""
+    out, d = _store(tmp_path, cases=(0, 1))
+    meta = out / "cases" / "c0000001" / "zarr.json"
+    j = json.loads(meta.read_text())
+    j["attributes"]["error"] = "x" * (17 * 1024**2)
+    meta.write_text(json.dumps(j))
+    with pytest.raises(SweepError, match="case 'c0000001' of the store has 17.8 MB of "
+                                         "metadata"):
+        Study(out).counts()
+    _refused(out, "17.8 MB of metadata")
 
 
 def test_crafted_case_groups_and_arrays_are_read_as_data_or_refused(tmp_path):
@@ -378,3 +441,12 @@ def test_metric_references_import_only_from_named_modules(tmp_path):
         resolve_metric("avblocks.sweep.store:MAX_CASES", "m")
     with pytest.raises(SweepError, match="not 'package.module:function'"):
         resolve_metric("avblocks.sweep:_finish", "m")
+    # a function another module imported, or reached through another module
+    # (attack42: shutil.rmtree and subprocess.getoutput were metrics)
+    for ref, home in (("avblocks.core.confined:shutil.rmtree", "'shutil'"),
+                      ("avblocks.viz.diagram:subprocess.getoutput", "'subprocess'"),
+                      ("avblocks.core.confined:os.path.join", "'os'"),
+                      ("avblocks.analysis.model:dataclass", "'dataclasses'")):
+        with pytest.raises(SweepError, match=home):
+            resolve_metric(ref, "m")
+    assert resolve_metric("avblocks.sweep.metrics:min_gap", "m") is av.sweep.METRICS["min_gap"]

@@ -128,10 +128,11 @@ def test_grid_sweep_matches_serial_runs_and_closed_form(client, serial, tmp_path
     half.write_text(half.read_text().replace('"status"', '"status_"'))
     assert Study(out).counts() == {"done": 30, "failed": 0, "missing": 6}
     with pytest.raises(SweepError, match="cannot be imported by name"):
-        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                        scenario=SCEN)
     fns = {k: v for k, v in metrics().items() if callable(v)}   # not importable by name
     again = av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
-                            metrics=fns)
+                            metrics=fns, scenario=SCEN)
     assert again.last_run["ran"] == 6 and again.last_run["done"] == 6
     after = again.records()
     for cid, rec in before.items():
@@ -273,6 +274,13 @@ def test_grid_parsing_and_case_numbering():
         {"k": [0.5, 1, 2], "name": ["a", "b"], "x": [0.0, 0.5, 1.0]}
     with pytest.raises(SweepError, match="name=v1"):
         parse_grid(["k"])
+    # a count that NumPy refuses or that would not fit: one clean error
+    # (attack42: ValueError and MemoryError tracebacks before)
+    for bad in ("k=1:2:-5", "k=1:2:0", "k=1:2:100000000", "k=nan:1:3", "k=1:inf:3"):
+        with pytest.raises(SweepError, match="a count from 1 to 10,000,000"):
+            parse_grid([bad])
+    with pytest.raises(SweepError, match="25,000,000 cases, more than 10,000,000"):
+        av.sweep.make_spec(SCEN, {"a": list(range(5000)), "b": list(range(5000))})
     spec, _ = av.sweep.make_spec(SCEN, {"a": [1, 2, 3], "b": ["x", "y"]}, seeds=[5, 6])
     assert spec.shape == (3, 2, 2) and spec.n_cases == 12
     # row-major over (a, b, seed): case 7 = a index 1, b index 1, seed index 1
@@ -388,16 +396,18 @@ def test_a_store_never_runs_the_code_it_holds(client, tmp_path):
     for cid in (1, 3):
         shutil.rmtree(out / "cases" / f"c{cid:07d}")
     with pytest.raises(SweepError, match="'final_x'|'evil'"):
-        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False)
+        av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
+                        scenario=SCEN)
     with pytest.raises(SweepError, match="'evil'.*cannot be imported by name"):
         av.sweep.resume(str(out), scheduler=client, summary=False, plot=False,
-                        metrics={"final_x": lambda r: r["fleet.position"][-1, :, 0]})
+                        metrics={"final_x": lambda r: r["fleet.position"][-1, :, 0]},
+                        scenario=SCEN)
     study = Study.open(out)
     ds = study.to_xarray()
     assert ds["gap"].shape == (2, 2) and study.counts()["missing"] == 2
     from avblocks.cli import main
-    assert main(["sweep", "--resume", str(out), "--scheduler", client.scheduler.address,
-                 "--quiet", "--no-plot"]) == 2
+    assert main(["sweep", SCEN, "--resume", str(out), "--scheduler",
+                 client.scheduler.address, "--quiet", "--no-plot"]) == 2
     assert not marker.exists()
     # importable metrics resume by name
     with pytest.raises(SweepError, match="no.such.module"):

@@ -211,18 +211,72 @@ class Policy(Block):
 
     @classmethod
     def load(cls, path, *, fn=None, n=None, **kw):
-        """A Policy from a file :meth:`save` (or :func:`save_policy`) wrote."""
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["__meta__"]))
-            params = {k: z[k] for k in meta["order"]}
-            low, high = z["__low__"], z["__high__"]
+        """A Policy from a file :meth:`save` (or :func:`save_policy`) wrote.
+
+        The file may come from someone else (a scenario names it): it is
+        read as data (no pickle) and only when it is a ``.npz`` whose
+        members, as its zip directory declares them, are ``.npy`` arrays
+        that inflate to at most ``AVBLOCKS_MAX_MEMORY`` together (the zip
+        reader stops each member at its declared size, so a 2 MB file
+        cannot inflate to gigabytes); a malformed file is a
+        :class:`~avblocks.core.errors.ParameterError` naming it."""
+        _check_npz(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                meta = json.loads(str(z["__meta__"]))
+                params = {k: z[k] for k in meta["order"]}
+                low, high = z["__low__"], z["__high__"]
+            if not isinstance(meta.get("act_dim"), int):
+                raise TypeError("act_dim")
+            opts = {"activation": meta["activation"], "output": meta["output"],
+                    "act_dim": meta["act_dim"], "low": low, "high": high}
+        except MemoryError:
+            raise ParameterError("a policy file declares arrays that do not fit in memory",
+                                 block="Policy", param="path", found=str(path)) from None
+        except (KeyError, TypeError, ValueError, AttributeError, EOFError, OSError,
+                RecursionError) as e:
+            raise ParameterError(f"not a policy file Policy.save wrote ({type(e).__name__}: "
+                                 f"{str(e)[:120]})", block="Policy", param="path",
+                                 found=str(path)) from None
         if meta.get("custom_fn") and fn is None:
             raise ParameterError("this policy was saved with a custom fn: pass fn=",
                                  block="Policy", param="fn", found=str(path))
-        opts = {"activation": meta["activation"], "output": meta["output"],
-                "act_dim": meta["act_dim"], "low": low, "high": high}
         opts.update(kw)
         return cls(params, fn=fn, n=n, **opts)
+
+
+#: Largest policy file's arrays, inflated (bytes): a network's weights are
+#: kilobytes to megabytes; this bounds what a small compressed file can
+#: make the reader allocate.
+MAX_POLICY_BYTES = 256 * 1024**2
+
+
+def _check_npz(path):
+    """Refuse a policy file that is not a zip of ``.npy`` members whose
+    declared sizes fit in :func:`~avblocks.core.memlimit.memory_limit`,
+    before NumPy reads any of it."""
+    import zipfile
+
+    from ..core.memlimit import describe, too_large
+    try:
+        with zipfile.ZipFile(path) as z:
+            infos = z.infolist()
+    except (OSError, zipfile.BadZipFile, ValueError) as e:
+        raise ParameterError(f"not a policy file (.npz): {e}", block="Policy", param="path",
+                             found=str(path)) from None
+    bad = [i.filename for i in infos if not i.filename.endswith(".npy")]
+    if bad or not infos:
+        raise ParameterError("a policy file holds .npy arrays only", block="Policy",
+                             param="path", found=bad[:3] or str(path))
+    need = sum(i.file_size for i in infos)
+    if need > MAX_POLICY_BYTES:
+        raise ParameterError(f"a policy file whose arrays inflate to {need / 1e6:,.0f} MB, "
+                             f"more than {MAX_POLICY_BYTES / 1e6:,.0f} MB",
+                             block="Policy", param="path", found=str(path),
+                             hint="a policy is a network's weights: kilobytes to megabytes")
+    if too_large(need):
+        raise ParameterError(f"a policy file whose arrays inflate to {describe(need)}",
+                             block="Policy", param="path", found=str(path))
 
 
 def save_policy(path, params, *, activation="tanh", output="clip", low=-1.0, high=1.0):

@@ -239,15 +239,30 @@ class Results:
     @classmethod
     def load(cls, path) -> Results:
         """Load results saved by :meth:`save`; any problem (missing, not a
-        results file, truncated, a missing reader) is an :class:`AvError`."""
+        results file, truncated, a missing reader) is an :class:`AvError`.
+
+        A results file may come from someone else: what it declares is
+        checked before anything is decoded (:mod:`avblocks.core.stored`):
+        its arrays' sizes within ``AVBLOCKS_MAX_MEMORY``, plain codecs,
+        chunks that inflate to no more than their size, and for NetCDF no
+        HDF5 link, external or virtual storage (data from other files)."""
         path = Path(path)
         if not path.exists():
             raise AvError(f"no results file at {path}")
+        if not path.is_dir() and not path.is_file():
+            raise AvError(f"'{path}' is not a regular file (a FIFO, a socket or a device)")
         try:
             import xarray as xr
+
+            from .stored import check_hdf5, check_zarr_group
+            # what the file declares is checked before anything is decoded
+            # (sizes, codecs, compression bombs, HDF5 links and external data)
             if path.suffix == ".zarr":
+                import zarr
+                check_zarr_group(zarr.open_group(str(path), mode="r"), str(path))
                 ds = xr.open_zarr(path).load()
             else:
+                check_hdf5(path)
                 with xr.open_dataset(path, engine="h5netcdf") as f:
                     ds = f.load()
             return cls.from_xarray(ds)

@@ -20,7 +20,12 @@ this order:
    :data:`MAX_BODY` bytes without reading on (413 ``TooLarge``, chunked
    bodies too), and scanned for nesting deeper than
    :data:`MAX_JSON_DEPTH` and more than :data:`MAX_JSON_VALUES` values
-   before it is parsed (400 ``BadRequest``).
+   before it is parsed (400 ``BadRequest``; a body is UTF-8 text).
+
+Below all of them, the connection itself (:func:`bounded_protocol`): a
+request must arrive whole within :data:`REQUEST_TIMEOUT` seconds, at most
+:data:`MAX_CONNECTIONS` connections are held and
+:data:`MAX_BODIES_READING` bodies read at once.
 
 Under the token:
 
@@ -59,6 +64,20 @@ MAX_BODY = 8 * 1024 * 1024
 MAX_JSON_DEPTH = 100
 #: Most values (numbers, texts, arrays, objects) in a request's JSON.
 MAX_JSON_VALUES = 1_000_000
+#: Seconds a client has to send a whole request (its headers and body) from
+#: the moment it connected or its previous answer was sent; a slower one is
+#: cut off (a "slowloris" holds a connection, and its body's memory, as
+#: long as it likes otherwise). Time the editor spends answering does not
+#: count.
+REQUEST_TIMEOUT = 30.0
+#: Connections held at once. A new one past it cuts off the oldest
+#: connection that is still sending its request (or idle); when every
+#: connection is being answered, the new one is refused.
+MAX_CONNECTIONS = 64
+#: Request bodies read at the same time (each at most :data:`MAX_BODY`):
+#: the others wait their turn, so slow uploads hold at most this many
+#: bodies' memory.
+MAX_BODIES_READING = 8
 #: The host names the server answers to, with its port: loopback only.
 LOOPBACK_NAMES = ("127.0.0.1", "localhost", "[::1]")
 #: The page's Content-Security-Policy: scripts, styles, fetches only from
@@ -233,9 +252,20 @@ def json_shape(raw: bytes) -> tuple[int, int]:
 def parse_body(raw: bytes) -> dict:
     """The JSON object of a request body, within :data:`MAX_JSON_DEPTH` and
     :data:`MAX_JSON_VALUES` (checked before parsing); an
-    :class:`EditorError` (400 ``BadRequest``) otherwise. Empty: ``{}``."""
+    :class:`EditorError` (400 ``BadRequest``) otherwise. Empty: ``{}``.
+
+    The body must be UTF-8 text (RFC 8259, section 8.1), without a
+    byte-order mark: it is decoded first and the text is parsed, so the
+    depth scan and the parser read the same characters (``json.loads`` of
+    bytes would also take UTF-16 and UTF-32, where an escaped quote put
+    the scan out of step with the parser and hid the nesting)."""
     if not raw.strip():
         return {}
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise EditorError(f"the body is not UTF-8 text (byte {e.start}): JSON is sent "
+                          "as UTF-8", kind="BadRequest") from None
     depth, values = json_shape(raw)
     if depth > MAX_JSON_DEPTH:
         raise EditorError(f"the body nests deeper than {MAX_JSON_DEPTH} levels",
@@ -248,7 +278,7 @@ def parse_body(raw: bytes) -> dict:
         # NaN and Infinity are read as Python's json writes them: a field
         # where `.nan` or `1e999` is typed sends that number, and the library
         # judges it (its message comes back on that field)
-        data = json.loads(raw)
+        data = json.loads(text)
     except (ValueError, RecursionError) as e:
         raise EditorError(f"the body is not JSON: {str(e)[:200]}", kind="BadRequest"
                           ) from None
@@ -271,12 +301,19 @@ async def read_body(request) -> bytes:
         if n > MAX_BODY:
             raise EditorError(f"request too large: {n:,} bytes, more than {MAX_BODY:,}",
                               status=413, kind="TooLarge")
+    from starlette.requests import ClientDisconnect
     buf = bytearray()
-    async for chunk in request.stream():
-        buf += chunk
-        if len(buf) > MAX_BODY:
-            raise EditorError(f"request too large: more than {MAX_BODY:,} bytes",
-                              status=413, kind="TooLarge")
+    try:
+        async for chunk in request.stream():
+            buf += chunk
+            if len(buf) > MAX_BODY:
+                raise EditorError(f"request too large: more than {MAX_BODY:,} bytes",
+                                  status=413, kind="TooLarge")
+    except ClientDisconnect:
+        # the client went away, or was cut off for being slow: no answer
+        # can reach it, and nothing of the body is kept
+        raise EditorError("the client went away while sending its request",
+                          kind="BadRequest") from None
     return bytes(buf)
 
 
@@ -318,11 +355,17 @@ def make_app(service: EditorService, token: str, port=None, names=()):
             return Response(result, media_type="image/png")
         return JSONResponse(result)
 
+    slots = []                  # the semaphore, made in the server's own loop
+
     async def body_of(request) -> dict:
         if not _is_json(request):
             raise EditorError("a POST's body is JSON: send it with Content-Type: "
                               "application/json", status=415, kind="UnsupportedMediaType")
-        return parse_body(await read_body(request))
+        if not slots:
+            slots.append(asyncio.Semaphore(MAX_BODIES_READING))
+        async with slots[0]:
+            raw = await read_body(request)
+        return parse_body(raw)
 
     async def index(request):
         page = STATIC / "index.html"
@@ -408,6 +451,77 @@ def make_app(service: EditorService, token: str, port=None, names=()):
     return Guard(TokenGate(app, token), port=port, names=names)
 
 
+def bounded_protocol():
+    """uvicorn's h11 protocol with two limits it lacks: each request must
+    arrive whole within :data:`REQUEST_TIMEOUT` seconds, and at most
+    :data:`MAX_CONNECTIONS` connections are held (see both). Without them
+    a client that connects and sends nothing, or sends its headers or its
+    body a byte at a time, kept its socket (and the body read so far) for
+    ever: 200 such connections were all still open after minutes, 50 slow
+    8 MB bodies held 350 MB."""
+    import h11
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    class BoundedH11Protocol(H11Protocol):
+        _deadline = None
+        _since = 0.0
+
+        def connection_made(self, transport):
+            super().connection_made(transport)
+            self._arm()
+            if len(self.connections) > MAX_CONNECTIONS:
+                waiting = [c for c in self.connections
+                           if c is not self and getattr(c, "waiting", lambda: False)()]
+                victim = min(waiting, key=lambda c: c._since) if waiting else self
+                victim.cut()
+
+        def waiting(self) -> bool:
+            """Whether the connection waits for its client (a request not
+            yet whole), not for the editor's answer."""
+            return (not self.transport.is_closing()
+                    and self.conn.their_state in (h11.IDLE, h11.SEND_BODY))
+
+        def cut(self):
+            self._disarm()
+            if not self.transport.is_closing():
+                self.transport.close()
+
+        def _arm(self):
+            self._disarm()
+            self._since = self.loop.time()
+            self._deadline = self.loop.call_later(REQUEST_TIMEOUT, self._expire)
+
+        def _disarm(self):
+            if self._deadline is not None:
+                self._deadline.cancel()
+                self._deadline = None
+
+        def _expire(self):
+            self._deadline = None
+            if self.waiting():
+                self.cut()
+
+        def handle_events(self):
+            super().handle_events()
+            if self.conn.their_state is not h11.IDLE and not self.waiting():
+                self._disarm()                  # the request is whole: answering
+
+        def on_response_complete(self):
+            super().on_response_complete()
+            if not self.transport.is_closing():
+                self._arm()                     # the next request, if any
+
+        def handle_websocket_upgrade(self, event):
+            self._disarm()                      # (the guard closes it anyway)
+            super().handle_websocket_upgrade(event)
+
+        def connection_lost(self, exc):
+            self._disarm()
+            super().connection_lost(exc)
+
+    return BoundedH11Protocol
+
+
 class EditorServer:
     """The editor served by uvicorn in a background thread.
 
@@ -451,9 +565,12 @@ class EditorServer:
                                          "free one") from None
         self.port = sock.getsockname()[1]
         names = () if self.host in ("127.0.0.1", "::1", "localhost") else (self.host,)
+        # h11 always (not httptools where it is installed): its header limit
+        # and the request deadline and connection cap of bounded_protocol
         config = uvicorn.Config(make_app(self.service, self.token, port=self.port,
                                          names=names),
                                 log_level="warning", access_log=False, lifespan="off",
+                                http=bounded_protocol(),
                                 h11_max_incomplete_event_size=64 * 1024)
         self._server = uvicorn.Server(config)
         self._server.install_signal_handlers = lambda: None   # uvicorn < 0.29

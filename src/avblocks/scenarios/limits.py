@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 
 from ..core.errors import ParameterError, ScenarioError
+from ..core.memlimit import memory_limit  # noqa: F401  (limits.memory_limit, as before)
 
 #: Largest scenario file read (bytes).
 MAX_FILE_BYTES = 10 * 1024**2
@@ -63,24 +64,6 @@ def too_many_blocks(n, source=None, entry="blocks"):
                          file=source, entry=entry,
                          hint="vectorize: one block serves N agents (agents are the "
                               "leading axis); or set AVBLOCKS_MAX_BLOCKS")
-
-
-def memory_limit() -> int:
-    """Bytes a scenario may ask for (generated arrays; the log is checked by
-    ``simulate``): ``AVBLOCKS_MAX_MEMORY`` (e.g. ``8e9``) or half the
-    physical memory, at most 8 GB."""
-    env = os.environ.get("AVBLOCKS_MAX_MEMORY")
-    if env:
-        try:
-            return int(float(env))
-        except (ValueError, OverflowError):
-            raise ScenarioError(f"AVBLOCKS_MAX_MEMORY must be a number of bytes, "
-                                f"found {env!r}") from None
-    try:
-        phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        phys = 16 * 1024**3
-    return int(min(8e9, phys / 2))
 
 
 def budget(elements, what):

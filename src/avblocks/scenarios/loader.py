@@ -161,7 +161,8 @@ def resolve_function(ref, modules=(), source="<scenario>", where="function"):
     Only modules of the library (``avblocks`` and below) and the user's
     block modules (``modules``, named on the command line, and below) are
     imported; the name must be public (no leading underscore) and a plain
-    Python function (not a class, so nothing is constructed). Anything
+    Python function (not a class, so nothing is constructed) defined in
+    one of those modules (not one they imported from elsewhere). Anything
     else is a :class:`ScenarioError` naming the entry."""
     import importlib
     if not isinstance(ref, str) or not _FUNCTION_REF.match(ref):
@@ -186,6 +187,13 @@ def resolve_function(ref, modules=(), source="<scenario>", where="function"):
                             hint=did_you_mean(name, [n for n in dir(mod)
                                                      if inspect.isfunction(getattr(mod, n))
                                                      and not n.startswith("_")]))
+    home = getattr(fn, "__module__", None) or ""
+    if not any(home == a or home.startswith(a + ".") for a in allowed):
+        # a name the module imported from elsewhere (dataclasses.dataclass)
+        raise ScenarioError(f"'{ref}' is a function of '{home}', not of a module a file "
+                            "may name", file=source, entry=where,
+                            hint="functions come from avblocks or a block module "
+                                 "given with --blocks")
     return fn
 
 

@@ -249,8 +249,13 @@ def hooks_from_data(outcome_spec, figures_spec, diagram=None, source="<scenario>
         return ", ".join(lines), numbers
 
     def figures(res, out):
+        from .paths import inside
         paths = []
         for i, item in enumerate(figures_spec):
+            # a name inside the output folder may still pass through a
+            # symbolic link found there (a shared project's avblocks-out/
+            # could carry one): resolved, it must stay inside
+            inside(item["file"], out, what=f"figures[{i}].file", source=source)
             args = {k: v for k, v in item.items() if k not in ("plot", "file")}
             fig = _guarded(f"figures[{i}]", f"plot '{item['plot']}'", source,
                            PLOTS[item["plot"]], res, diagram=diagram, **args)

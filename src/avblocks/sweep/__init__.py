@@ -98,6 +98,13 @@ def make_spec(scenario, grid=None, seeds=1, metrics=None, *, fixed=None, log=Non
     clash = set(g) & set(fx)
     if clash:
         raise SweepError(f"{sorted(clash)} are both in grid and fixed")
+    from .store import MAX_CASES
+    n_cases = len(normalise_seeds(seeds))
+    for v in g.values():
+        n_cases *= len(v)
+    if n_cases > MAX_CASES:
+        raise SweepError(f"the grid and seeds make {n_cases:,} cases, more than "
+                         f"{MAX_CASES:,}", hint="split the sweep into several stores")
     names, custom = _metrics_spec(metrics, src["name"])
     if log is True:
         log = ["*"]
@@ -213,7 +220,8 @@ def run_sweep(scenario, grid=None, seeds=1, metrics=None, out="sweep.zarr", *,
                                   "avblocks.sweep.resume(out) to use the stored ones")
         return resume_sweep(out, scheduler=scheduler, workers=workers, progress=progress,
                             plot=plot, summary=summary, dashboard=dashboard,
-                            metrics=_custom or None, modules=_metric_modules(_custom))
+                            metrics=_custom or None, modules=_metric_modules(_custom),
+                            scenario=scenario)
     if exists and not overwrite:
         raise SweepError(f"'{out}' already exists",
                          hint="pass resume=True to finish it, overwrite=True to "
@@ -233,15 +241,20 @@ def _metric_modules(custom):
 
 def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progress=None,
                  plot=True, summary=True, dashboard=False, metrics=None,
-                 modules=()) -> Study:
+                 modules=(), scenario=None) -> Study:
     """Run the cases of the sweep stored at ``out`` that are missing (and
     the failed ones with ``retry_failed=True``), with the stored definition.
 
-    The store holds no code and nothing in it is executed. Its definition
-    is checked entry by entry first (:func:`avblocks.sweep.store.check_definition`).
-    A ``.py`` scenario is stored by path and SHA-256: it is run only when
-    the file at that path has that hash (the bytes checked are the bytes
-    run), else a :class:`SweepError` names the file and both hashes.
+    The store holds no code and nothing in it is executed, nor chosen to be
+    executed. Its definition is checked entry by entry first
+    (:func:`avblocks.sweep.store.check_definition`). A ``.py`` scenario is
+    stored by path and SHA-256 only, and a store never picks a Python file
+    to run (it could bring one along, inside itself or next to it in a
+    shared folder): the person resuming names the file, ``scenario=``
+    (CLI: ``avblocks sweep FILE.py --resume STORE``), and it runs only when
+    it has the stored hash (the bytes checked are the bytes run); else a
+    :class:`SweepError` names the stored file and the hashes. ``scenario``
+    given for a built-in or YAML/TOML sweep must be that same scenario.
     Custom metrics come back by their stored reference
     (``"package.module:function"``), imported by name only from
     ``avblocks`` or one of ``modules`` (module names you trust, CLI
@@ -268,19 +281,58 @@ def resume_sweep(out, *, scheduler=None, workers=None, retry_failed=False, progr
         data["_callables"] = dict(metrics)
     spec = Spec(data)
     todo = Study(out).missing(retry_failed)
+    src = data["scenario"]
+    if scenario is not None:
+        _same_scenario(scenario, src, out)
     if len(todo):
-        src = data["scenario"]
-        if src["kind"] == "py":                    # the file, checked: never the store's
-            data["scenario"] = checked_python(src)
+        metric_fns = spec.metric_fns()  # every metric found before any case runs
+        if src["kind"] == "py":                    # the file you named, checked
+            data["scenario"] = checked_python(_named_python(scenario, src, out))
         elif src["kind"] in ("yaml", "toml"):
             from .spec import _stored_folder
             data["scenario"] = {**src, "_folder": _stored_folder(src) or ""}
         spec = Spec(data)
-        spec.metric_fns()               # every metric found before any case runs
+        spec._metric_fns = metric_fns
         _check_first_case(spec, todo[0])
     with client_for(scheduler, workers, dashboard) as client:
         counts = execute(spec, todo, out, client, progress)
     return _finish(out, counts, plot, summary)
+
+
+def _named_python(scenario, src, out) -> dict:
+    """The stored ``.py`` scenario ``src`` read from the file the person
+    resuming named (``scenario``), never from a path the store chose."""
+    from pathlib import Path
+    if scenario is None:
+        path = src["path"]
+        raise SweepError(f"this sweep runs the Python scenario '{path}' (SHA-256 "
+                         f"{src['sha256']}); a store never chooses a Python file to run",
+                         hint="if you ran this sweep, name your scenario file: avblocks "
+                              f"sweep FILE.py --resume {out} (av.sweep.resume({str(out)!r}, "
+                              "scenario=FILE.py)); a store someone sent you may name a file "
+                              "it brought along: run only code you have read")
+    return {**src, "path": str(Path(str(scenario)).resolve())}
+
+
+def _same_scenario(scenario, src, out):
+    """``scenario`` (named by the person resuming) is the stored one: the
+    same built-in, or a file of the same kind (its hash is checked where the
+    file is read)."""
+    from pathlib import Path
+
+    from ..scenarios import builtin_scenarios
+    p = Path(str(scenario))
+    kind = "builtin" if not p.is_file() and str(scenario) in builtin_scenarios() else \
+        {".py": "py", ".yaml": "yaml", ".yml": "yaml", ".toml": "toml"}.get(p.suffix)
+    same = kind == src["kind"] and (kind != "builtin" or str(scenario) == src["name"])
+    if same and kind in ("yaml", "toml"):
+        same = scenario_source(scenario)["sha256"] == src.get("sha256")
+    if not same:
+        stored = src["name"] if src["kind"] == "builtin" else src.get("path")
+        raise SweepError(f"'{out}' is a sweep of {src['kind']} scenario '{stored}', not of "
+                         f"'{str(scenario)[:200]}'",
+                         hint="name the scenario the sweep ran, or leave it out for a "
+                              "built-in or YAML scenario")
 
 
 def _finish(out, counts, plot, summary) -> Study:

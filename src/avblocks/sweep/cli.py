@@ -3,6 +3,7 @@
     avblocks sweep formation --grid gain=0.5,1,2 --grid speed=0.4,0.8 --seeds 20 \\
         --out sweep.zarr [--metric final_error] [--scheduler tcp://host:8786] [--workers 2]
     avblocks sweep --resume sweep.zarr
+    avblocks sweep my_scenario.py --resume sweep.zarr     # a sweep of a Python file
 """
 
 from __future__ import annotations
@@ -35,6 +36,10 @@ def parse_grid(items) -> dict:
             except ValueError:
                 raise SweepError(f"--grid {k}={v}: lo:hi:n needs two numbers and a "
                                  "count") from None
+            from .store import MAX_CASES
+            if not 1 <= n <= MAX_CASES or not (np.isfinite(lo) and np.isfinite(hi)):
+                raise SweepError(f"--grid {k}={v}: lo:hi:n needs finite numbers and a count "
+                                 f"from 1 to {MAX_CASES:,}")
             grid[k] = [float(x) for x in np.linspace(lo, hi, n)]
             continue
         vals = []
@@ -56,7 +61,10 @@ def add_parser(sub):
         "sweep", help="run a scenario over a parameter grid x seeds on Dask",
         description="Run a scenario over a grid of parameters and seeds on a Dask "
                     "cluster (a local one by default); results go to a Zarr store.")
-    sw.add_argument("target", nargs="?", help="built-in scenario name or file")
+    sw.add_argument("target", nargs="?",
+                    help="built-in scenario name or file (with --resume: the Python "
+                         "scenario file the stored sweep ran, which a store never names "
+                         "for you)")
     sw.add_argument("--grid", action="append", metavar="NAME=V1,V2,...",
                     help="a grid dimension (repeatable): scenario parameter, "
                          "simulation.<key> or block.param; lo:hi:n for n values")
@@ -103,12 +111,14 @@ def cmd_sweep(args):
     out = args.resume or args.out or "sweep.zarr"
     try:
         if args.resume:
-            if args.target or args.grid or args.set or args.metric or args.log:
+            if args.grid or args.set or args.metric or args.log:
                 raise SweepError("--resume takes the sweep's definition from the store",
-                                 hint="give only --resume STORE (and --scheduler, "
-                                      "--workers, --retry-failed, --metrics-module)")
+                                 hint="give only --resume STORE (and the scenario when it "
+                                      "is a Python file, --scheduler, --workers, "
+                                      "--retry-failed, --metrics-module)")
             study = resume_sweep(args.resume, retry_failed=args.retry_failed,
-                                 modules=tuple(args.metrics_module or ()), **common)
+                                 modules=tuple(args.metrics_module or ()),
+                                 scenario=args.target, **common)
         else:
             if args.metrics_module:
                 raise SweepError("--metrics-module goes with --resume (a new sweep is "

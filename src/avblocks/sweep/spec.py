@@ -23,8 +23,9 @@ person resuming names (``modules=``).
 The scenario is stored as data: a built-in by name, a YAML/TOML file by
 its text (read with the scenario reader's limits) with its path and
 SHA-256; a ``.py`` scenario by its path and SHA-256 only. A resume runs a
-``.py`` scenario only when the file at that path has that hash, and runs
-the bytes it checked; a store's text is never executed.
+``.py`` scenario only when the person resuming names the file (a store
+never chooses one) and it has that hash, and runs the bytes it checked; a
+store's text is never executed.
 """
 
 from __future__ import annotations
@@ -302,10 +303,19 @@ def resolve_metric(ref: str, name: str, modules=()):
                          hint=f"name the module: resume(..., modules=['{mod}']) (CLI: "
                               f"--metrics-module {mod}), or hand the function: "
                               f"resume(..., metrics={{'{name}': fn}})")
+    def inside(module_name):
+        return any(module_name == a or module_name.startswith(a + ".") for a in allowed)
+
     try:
         obj = importlib.import_module(mod)
         for part in qual.split("."):
             obj = getattr(obj, part)
+            if inspect.ismodule(obj) and not inside(obj.__name__):
+                raise SweepError(f"metric '{name}' refers to {ref!r}, which goes through "
+                                 f"the module '{obj.__name__}', not one this resume may "
+                                 "import")
+    except SweepError:
+        raise
     except Exception as e:  # noqa: BLE001 - any import failure is the same answer
         raise SweepError(f"metric '{name}' refers to {ref!r}, which cannot be imported "
                          f"({type(e).__name__}: {e})",
@@ -314,6 +324,12 @@ def resolve_metric(ref: str, name: str, modules=()):
     if not inspect.isfunction(obj):
         raise SweepError(f"metric '{name}' refers to {ref!r}, which is not a Python "
                          "function")
+    home = getattr(obj, "__module__", None) or ""
+    if not inside(home):
+        # a name another module imported (avblocks.core.confined:shutil.rmtree)
+        raise SweepError(f"metric '{name}' refers to {ref!r}, a function of '{home}', "
+                         "not of a module this resume may import",
+                         hint=f"name the module: --metrics-module {home}")
     return obj
 
 

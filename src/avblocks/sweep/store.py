@@ -50,7 +50,11 @@ MAX_DEFINITION_BYTES = 16 * 1024**2
 #: Codecs an array avblocks reads from a store may use (what zarr writes by
 #: default for numbers and text); anything else is refused before reading.
 SAFE_CODECS = frozenset({"bytes", "transpose", "zstd", "gzip", "blosc", "crc32c",
-                         "vlen-utf8", "sharding_indexed"})
+                         "vlen-utf8"})
+#: Largest metadata file of a case group read (its record: status, error
+#: text of at most 4,000 characters, seed, worker and its grid values,
+#: which the definition, at most as large, holds too).
+MAX_CASE_METADATA_BYTES = MAX_DEFINITION_BYTES
 #: Most values of one stored metric (what a case may write, see runner).
 MAX_METRIC_VALUES = 10_000
 _CASE = re.compile(r"^c(\d{7,9})$")
@@ -311,13 +315,46 @@ def failure_text(exc: BaseException, limit=4000) -> str:
     return text if len(text) <= limit else text[:limit] + "..."
 
 
+def _check_case_metadata(root):
+    """Refuse a local store whose case groups' metadata files are larger
+    than :data:`MAX_CASE_METADATA_BYTES` before zarr parses them (a case's
+    record is a few kB; a 314 MB store of two padded records took 1.9 GB
+    and 42 s to open before, attack42)."""
+    folder = getattr(getattr(root, "store", None), "root", None)
+    if folder is None:
+        return
+    cases = Path(str(folder)) / (root.store_path.path or "") / "cases"
+    try:
+        entries = list(os.scandir(cases))
+    except OSError:
+        return
+    for e in entries:
+        if not _CASE.match(e.name):
+            continue
+        for meta in (Path(e.path) / "zarr.json", Path(e.path) / "metrics" / "zarr.json",
+                     Path(e.path) / "logs" / "zarr.json"):
+            try:
+                size = meta.stat().st_size
+            except OSError:
+                continue
+            if size > MAX_CASE_METADATA_BYTES:
+                raise SweepError(f"case '{e.name}' of the store has {size / 1e6:.1f} MB of "
+                                 f"metadata ({meta.name}), more than "
+                                 f"{MAX_CASE_METADATA_BYTES / 1e6:.0f} MB",
+                                 hint="a case's record is a few kB, never larger than "
+                                      "the sweep's definition; this store was not "
+                                      "written by avblocks or was changed")
+
+
 def scan_cases(root, n_cases=None) -> dict:
     """``{case_id: attrs}`` of every case group that has a status: groups
     named ``c`` and seven to nine digits only, below ``n_cases`` when
-    given; a status other than done or failed counts as failed."""
+    given; a status other than done or failed counts as failed. A local
+    store's case metadata is size-checked before it is parsed."""
     out = {}
     if "cases" not in root:
         return out
+    _check_case_metadata(root)
     for name, g in root["cases"].groups():
         m = _CASE.match(name)
         if m is None:
@@ -338,9 +375,12 @@ def scan_cases(root, n_cases=None) -> dict:
 
 def _checked(a, name, limit):
     """The values of array ``a`` once its data type (numbers, booleans) and
-    codecs (:data:`SAFE_CODECS`) and its size (at most ``limit`` values)
-    are checked: a store cannot make avblocks decode with another codec or
-    allocate without bound."""
+    codecs (:data:`SAFE_CODECS`), its size (at most ``limit`` values) and
+    every stored chunk (it inflates to no more than its own size: no
+    compression bomb) are checked (:func:`avblocks.core.stored.check_zarr_array`):
+    a store cannot make avblocks decode with another codec or allocate
+    without bound."""
+    from ..core.stored import StoredArrayError, check_zarr_array
     md = a.metadata
     codecs = [c.to_dict().get("name") for c in getattr(md, "codecs", ())]
     if getattr(md, "zarr_format", None) != 3 or not set(codecs) <= SAFE_CODECS:
@@ -351,7 +391,14 @@ def _checked(a, name, limit):
     size = math.prod(a.shape)
     if size > limit:
         raise SweepError(f"stored array '{name}' has {size:,} values, more than {limit:,}")
-    return np.asarray(a[...])
+    try:
+        check_zarr_array(a, f"stored array '{name}'", max_values=limit)
+        return np.asarray(a[...])
+    except StoredArrayError as e:
+        raise SweepError(str(e)) from None
+    except (ValueError, TypeError, KeyError, OSError, RuntimeError) as e:
+        raise SweepError(f"stored array '{name}' cannot be read: {type(e).__name__}: "
+                         f"{str(e)[:200]}") from None
 
 
 def read_metrics(root, case_id) -> dict:

@@ -29,6 +29,19 @@ def _text_array(values):
     return out
 
 
+def _budget(need, what, spec):
+    """Refuse a dataset whose arrays would pass the memory limit before they
+    are allocated: a store's definition declares the cases (up to 10^7) and
+    one case's metric its shape (up to 10^4 values), so a 50 kB store could
+    ask for hundreds of GB."""
+    from ..core.memlimit import describe, too_large
+    if too_large(need):
+        raise SweepError(f"the sweep's dataset would take {describe(need)} at {what} "
+                         f"({spec.n_cases:,} cases)",
+                         hint="read cases one by one (study.metrics(case), "
+                              "study.results(case)), or set AVBLOCKS_MAX_MEMORY")
+
+
 class Study:
     """The results of a sweep stored at ``out``.
 
@@ -130,9 +143,12 @@ class Study:
         variables = {"status": (dims, _text_array(status).reshape(sp.shape)),
                      "error": (dims, _text_array(error).reshape(sp.shape)),
                      "wall_s": (dims, wall.reshape(sp.shape), {"unit": "s"})}
+        need = 3 * 8 * sp.n_cases               # status, error, wall_s
         for name in sp.data["metrics"]:
             per = vals.get(name, {})
             shape = next(iter(per.values())).shape if per else ()
+            need += 8 * sp.n_cases * int(np.prod(shape))
+            _budget(need, f"metric '{name}'", sp)
             arr = np.full((sp.n_cases,) + shape, np.nan)
             for cid, v in per.items():
                 if v.shape != shape:
@@ -142,7 +158,7 @@ class Study:
             mdims = dims + [f"{name}_dim{i}" for i in range(len(shape))]
             variables[name] = (mdims, arr.reshape(sp.shape + shape))
         if logs:
-            variables.update(self._logs_variables(recs))
+            variables.update(self._logs_variables(recs, need))
         ds = xr.Dataset(variables, coords=coords)
         ds.attrs.update({"scenario": sp.data["scenario"]["name"],
                          "store": self.out, "metrics": list(sp.data["metrics"])})
@@ -175,7 +191,7 @@ class Study:
         done = [c for c, r in self.records().items() if r["status"] == STATUS_DONE]
         return bool(done) and bool(store.read_logs(self._root, done[0]))
 
-    def _logs_variables(self, recs):
+    def _logs_variables(self, recs, need=0):
         sp = self.spec
         done = [cid for cid, r in recs.items() if r["status"] == STATUS_DONE]
         if not done:
@@ -186,6 +202,8 @@ class Study:
                              hint="run it with log=[ports] (CLI: --log PORT)")
         out = {}
         for name, v0 in first.items():
+            need += 8 * sp.n_cases * int(np.prod(v0.shape))
+            _budget(need, f"log '{name}'", sp)
             arr = np.full((sp.n_cases,) + v0.shape, np.nan)
             for cid in done:
                 v = store.read_logs(self._root, cid)[name]

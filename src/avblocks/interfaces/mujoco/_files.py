@@ -20,7 +20,9 @@ absolute path elsewhere, ``..`` out, a symbolic link that points out. A
 name is resolved against every folder MuJoCo may join it to (the main
 file's and the naming file's folders, each with and without each
 ``*dir`` of the model), and all of those must stay inside: a strict
-superset of MuJoCo's own lookups.
+superset of MuJoCo's own lookups. A file that declares a DOCTYPE, entities
+or an XML namespace is refused: the standard library's reader and
+MuJoCo's would not see the same elements.
 """
 
 from __future__ import annotations
@@ -69,6 +71,13 @@ class _Check:
         if "<!DOCTYPE" in text or "<!ENTITY" in text:
             raise ParameterError(f"'{self._rel(file)}' declares a DOCTYPE or entities, "
                                  "which MJCF does not use", block=_NAME, param="mjcf")
+        if "xmlns" in text:
+            # ElementTree would name <include xmlns="u"> "{u}include" and the
+            # walk would miss it; MuJoCo's reader knows no namespaces and
+            # includes it
+            raise ParameterError(f"'{self._rel(file)}' declares an XML namespace "
+                                 "(xmlns), which MJCF does not use", block=_NAME,
+                                 param="mjcf")
         try:
             return ET.fromstring(text)
         except ET.ParseError as e:

@@ -52,11 +52,13 @@ def free_base_port(n, step=1, kind=socket.SOCK_DGRAM):
 
 
 @contextlib.contextmanager
-def emulator(tmp_path, n, *extra, pose0=None):
+def emulator(tmp_path, n, *extra, pose0=None, keep=None):
     """``avblocks mavlink emulate`` as a subprocess; yields (log, connections):
     the emulator's log and the commander's connection spec, reached as the
     real SITL is (PX4 / ``--link udp``: ``udpin:127.0.0.1:BASE+``;
-    ArduPilot's TCP: ``tcp:127.0.0.1:BASE+10``)."""
+    ArduPilot's TCP: ``tcp:127.0.0.1:BASE+10``). ``keep``, a dict, gets the
+    process (``"process"``) and the vehicles' own UDP ports (``"vehicle_port"``,
+    the first)."""
     need_pymavlink()
     extra = list(map(str, extra))
     tcp = ("--flavor" in extra and extra[extra.index("--flavor") + 1] == "ardupilot"
@@ -77,6 +79,8 @@ def emulator(tmp_path, n, *extra, pose0=None):
            *ports, "--pose0", json.dumps(pose0), "--log", str(log), *extra]
     p = subprocess.Popen(cmd, env=env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                          text=True)
+    if keep is not None:
+        keep.update(process=p, vehicle_port=None if tcp else vport)
     try:
         t_end = time.monotonic() + 30
         while not (log.exists() and log.stat().st_size) and time.monotonic() < t_end:

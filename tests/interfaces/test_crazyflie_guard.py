@@ -230,3 +230,42 @@ def test_a_slow_diagram_step_keeps_the_stream_and_a_normal_end_is_left_to_the_co
     gl = [json.loads(s) for s in glog.read_text().splitlines()]
     assert [r for r in gl if r["ev"] == "landed_by_guard"] == []
     assert sorted(r["vehicle"] for r in gl if r["ev"] == "commander_lands") == list(NAMES)
+
+
+def test_a_commander_killed_as_its_takeoff_begins_is_landed_once_its_vehicles_rise(
+        router, tmp_path):
+    """Killed right after its takeoff requests, the vehicles still on the
+    floor (the guard's claim watch saw them "not flying"): the firmware flies
+    the takeoff on, and they would hover until their batteries die. The guard
+    lands them as they leave the floor."""
+    flight, results = tmp_path / "flight.jsonl", tmp_path / "results.nc"
+    with cf_emulator(router, ",".join(NAMES), tmp_path, "--position0", P0) as log, \
+            _guard(router, tmp_path) as glog:
+        p = subprocess.Popen([sys.executable, str(HERE / "_cf_fleet_run.py"), router,
+                              ",".join(NAMES), "30", str(flight), str(results)], env=env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        try:
+            wait_for(log, lambda r: all(
+                [e for e in events(r, "service", nm) if e["service"] == "takeoff"]
+                for nm in NAMES), timeout=40)
+            p.send_signal(signal.SIGKILL)
+            t0 = time.time()
+            recs = wait_for(log, lambda r: all(
+                [e for e in events(r, "ground", nm) if e["wall"] > t0] for nm in NAMES),
+                timeout=20)
+        finally:
+            _end(p)
+    gl = [json.loads(s) for s in Path(glog).read_text().splitlines()]
+    gone = [r for r in gl if r["ev"] == "commander_gone"]
+    assert gone and not any(r["flying"] for r in gone)      # on the floor when it died
+    done = [r for r in gl if r["ev"] == "landed_by_guard"]
+    assert sorted(r["vehicle"] for r in done) == list(NAMES) and all(r["ok"] for r in done)
+    assert {r["reason"] for r in done} == {"commander gone during its takeoff"}
+    for nm in NAMES:
+        srv = [e["service"] for e in events(recs, "service", nm)]
+        assert srv == ["takeoff", "notify_setpoints_stop", "land"], srv
+        # it had left the floor (5 cm) and no higher than 0.3 m of its 0.5 m
+        (plan,) = [e for e in events(recs, "plan", nm) if e["kind"] == "land"]
+        assert 0.05 < plan["from"][2] < 0.3, plan
+        (g,) = [e for e in events(recs, "ground", nm) if e["wall"] > t0]
+        assert g["speed"] < SOFT_TOUCHDOWN, g

@@ -261,3 +261,40 @@ def test_a_reply_awaited_by_two_threads_reaches_both(router):
         cli.close()
         srv.close()
     assert got == {"blocking": (True, None), "bounded": (True, None)}
+
+
+def test_a_reply_without_the_rmw_zenoh_attachment_or_for_another_request_is_no_answer(
+        router):
+    """Anyone on the router can answer a query: a reply counts only with the
+    rmw_zenoh attachment carrying the request's sequence number and client
+    GID (a forged "land accepted" must not stand for the server's)."""
+    import zenoh
+
+    from avblocks.interfaces.crazyflie import _types as T
+    from avblocks.interfaces.crazyflie._link import CfLink, attachment
+    cli = CfLink(router, node="client")
+    forger = zenoh.open(zenoh.Config.from_json5(json.dumps(
+        {"mode": "client", "connect": {"endpoints": [router]}})))
+    try:
+        client = cli.client("/cf1/land", T.LAND)
+        replies = []
+
+        def forge(query):
+            kind = ("bare", "stranger")[len(replies)]
+            replies.append(kind)
+            if kind == "bare":
+                query.reply(query.key_expr, T.empty_response(T.LAND))
+            else:
+                query.reply(query.key_expr, T.empty_response(T.LAND),
+                            attachment=attachment(999, bytes(16)))
+        q = forger.declare_queryable(client.key, forge, complete=True)
+        time.sleep(0.5)
+        bare = client.send(1.0, height=0.03, duration=2.0).wait()
+        stranger = client.send(1.0, height=0.03, duration=2.0).wait()
+        q.undeclare()
+    finally:
+        cli.close()
+        forger.close()
+    assert replies == ["bare", "stranger"]
+    assert bare[0] is False and "without the rmw_zenoh attachment" in bare[1], bare
+    assert stranger[0] is False and "for another request" in stranger[1], stranger

@@ -55,6 +55,50 @@ def test_a_connection_string_it_does_not_know_is_refused_with_examples(bad, why)
         e.value)
 
 
+def test_connection_mistakes_are_named_before_anything_else(tmp_path):
+    """A pilot's usual slips: MAVSDK's URL or one string for two vehicles
+    (the error used to be about the start slots), a port out of range, a
+    PORT+ inside a list (OverflowError / ValueError tracebacks before)."""
+    with pytest.raises(ParameterError, match="one connection string per vehicle "
+                                             r"\(2 vehicles\), or PREFIX:PORT\+"):
+        Drones("udpin:127.0.0.1:14540", n=2)
+    with pytest.raises(ParameterError, match="port from 1 to 65535"):
+        Drones("udpin:127.0.0.1:99999+", n=2)
+    with pytest.raises(ParameterError, match="PREFIX:PORT\\+ stands for every vehicle"):
+        Drones("udpin:127.0.0.1:14540+,udpin:127.0.0.1:14541")
+    p = subprocess.run([sys.executable, "-m", "avblocks", "run", "drone_formation",
+                        "--robots", "mavlink", "--set", "agents=2", "--mavlink-connect",
+                        "udp://:14540", "--out", str(tmp_path)], env=env(),
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2, p.stderr
+    assert "not a MAVLink connection string" in p.stderr and "slots" not in p.stderr
+
+
+def test_a_connection_that_cannot_be_opened_is_refused_by_name(tmp_path):
+    """Nothing serves the TCP port, the serial device is not there, another
+    program holds the UDP port: a PreflightError naming the vehicle, the
+    string and why (ConnectionRefusedError, SerialException tracebacks
+    before; the port in use was shared)."""
+    need_pymavlink()
+    from avblocks.interfaces.flight import PreflightError
+
+    from ._mavlink import free_base_port
+    tcp = free_base_port(1, kind=socket.SOCK_STREAM)
+    held = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    held.bind(("127.0.0.1", 0))
+    udp = held.getsockname()[1]
+    try:
+        for spec, why in ((f"tcp:127.0.0.1:{tcp}", "Connection refused"),
+                          (f"serial:{tmp_path}/ttyNONE:57600", "No such file"),
+                          (f"udpin:127.0.0.1:{udp}", "Address already in use")):
+            drones = Drones(spec, n=1, wait=1.0)
+            with pytest.raises(PreflightError, match=rf"uav1: cannot open the connection "
+                                                     rf"'{spec}' \(.*{why}"):
+                _flight(drones, [[0.0, 0.0, 1.0]], t_final=0.5)
+    finally:
+        held.close()
+
+
 def test_run_help_says_which_connection_reaches_which_autopilot():
     p = subprocess.run([sys.executable, "-m", "avblocks", "run", "--help"], env=env(),
                        capture_output=True, text=True, timeout=60)

@@ -176,11 +176,15 @@ class Pending:
                              f"{reply.err.payload.to_bytes().decode(errors='replace')}")
                 return
             att = reply.ok.attachment
-            if att is None:                     # accept a bare reply, say so
-                return self._set((True, "reply without attachment"))
+            if att is None:         # rmw_zenoh always attaches one: not an answer
+                self._why = (f"a reply of service '{self.client.name}' without the rmw_zenoh "
+                             "attachment (ignored)")
+                return
             seq, _, gid = parse_attachment(att.to_bytes())
-        except Exception:  # noqa: BLE001 - a malformed reply: accept it, say so
-            return self._set((True, "reply without a valid attachment"))
+        except Exception:  # noqa: BLE001 - a malformed reply counts for nothing
+            self._why = (f"a reply of service '{self.client.name}' with a malformed "
+                         "attachment (ignored)")
+            return
         if seq == self.seq and gid == self.client.gid:
             self._set((True, None))
         else:

@@ -51,6 +51,12 @@ from .link import LANDING_PREFIX, POSE_SOURCES, SETPOINTS
 
 #: Default time without set-points before the guard lands a vehicle [s].
 TIMEOUT = 0.4
+#: After a commander vanishes (without announcing a landing) while its vehicle
+#: is still on the floor, the guard lands the vehicle if it leaves the floor
+#: within this time [s]: the takeoff it was given goes on without it (the
+#: high-level commander's polynomial leaves the floor slowly: 5 cm of a
+#: 1.5 m, 5 s takeoff take about 1.3 s).
+ORPHAN_WINDOW = 5.0
 
 
 class Guard:
@@ -104,6 +110,9 @@ class Guard:
         # its commander announced it lands the vehicle (kept until a new stream:
         # the announcement's token goes with the commander's session)
         self.announced = np.zeros(n, bool)
+        # its commander vanished while it stood on the floor (monotonic time;
+        # -inf: no): a takeoff it had been given may still lift it
+        self.orphaned = np.full(n, -np.inf)
         #: What the guard did: ``(vehicle, reason, age of the last set-point [s])``.
         self.landed = []
         self.link = link = CfLink(router, domain=domain, node="avblocks_guard")
@@ -112,9 +121,9 @@ class Guard:
             def on_poses(data, now):
                 try:
                     _, entries = _types.decode_named_poses(data)
-                except Exception:  # noqa: BLE001 - not an array: ignore
+                except Exception:  # noqa: BLE001 - not an array, or too large: ignore
                     return
-                for name, _x, _y, z, *_ in entries[:4096]:
+                for name, _x, _y, z, *_ in entries:
                     if name in index:
                         self._height(index[name], z)
             link.subscribe("/poses", _types.NAMED_POSE_ARRAY, on_poses)
@@ -166,6 +175,7 @@ class Guard:
             first = not self.streaming[i]
             self.streaming[i] = True
             self.handled[i] = False
+            self.orphaned[i] = -np.inf
             if first:
                 self.announced[i] = False
         if first:
@@ -192,6 +202,10 @@ class Guard:
             (self.owners[i].add if put else self.owners[i].discard)(zid)
             announced = bool(self.announced[i])
             left = not self.owners[i]
+            if put:
+                self.orphaned[i] = -np.inf
+            elif left and not announced:
+                self.orphaned[i] = time.monotonic()
         if put:
             self.write({"ev": "commander", "vehicle": nm, "session": zid})
             return
@@ -212,8 +226,14 @@ class Guard:
                 with self._lock:
                     due = (self.streaming[i] and now - self.last_sp[i] > self.timeout
                            and not self.announced[i])
+                    orphan = (now - self.orphaned[i] < ORPHAN_WINDOW and not self.owners[i]
+                              and not self.announced[i])
                 if due and self._flying(i):
                     self._trigger(i, f"no set-point for more than {self.timeout:g} s")
+                elif orphan and self._flying(i):
+                    with self._lock:
+                        self.orphaned[i] = -np.inf
+                    self._trigger(i, "commander gone during its takeoff")
 
     def _trigger(self, i, reason):
         with self._lock:

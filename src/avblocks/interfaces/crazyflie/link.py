@@ -229,10 +229,12 @@ class CrazyflieLink(FleetLink):
         try:
             stamp, entries = _types.decode_named_poses(data)
         except Exception as e:  # noqa: BLE001
+            why = (str(e) if len(data) > _types.MAX_POSES_BYTES
+                   else f"not a NamedPoseArray ({type(e).__name__})")
             for i in range(self.n):
-                self._reject(i, f"not a NamedPoseArray ({type(e).__name__})")
+                self._reject(i, why)
             return
-        for name, *vals in entries[:4096]:
+        for name, *vals in entries:
             i = self._index.get(name)
             if i is not None:
                 self._pose_in(i, (*vals, stamp), now)

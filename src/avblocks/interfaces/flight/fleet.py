@@ -12,7 +12,7 @@ import numpy as np
 from ...core.block import Block
 from ...core.errors import ParameterError
 from . import _guard
-from .errors import FailsafeError, LimitError, PreflightError
+from .errors import FailsafeError, FlightError, LimitError, PreflightError
 from .limits import FlightLimits
 from .telemetry import Telemetry
 
@@ -49,6 +49,9 @@ class FleetLink:
     """
 
     telemetry = None
+    #: Seconds without a word after which a vehicle counts as gone (set by
+    #: the block from its ``link_timeout`` before the takeoff).
+    link_timeout = 2.0
 
     def open(self):
         """Connect; start the threads that fill ``telemetry``."""
@@ -69,6 +72,14 @@ class FleetLink:
         """The protocol's own pre-flight checks (called after the shared ones,
         before anything is commanded; may wait, bounded): a list of reasons,
         each naming its vehicle, empty when all is well."""
+        return []
+
+    def lost_control(self):
+        """Vehicles that left the block's control in flight, as ``[(index,
+        reason)]`` (disarmed, or switched out of the mode the block put them
+        in: their own fail-safe, a pilot, another ground station); empty
+        when the protocol cannot tell. Called each command step and during
+        the takeoff."""
         return []
 
     def land(self, action="land"):
@@ -250,6 +261,8 @@ class Fleet(Block):
         self._log = None
         self._lock = threading.Lock()
         self._landing = False
+        self._failsafe_reason = self._failsafe_code = None
+        self._aborting = False
         self._watch = None
 
     # ---------------------------------------------------------------- to override
@@ -316,6 +329,8 @@ class Fleet(Block):
     def on_start(self):
         self.events, self.steps_sent, self.sent = [], 0, None
         self._landing = False
+        self._failsafe_reason = self._failsafe_code = None
+        self._aborting = False
         self.order = np.arange(self.n)
         self._v_prev, self._t_prev = None, None
         self._next_send = None
@@ -324,6 +339,7 @@ class Fleet(Block):
         self.record("start", vehicles=self.names, block=type(self).__name__)
         try:
             self.link = self.open_link()
+            self.link.link_timeout = self.link_timeout
             _guard.register(self)
             self.link.open()
             self._set_phase("preflight")
@@ -335,7 +351,11 @@ class Fleet(Block):
                             agents=self.agent_names)
         except BaseException as e:
             self.record("abort", phase=self.phase, error=f"{type(e).__name__}: {e}")
-            self.on_stop()
+            self._aborting = True       # the error above is the one to report
+            try:
+                self.on_stop()
+            finally:
+                self._aborting = False
             raise
         for k, v in self._state_from(tm).items():
             self.set_initial(k, v)
@@ -380,6 +400,7 @@ class Fleet(Block):
             sub = [self.names[i] for i in idx]
             why += self.limits.outside(sub, tm.position[idx])
             why += [f"too close: {s}" for s in self.limits.too_close(sub, tm.position[idx])]
+            why += self._takeoff_in_fence(sub, tm.position[idx])
         if self.slots is not None and have.all():
             why += self._assign(tm.position)
         why += self.link.preflight(tm)
@@ -391,6 +412,18 @@ class Fleet(Block):
                                       "again")
         self.record("preflight_ok", position=tm.position.tolist(),
                     battery=[None if not np.isfinite(b) else float(b) for b in tm.battery])
+
+    def _takeoff_in_fence(self, names, position):
+        """Refusals for vehicles whose takeoff height (above where each
+        stands) would carry them through the geofence's ceiling."""
+        g = self.limits.geofence
+        if g is None or not np.isfinite(g[5]):
+            return []
+        z = np.asarray(position, float)[:, 2] + self.takeoff_height
+        return [f"{nm}: takeoff to z={zi:.2f} m ({self.takeoff_height:g} m above where it "
+                f"stands) would cross the geofence's ceiling ({g[5]:g} m): lower the "
+                f"takeoff height or raise the fence"
+                for nm, zi in zip(names, z) if zi > g[5]]
 
     def _assign(self, position):
         """Match the vehicles to the start slots (see ``slots``); sets
@@ -425,7 +458,17 @@ class Fleet(Block):
 
     # ---------------------------------------------------------------- mission
     def on_major_step(self, t, x, u, y):
-        if self.link is None or self.phase != "mission":
+        if self.link is None:
+            return
+        if self.phase == "failsafe" and self._failsafe_code is not None:
+            # landed from another thread (the stall watchdog): the run ends
+            # here, with the reason, not as if the vehicles still flew it
+            raise FailsafeError(f"the fail-safe landed every vehicle ({self._failsafe_reason}) "
+                                "and the run ended", reason=self._failsafe_code,
+                                vehicles=list(self.names), block=type(self).__name__,
+                                time=t, hint="the log up to then is in err.results (and "
+                                             "the flight log)")
+        if self.phase != "mission":
             return
         if self._next_send is not None and t < self._next_send - 1e-9:
             return
@@ -439,6 +482,10 @@ class Fleet(Block):
         if bad.any():
             who = [nm for nm, b in zip(names, bad) if b]
             self._fail(t, "nan", who, f"the velocity command is NaN or infinite for {who}")
+        lost = self.link.lost_control()
+        if lost:
+            who = [self.names[i] for i, _ in lost]
+            self._fail(t, "control", who, "; ".join(why for _, why in lost))
         tm = self._snapshot()
         # every test first, then one fail-safe naming every vehicle concerned:
         # a router or emulator that dies takes all vehicles' poses at once, and
@@ -493,15 +540,19 @@ class Fleet(Block):
                             time=t, hint="the log up to now is in err.results (and the "
                                          "flight log)")
 
-    def land_all(self, reason="fail-safe", vehicles=()):
+    def land_all(self, reason="fail-safe", vehicles=(), code=None):
         """Fail-safe: command every vehicle to land (or RTL) now and stop
-        sending set-points. Any thread; idempotent."""
+        sending set-points. Any thread; idempotent. ``code`` (e.g.
+        ``"stall"``): the next command step ends the run with a
+        :class:`FailsafeError` of that reason (a fail-safe raised from
+        another thread)."""
         link = self.link
         if link is None:
             return
         first = not self._landing
         self._landing = True
         if first:
+            self._failsafe_reason, self._failsafe_code = reason, code
             self.phase = "failsafe"
         try:
             link.land(self.failsafe)
@@ -522,19 +573,20 @@ class Fleet(Block):
             stalled = time.monotonic() - self._last_step
             if stalled > self.stall_timeout:
                 self.land_all(f"no command step for {stalled:.2f} s (stall_timeout "
-                              f"{self.stall_timeout:g} s)")
+                              f"{self.stall_timeout:g} s)", code="stall")
                 return
 
     # ---------------------------------------------------------------- end
     def on_stop(self):
         link = self.link
+        unconfirmed = None
         try:
             if link is not None:
                 if self.phase == "mission":      # the normal end: land, then wait
                     self._set_phase("land")
                     self._landing = True
                     link.land("land")
-                    self._wait_landed()
+                    unconfirmed = self._wait_landed()
                 elif not self._landing and self.phase == "takeoff":
                     self.land_all(f"run ended during {self.phase}")
                     self._wait_landed()
@@ -557,6 +609,13 @@ class Fleet(Block):
             if self._log is not None:
                 self._log.close()
                 self._log = None
+        if unconfirmed and not self._aborting:
+            # the run "completed" but some vehicles were not seen landing: say
+            # so (avblocks run: "error while stopping", exit status 3)
+            raise FlightError(f"the landing at the end of the run was not confirmed: "
+                              f"{unconfirmed}", block=type(self).__name__,
+                              hint="go and look at those vehicles; the flight log has "
+                                   "their last positions")
 
     def _wait_landed(self):
         """Wait up to ``land_wait`` for every vehicle still heard to report
@@ -583,13 +642,20 @@ class Fleet(Block):
                 self._set_phase("landed", position=tm.position.tolist())
             else:
                 self.record("all_landed", phase=self.phase)
-            return
+            return None
+        out = []
         if silent.any():
-            self.record("land_unconfirmed", vehicles=[nm for nm, s in zip(self.names, silent)
-                                                      if s],
+            who = [nm for nm, s in zip(self.names, silent) if s]
+            self.record("land_unconfirmed", vehicles=who,
                         reason=f"silent (nothing heard for more than link_timeout "
                                f"{self.link_timeout:g} s)")
+            out.append(", ".join(f"{self.names[i]} went silent at z={tm.position[i, 2]:.2f} m"
+                                 for i in np.nonzero(silent)[0]))
         flying = ~done & ~silent
         if flying.any():
             self.record("land_timeout", flying=[nm for nm, f in zip(self.names, flying) if f],
                         land_wait=self.land_wait)
+            out.append(", ".join(f"{self.names[i]} still not landed after {self.land_wait:g} s "
+                                 f"(z={tm.position[i, 2]:.2f} m)"
+                                 for i in np.nonzero(flying)[0]))
+        return "; ".join(out)

@@ -55,13 +55,14 @@ numbers and their sources are in :mod:`.autopilots`):
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 
 import numpy as np
 
 from ...core.errors import ParameterError
-from ..flight import Fleet, FleetLink, FlightError, TelemetryBuffer
+from ..flight import Fleet, FleetLink, FlightError, PreflightError, TelemetryBuffer
 from . import autopilots as ap
 from . import frames
 from .autopilots import APM_MODES, PX4_MODES
@@ -86,6 +87,61 @@ QUANTITIES = {"position": (("LOCAL_POSITION_NED", "ODOMETRY"), None),
 OPTIONAL = {"SYS_STATUS": 2.0}
 #: ArduPilot's REQUEST_DATA_STREAM fallback: MAV_DATA_STREAM id -> messages
 FALLBACK_STREAMS = {6: "LOCAL_POSITION_NED", 10: "ATTITUDE", 2: "SYS_STATUS"}
+
+
+#: PX4 main modes (px4_custom_mode.h) and AUTO sub modes, for messages
+PX4_MAIN = {1: "MANUAL", 2: "ALTCTL", 3: "POSCTL", 4: "AUTO", 5: "ACRO", 6: "OFFBOARD",
+            7: "STABILIZED", 8: "RATTITUDE"}
+PX4_AUTO = {1: "READY", 2: "TAKEOFF", 3: "LOITER", 4: "MISSION", 5: "RTL", 6: "LAND",
+            8: "FOLLOW_TARGET", 9: "PRECLAND"}
+#: EXTENDED_SYS_STATE.landed_state values of a vehicle off the ground
+#: (MAV_LANDED_STATE: 2 IN_AIR, 3 TAKEOFF, 4 LANDING)
+IN_AIR_STATES = {2: "IN_AIR", 3: "TAKEOFF", 4: "LANDING"}
+#: Status texts / malformed messages logged per vehicle and second at most
+#: (the rest counted: a flood must not grow the flight log without bound)
+LOG_PER_SECOND = 10
+
+
+def mode_name(autopilot, custom_mode):
+    """``"OFFBOARD"``, ``"AUTO.LAND"``, ``"GUIDED"`` ... of a HEARTBEAT's
+    custom mode."""
+    if autopilot == "px4":
+        main, sub = (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+        name = PX4_MAIN.get(main, f"main mode {main}")
+        return f"{name}.{PX4_AUTO.get(sub, sub)}" if main == 4 else name
+    names = {v: k.upper() for k, v in APM_MODES.items()}
+    return names.get(custom_mode, f"mode {custom_mode}")
+
+
+class _Throttle:
+    """At most ``per_second`` records per key and second; the rest counted
+    and reported in the next record of that key (``suppressed``)."""
+
+    def __init__(self, record, per_second=LOG_PER_SECOND):
+        self.record, self.per_second = record, int(per_second)
+        self._win = {}          # key -> (window start, count, suppressed)
+        self._lock = threading.Lock()
+
+    def __call__(self, key, ev, **kw):
+        now = time.monotonic()
+        with self._lock:
+            t0, k, skipped = self._win.get(key, (now, 0, 0))
+            if now - t0 >= 1.0:
+                t0, k = now, 0
+            if k >= self.per_second:
+                self._win[key] = (t0, k, skipped + 1)
+                return
+            self._win[key] = (t0, k + 1, 0)
+        if skipped:
+            kw["suppressed_before"] = skipped
+        self.record(ev, **kw)
+
+    def flush(self):
+        with self._lock:
+            left = {k: v[2] for k, v in self._win.items() if v[2]}
+            self._win.clear()
+        for key, n in left.items():
+            self.record("suppressed", key=list(key), count=n)
 
 
 class MavlinkLink(FleetLink):
@@ -123,6 +179,11 @@ class MavlinkLink(FleetLink):
         self.params = [dict() for _ in range(n)]
         self._asked = set()                     # parameter names asked for
         self._t_quat = np.full(n, -np.inf)
+        self._hb = [None] * n                  # (armed, custom mode, monotonic time)
+        self._landed_state = [0] * n           # EXTENDED_SYS_STATE.landed_state
+        self._want_mode = [None] * n           # (mode name, since) set by the block
+        self._want_armed = [None] * n          # since (monotonic) the block armed it
+        self._log_some = _Throttle(self.record)
         self._t_reached = np.full(n, np.inf)   # our first heartbeat the vehicle can hear
         self._acks = [dict() for _ in range(n)]  # cmd -> (result, sequence)
         self._ack_seq = 0
@@ -138,11 +199,19 @@ class MavlinkLink(FleetLink):
         self._setup = []
         #: Set-points sent, per vehicle (the sender's count).
         self.setpoints_sent = np.zeros(n, np.int64)
+        #: Messages of each vehicle dropped as malformed (non-finite numbers,
+        #: a quaternion far from unit length, fields pymavlink could not read).
+        self.malformed = np.zeros(n, np.int64)
 
     # -------------------------------------------------------------- plumbing
     def _connect(self, spec):
         m = self.m
         kw = dict(source_system=self.src[0], source_component=self.src[1])
+        if spec.startswith(("udpin:", "udp:", "udpout:")):
+            from ._udp import UdpLink
+            from .emulator import _dialect
+            return UdpLink(spec, _dialect(), source_system=self.src[0],
+                           source_component=self.src[1])
         if spec.startswith("serial:"):
             dev, _, baud = spec[len("serial:"):].rpartition(":")
             return m.mavlink_connection(dev, baud=int(baud), **kw)
@@ -150,8 +219,20 @@ class MavlinkLink(FleetLink):
 
     def open(self):
         self.m = mavutil()
-        for s in self.conn_strings:
-            self.conns.append(self._connect(s))
+        for nm, s in zip(self.names, self.conn_strings):
+            try:
+                self.conns.append(self._connect(s))
+            except (OSError, ValueError, OverflowError) as e:
+                why = getattr(e, "strerror", None) or str(e)
+                hint = {"udp": "another program (a second avblocks commander, QGroundControl, "
+                               "MAVProxy) already listens there: stop it, or give another port",
+                        "tcp": "is the vehicle (ArduPilot SITL: tcp:127.0.0.1:5760+10) "
+                               "running and serving that port?",
+                        "ser": "is the radio plugged in, and is the device name right "
+                               "(ls /dev/ttyUSB* /dev/ttyACM*)?"}.get(s[:3], "")
+                raise PreflightError(f"{nm}: cannot open the connection {s!r} ({why}); "
+                                     "nothing was commanded", block="Drones",
+                                     hint=hint) from None
         for i in range(self.n):
             self._heartbeat(i)           # udpout / tcp: the vehicle learns where we are
         for i in range(self.n):
@@ -198,8 +279,9 @@ class MavlinkLink(FleetLink):
             try:
                 self._handle(i, msg)
             except Exception as e:  # noqa: BLE001 - a malformed message is dropped
-                self.record("rx_error", vehicle=self.names[i], type=msg.get_type(),
-                            error=f"{type(e).__name__}: {e}")
+                self.malformed[i] += 1
+                self._log_some((i, "rx_error"), "rx_error", vehicle=self.names[i],
+                               type=msg.get_type(), error=f"{type(e).__name__}: {e}")
 
     def _handle(self, i, msg):
         typ = msg.get_type()
@@ -220,8 +302,10 @@ class MavlinkLink(FleetLink):
                 return
             if self.sysid[i] == 0:
                 self.sysid[i], self.compid[i] = sid, cid
+                peer = getattr(self.conns[i], "peer", None)
                 self.record("autopilot", vehicle=self.names[i], system=sid, component=cid,
-                            autopilot=msg.autopilot, mav_type=msg.type)
+                            autopilot=msg.autopilot, mav_type=msg.type,
+                            **({"address": f"{peer[0]}:{peer[1]}"} if peer else {}))
                 self._heartbeat(i)        # udpin: now it can reach the vehicle
                 self._t_reached[i] = time.monotonic()
             if (sid, cid) != (self.sysid[i], self.compid[i]):
@@ -230,6 +314,7 @@ class MavlinkLink(FleetLink):
             self.autopilot[i] = ("px4" if msg.autopilot == ap.AUTOPILOT_PX4 else "ardupilot"
                                  if msg.autopilot == ap.AUTOPILOT_ARDUPILOTMEGA else "other")
             self.vtype[i] = msg.type
+            self._hb[i] = (bool(msg.base_mode & 128), int(msg.custom_mode), time.monotonic())
         if self.sysid[i] == 0 or (sid, cid) != (self.sysid[i], self.compid[i]):
             return                                       # not this vehicle's autopilot
         now = time.monotonic()
@@ -240,34 +325,36 @@ class MavlinkLink(FleetLink):
             armed = bool(msg.base_mode & 128)
             tb.armed(i, armed, None if armed else True)
         elif typ == "LOCAL_POSITION_NED":
+            _check(typ, msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
             tb.pose(i, frames.position_to_world([msg.x, msg.y, msg.z], self.origins[i]),
                     frames.ned_to_enu([msg.vx, msg.vy, msg.vz]), now)
         elif typ == "ODOMETRY" and msg.frame_id == 1:         # pose in MAV_FRAME_LOCAL_NED
-            q = frames.quat_to_enu(np.asarray(msg.q, float))
+            _check(typ, msg.x, msg.y, msg.z, msg.vx, msg.vy, msg.vz)
+            q = frames.quat_to_enu(_unit(typ, msg.q))
             v = np.array([msg.vx, msg.vy, msg.vz])
             if msg.child_frame_id != 1:      # velocity in the body frame (BODY_FRD, 12)
-                v = _rotmat(np.asarray(msg.q, float)) @ v
+                v = _rotmat(_unit(typ, msg.q)) @ v
             tb.pose(i, frames.position_to_world([msg.x, msg.y, msg.z], self.origins[i]),
                     frames.ned_to_enu(v), now)
             tb.attitude(i, q)
             self._t_quat[i] = now
         elif typ == "ATTITUDE_QUATERNION":
-            tb.attitude(i, frames.quat_to_enu([msg.q1, msg.q2, msg.q3, msg.q4]))
+            tb.attitude(i, frames.quat_to_enu(_unit(typ, [msg.q1, msg.q2, msg.q3, msg.q4])))
             self._t_quat[i] = now
         elif typ == "ATTITUDE" and now - self._t_quat[i] > 0.5:   # Euler: the fallback
+            _check(typ, msg.roll, msg.pitch, msg.yaw)
             tb.attitude(i, frames.quat_to_enu(_euler_quat(msg.roll, msg.pitch, msg.yaw)))
-        elif typ == "SYS_STATUS" and msg.battery_remaining >= 0:
-            tb.battery(i, msg.battery_remaining / 100.0)
-        elif typ == "BATTERY_STATUS" and msg.battery_remaining >= 0:
-            tb.battery(i, msg.battery_remaining / 100.0)
+        elif typ in ("SYS_STATUS", "BATTERY_STATUS") and msg.battery_remaining >= 0:
+            tb.battery(i, min(msg.battery_remaining, 100) / 100.0)
         elif typ == "EXTENDED_SYS_STATE" and msg.landed_state:
+            self._landed_state[i] = int(msg.landed_state)
             tb.armed(i, tb.snapshot().armed[i], msg.landed_state == 1)
         elif typ == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else msg.text.decode(
                 errors="replace")
             text = text.rstrip("\x00")[:200]
             tb.status(i, text)
-            self.record("statustext", vehicle=self.names[i], text=text)
+            self._log_some((i, "statustext"), "statustext", vehicle=self.names[i], text=text)
         elif typ == "COMMAND_ACK":
             tgt = getattr(msg, "target_system", 0)
             if tgt not in (0, self.src[0]):
@@ -391,6 +478,35 @@ class MavlinkLink(FleetLink):
             raise FlightError(f"{self.names[i]} refused {what}: {name}{spent}"
                               + (f" ('{text}')" if text else ""),
                               block="Drones", hint="see the vehicle's messages")
+
+    def _in_mode(self, i, name, custom_mode):
+        if self.autopilot[i] == "px4":
+            main, sub = PX4_MODES[name]
+            return (custom_mode >> 16) & 0xFF == main and (
+                main != 4 or (custom_mode >> 24) & 0xFF == sub)
+        return custom_mode == APM_MODES[name]
+
+    def lost_control(self):
+        """Vehicles whose HEARTBEAT, sent after the block put them in their
+        mode and armed them, says they are disarmed or in another mode (their
+        own fail-safe, a pilot, another ground station took them)."""
+        if self._landing:
+            return []
+        out = []
+        for i, nm in enumerate(self.names):
+            hb = self._hb[i]
+            if hb is None:
+                continue
+            armed, cm, t = hb
+            wa, wm = self._want_armed[i], self._want_mode[i]
+            if wa is not None and t > wa and not armed:
+                out.append((i, f"{nm} is disarmed (mode {mode_name(self.autopilot[i], cm)}; "
+                               "its own fail-safe, a pilot or another ground station?)"))
+            elif wm is not None and t > wm[1] and not self._in_mode(i, wm[0], cm):
+                out.append((i, f"{nm} left {wm[0].upper()} for "
+                               f"{mode_name(self.autopilot[i], cm)} (its own fail-safe, a "
+                               "pilot or another ground station?)"))
+        return out
 
     def set_mode(self, i, name):
         if self.autopilot[i] == "ardupilot":
@@ -554,6 +670,14 @@ class MavlinkLink(FleetLink):
                 continue
             if self.vtype[i] not in ap.MULTICOPTER_TYPES:
                 why.append(f"{nm}: MAV_TYPE {self.vtype[i]} is not a multicopter")
+            ls = self._landed_state[i]
+            if ls in IN_AIR_STATES:
+                hb = self._hb[i]
+                mode = mode_name(self.autopilot[i], hb[1]) if hb else "unknown"
+                why.append(f"{nm}: already off the ground (EXTENDED_SYS_STATE "
+                           f"{IN_AIR_STATES[ls]}, z={telemetry.position[i, 2]:.2f} m, mode "
+                           f"{mode}): a pilot or another ground station flies it; land it "
+                           "first")
             for q in self._missing(i):
                 names = QUANTITIES[q][0]
                 first = names[0]
@@ -589,6 +713,7 @@ class MavlinkLink(FleetLink):
         start = tm.position.copy()
         goal = start + [0.0, 0.0, height]
         self._landing = False
+        self._want_mode, self._want_armed = [None] * self.n, [None] * self.n
         px4 = [i for i in range(self.n) if self.autopilot[i] == "px4"]
         for i in range(self.n):     # PX4: set-points must flow before OFFBOARD
             local = frames.position_to_local(start[i], self.origins[i])
@@ -609,19 +734,29 @@ class MavlinkLink(FleetLink):
             t_ok = max(self._t_reached[i] for i in apm) + 1.0
             time.sleep(max(0.0, min(t_ok - time.monotonic(), 2.0)))
         for i in range(self.n):
+            mode = "guided" if self.autopilot[i] == "ardupilot" else "offboard"
+            self.set_mode(i, mode)
+            self._want_mode[i] = (mode, time.monotonic())
+            self.command(i, CMD_ARM, 1)
+            self._want_armed[i] = time.monotonic()
             if self.autopilot[i] == "ardupilot":
-                self.set_mode(i, "guided")
-                self.command(i, CMD_ARM, 1)
                 self.command(i, CMD_TAKEOFF, 0, 0, 0, 0, 0, 0, float(height))
             else:
-                self.set_mode(i, "offboard")
-                self.command(i, CMD_ARM, 1)
                 local = frames.position_to_local(goal[i], self.origins[i])
                 self._sp[i] = (MASK_POSITION, local, time.monotonic())
             self.record("climb", vehicle=self.names[i], goal=goal[i].tolist())
         deadline = time.monotonic() + timeout
         while True:
             tm = self.telemetry.snapshot()
+            lost = self.lost_control()
+            silent = [nm for nm, a in zip(self.names, tm.heard_age) if a > self.link_timeout]
+            if lost or silent:
+                raise FlightError(
+                    "the takeoff failed: " + "; ".join(
+                        [why for _, why in lost]
+                        + ([f"nothing heard from {silent} for more than link_timeout "
+                            f"{self.link_timeout:g} s"] if silent else [])),
+                    block="Drones", hint="the vehicles still heard are commanded to land")
             err = np.abs(tm.position[:, 2] - goal[:, 2])
             if np.all(err < 0.1) and np.all(np.abs(tm.velocity[:, 2]) < 0.15):
                 break           # there and settled
@@ -664,11 +799,37 @@ class MavlinkLink(FleetLink):
         self._stop.set()
         for th in self._threads + self._setup:
             th.join(timeout=1.0)
+        self._log_some.flush()
+        for i, c in enumerate(self.conns):
+            if getattr(c, "foreign", 0):
+                self.record("foreign_datagrams", vehicle=self.names[i], count=c.foreign,
+                            last_from=[f"{h}:{p}" for h, p in c.foreign_from],
+                            note="datagrams from addresses other than the vehicle's, "
+                                 "dropped unread")
+            if self.malformed[i]:
+                self.record("malformed", vehicle=self.names[i], count=int(self.malformed[i]))
         for c in self.conns:
             try:
                 c.close()
             except Exception:  # noqa: BLE001
                 pass
+
+
+def _check(typ, *values):
+    """ValueError unless every number of a message is finite (a NaN
+    position must not reach the diagram: a malformed message is dropped)."""
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{typ} with a non-finite value")
+
+
+def _unit(typ, q):
+    """The unit quaternion of ``q`` (w, x, y, z); ValueError for a
+    non-finite one or one far from unit length (norm outside 0.5-1.5)."""
+    q = np.asarray(q, float)
+    nq = float(np.linalg.norm(q)) if np.isfinite(q).all() else math.nan
+    if not 0.5 <= nq <= 1.5:
+        raise ValueError(f"{typ} quaternion of norm {nq:.3g}")
+    return q / nq
 
 
 def _rotmat(q):
@@ -724,6 +885,18 @@ def _check_connection(s):
             raise ParameterError("a serial link is serial:DEVICE:BAUD", block="Drones",
                                  param="connections", found=s,
                                  expected="serial:/dev/ttyUSB0:57600")
+        return
+    host, _, port = s.partition(":")[2].rpartition(":")
+    if s.endswith("+") or "+" in port:
+        raise ParameterError("PREFIX:PORT+ stands for every vehicle's port on its own; in "
+                             "a comma-separated list give each vehicle's port",
+                             block="Drones", param="connections", found=s,
+                             expected="udpin:127.0.0.1:14540+ or udpin:127.0.0.1:14540,"
+                                      "udpin:127.0.0.1:14541")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ParameterError("a network link is PREFIX:HOST:PORT with a port from 1 to "
+                             "65535", block="Drones", param="connections", found=s,
+                             expected="udpin:127.0.0.1:14540, tcp:127.0.0.1:5760")
 
 
 class Drones(Fleet):
@@ -811,14 +984,18 @@ class Drones(Fleet):
         if names is not None and n is None:
             n = len(names.split(",") if isinstance(names, str) else names)
         conns = connections_from(connections, n)
+        for s in conns:                 # the strings first: their errors say most
+            _check_connection(s)
+        if n is not None and len(conns) != n:
+            raise ParameterError(f"give one connection string per vehicle ({n} vehicles), "
+                                 "or PREFIX:PORT+ for consecutive ports", block="Drones",
+                                 param="connections", expected=n, found=conns)
         if names is None:
             names = [f"uav{k + 1}" for k in range(len(conns))]
         super().__init__(names, **flight)
         if len(conns) != self.n:
             raise ParameterError("give one connection string per vehicle", block="Drones",
                                  param="connections", expected=self.n, found=len(conns))
-        for s in conns:
-            _check_connection(s)
         self.connections = conns
         o = np.zeros((self.n, 3)) if origins is None else np.asarray(origins, float)
         if o.shape != (self.n, 3) or not np.isfinite(o).all():

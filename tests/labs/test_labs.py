@@ -70,8 +70,8 @@ def test_the_reference_solution_passes(capsys, number):
 
 @pytest.mark.parametrize("number", NUMBERS)
 def test_the_untouched_template_fails_readably(capsys, number):
-    rc, out, _ = check(capsys, number, get(number).template)
-    assert rc == 1
+    rc, out, err = check(capsys, number, get(number).template)
+    assert rc == 1, out + err
     assert "FAIL" in out and "not written yet: NotImplementedError: write" in out
     # it names the line of the student's file
     assert f"of {get(number).template.name}, in " in out

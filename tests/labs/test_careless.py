@@ -167,3 +167,19 @@ def test_a_grader_that_imported_from_the_class_folder_refuses_to_grade_it(tmp_pa
         del sys.modules["random_homework"]
     cli._keep_off_the_path(tmp_path)
     assert str(tmp_path) not in sys.path
+
+
+def test_a_module_of_the_folder_imported_through_its_package_shadows_nothing(tmp_path):
+    """CI imported the templates as ``src.avblocks.labs.templates.lab1_kinematics``
+    (through the namespace package ``src``, the checkout on the path) and the
+    grader then refused to grade the untouched template: a submodule is reached
+    through its package, never through the folder on the path, so it shadows
+    no name a student's file could take."""
+    sub = types.ModuleType("pkg_of_tests.lab1_kinematics")
+    sub.__file__ = str(tmp_path / "lab1_kinematics.py")
+    sys.modules[sub.__name__] = sub
+    try:
+        assert cli._imported_from(tmp_path) == []
+        cli._keep_off_the_path(tmp_path)            # no refusal
+    finally:
+        del sys.modules[sub.__name__]

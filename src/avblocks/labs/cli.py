@@ -222,6 +222,11 @@ def _imported_from(folder) -> list:
     submission named ``random.py`` was then imported as the grader's code)."""
     out = []
     for name, mod in list(sys.modules.items()):
+        if "." in name:
+            # a submodule came through its package, not through the folder
+            # on the path (a test run imported src.avblocks.labs.templates.*
+            # by its package names): it shadows nothing a student could name
+            continue
         f = getattr(mod, "__file__", None)
         if isinstance(f, str) and _same_folder(os.path.dirname(os.path.abspath(f)), folder):
             out.append(name)

@@ -101,12 +101,18 @@ def test_an_include_that_escapes_is_refused(mj, tmp_path):
     _refused(case, "scene.xml", '<include file="../other/part.xml">')
 
 
-def test_a_nested_include_that_escapes_is_refused(mj, tmp_path):
+def _nested_escape(tmp_path):
+    """``sub/a.xml`` of the case includes ``../../other/assets.xml``, outside it."""
     case, other = _layout(tmp_path)
     _write(other / "assets.xml", '<mujoco><asset><mesh name="tetra" '
            f'file="{case / "meshes" / "tetra.obj"}"/></asset></mujoco>')
     _write(case / "sub" / "a.xml", '<mujoco><include file="../../other/assets.xml"/>'
            '</mujoco>')
+    return case, other
+
+
+def test_a_nested_include_that_escapes_is_refused(mj, tmp_path):
+    case, other = _nested_escape(tmp_path)
     _write(case / "scene.xml", f'<mujoco><include file="sub/a.xml"/>{DRONE[8:]}')
     _escapes(mj, case, other / "assets.xml")
     _refused(case, "'sub/a.xml'", '<include file="../../other/assets.xml">')
@@ -120,11 +126,7 @@ def test_an_include_in_a_namespace_cannot_hide_a_nested_one(mj, tmp_path, tag):
     includes; MuJoCo's reader knows no namespaces and includes it, and its
     nested include escaped (attack42). MJCF uses no namespaces: any is
     refused."""
-    case, other = _layout(tmp_path)
-    _write(other / "assets.xml", '<mujoco><asset><mesh name="tetra" '
-           f'file="{case / "meshes" / "tetra.obj"}"/></asset></mujoco>')
-    _write(case / "sub" / "a.xml", '<mujoco><include file="../../other/assets.xml"/>'
-           '</mujoco>')
+    case, other = _nested_escape(tmp_path)
     _write(case / "scene.xml", f'<mujoco>{tag}{DRONE[8:]}')
     if 'xmlns="' in tag:
         _escapes(mj, case, other / "assets.xml")

@@ -17,9 +17,25 @@ simulated (see docs/safety.md).
 import signal
 import sys
 
+_interrupted = []
+
 
 def _interrupt(signum, frame):
+    _interrupted.append(signum)
     raise KeyboardInterrupt
+
+
+def _quiet(hook):
+    """``sys.unraisablehook`` that drops a KeyboardInterrupt. The handler's
+    exception can land where Python cannot raise it (a weak reference's
+    callback of the import machinery, ``_get_module_lock``): Python then
+    prints "Exception ignored in ..." with a traceback and goes on, so the
+    command would have run to its end (seen once in CI). The handler has
+    noted the interrupt; :func:`main` acts on it after the import."""
+    def quiet(unraisable):
+        if not isinstance(unraisable.exc_value, KeyboardInterrupt):
+            hook(unraisable)
+    return quiet
 
 
 def _say(msg):
@@ -36,7 +52,14 @@ def main(argv=None):
     except (OSError, ValueError):   # not the main thread: nothing to guard
         pass
     try:
-        from avblocks.cli import main as cli_main
+        hook = sys.unraisablehook
+        sys.unraisablehook = _quiet(hook)
+        try:
+            from avblocks.cli import main as cli_main
+        finally:
+            sys.unraisablehook = hook
+        if _interrupted:            # an interrupt Python could not raise
+            raise KeyboardInterrupt
         return cli_main(argv)
     except KeyboardInterrupt:
         _say("avblocks: interrupted")

@@ -72,3 +72,39 @@ def test_the_run_is_unchanged_without_a_signal(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, "run", "nope"], env=env,
                        capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and r.stderr.startswith("avblocks: error:")
+
+
+def test_an_interrupt_python_could_not_raise_still_ends_the_command(tmp_path):
+    """CI once sent SIGINT while the import machinery ran a weak reference's
+    callback (``_get_module_lock``): Python printed "Exception ignored in"
+    with the KeyboardInterrupt and went on, and the run ended with status 0.
+    Here the handler runs inside such a callback during the import of the
+    command line, as the signal did: one line, status 130, no traceback."""
+    module, func = ENTRY.split(":")
+    code = f"""
+import gc, signal, sys, weakref
+import {module} as entry
+
+class _Obj:
+    pass
+
+class _Finder:
+    def find_spec(self, name, path=None, target=None):
+        if name == "avblocks.cli":
+            sys.meta_path.remove(self)
+            o = _Obj()
+            _keep = weakref.ref(o, lambda r: entry._interrupt(signal.SIGINT, None))
+            del o                   # the callback runs now, its exception unraisable
+            gc.collect()
+        return None
+
+sys.meta_path.insert(0, _Finder())
+sys.exit(entry.{func}())
+"""
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src"), "MPLBACKEND": "Agg"}
+    r = subprocess.run([sys.executable, "-c", code, "run", "waypoints", "--out",
+                        str(tmp_path / "o"), "--quiet"], env=env, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 130, (r.returncode, r.stderr)
+    assert r.stderr.strip() == "avblocks: interrupted", r.stderr
+    assert not (tmp_path / "o").exists()

@@ -47,3 +47,14 @@ def test_breaching_marks_the_vehicles_the_messages_name():
     lim = FlightLimits(4, geofence=(-1, 1, -1, 1), min_separation=0.5, fence_margin=0.2)
     p = np.array([[0.0, 0.0, 1.0], [0.3, 0.0, 1.0], [1.1, 0.0, 1.0], [-1.3, 0.5, 1.0]])
     assert lim.breaching(p).tolist() == [True, True, False, True]
+
+
+def test_a_separation_just_under_the_minimum_never_reads_as_the_minimum():
+    """0.7996 m under a 0.8 m minimum is shown rounded down (0.79), not as
+    "0.80 m apart (min_separation 0.8 m)", which read as no breach at all."""
+    lim = FlightLimits(2, min_separation=0.8)
+    p = np.array([[0.0, 0.0, 1.0], [0.7996, 0.0, 1.0]])
+    assert lim.too_close(["uav1", "uav2"], p) == ["uav1-uav2 0.79 m apart "
+                                                  "(min_separation 0.8 m)"]
+    p[1, 0] = 0.3                       # exact hundredths keep their digits
+    assert lim.too_close(["uav1", "uav2"], p)[0].startswith("uav1-uav2 0.30 m apart")

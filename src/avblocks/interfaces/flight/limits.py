@@ -120,7 +120,10 @@ class FlightLimits:
         p = np.asarray(position, float)
         dist = np.linalg.norm(p[:, None] - p[None], axis=-1)
         i, j = np.nonzero(np.triu(dist < self.min_separation, 1))
-        return [f"{names[a]}-{names[b]} {dist[a, b]:.2f} m apart (min_separation "
+        # centimetres rounded down: 0.7996 m under a 0.8 m minimum reads 0.79,
+        # never "0.80 m apart (min_separation 0.8 m)" (a CI run printed that)
+        shown = np.floor(dist * 100 + 1e-9) / 100
+        return [f"{names[a]}-{names[b]} {shown[a, b]:.2f} m apart (min_separation "
                 f"{self.min_separation:g} m)" for a, b in zip(i, j)]
 
     def breaches(self, names, position):

@@ -62,3 +62,45 @@ def test_the_previous_handlers_come_back_when_the_last_robot_stops():
     assert signal.getsignal(signal.SIGINT) is _guard._handler
     _guard.unregister(r)
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_handler_installed_over_the_guards_is_chained_by_the_next_robot():
+    """A run that ended with its robot still registered, then someone's own
+    handler that only takes note (a CLI run's deferred guard): the next
+    robot puts the guard back on top, so a signal stops it and still
+    reaches the other handler; when the robots stop, that handler is back."""
+    before = signal.getsignal(signal.SIGINT)
+    seen = []
+
+    def noting(signum, frame):
+        seen.append(signum)
+
+    left, r = _Robot(), _Robot()
+    _guard.register(left)                        # never unregistered by its run
+    try:
+        signal.signal(signal.SIGINT, noting)
+        _guard.register(r)
+        assert signal.getsignal(signal.SIGINT) is _guard._handler
+        with pytest.raises(KeyboardInterrupt):
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+        assert seen == [signal.SIGINT]
+        assert (True, False) in r.stopped
+    finally:
+        _guard.unregister(r)
+        _guard.unregister(left)
+    assert signal.getsignal(signal.SIGINT) is noting
+    signal.signal(signal.SIGINT, before)
+
+
+def test_a_handler_installed_after_the_guards_is_not_undone_when_robots_stop():
+    before = signal.getsignal(signal.SIGINT)
+    r = _Robot()
+    _guard.register(r)
+
+    def later(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, later)
+    _guard.unregister(r)
+    assert signal.getsignal(signal.SIGINT) is later
+    signal.signal(signal.SIGINT, before)

@@ -14,8 +14,9 @@ the stop goes out after what the main thread was sending. So that
 far (the CLI saves them) after calling every block's ``on_stop`` (which
 stops the robots again). An ``atexit`` hook stops any block still
 registered when the interpreter exits. Handlers are installed only from
-the main thread and the previous ones are restored when the last block
-stops.
+the main thread (again by a block that finds another handler over the
+guard's) and the previous ones are restored when the last block stops,
+unless another handler was installed over the guard's since.
 """
 
 from __future__ import annotations
@@ -62,12 +63,16 @@ def register(block):
         if not _atexit_done:
             atexit.register(_stop_all)
             _atexit_done = True
-        first = not _live
         _live.add(block)
-        if first and threading.current_thread() is threading.main_thread():
+        if threading.current_thread() is threading.main_thread():
+            # not only for the first block: a handler installed over ours
+            # while robots were registered (a block left registered by a
+            # run that ended without stopping it) would take the signal
+            # without stopping them; ours goes back on top and chains to it
             for s in (signal.SIGTERM, signal.SIGINT):
                 try:
-                    _previous[s] = signal.signal(s, _handler)
+                    if signal.getsignal(s) is not _handler:
+                        _previous[s] = signal.signal(s, _handler)
                 except (ValueError, OSError):  # pragma: no cover
                     pass
 
@@ -78,7 +83,10 @@ def unregister(block):
         if not _live and threading.current_thread() is threading.main_thread():
             for s, h in list(_previous.items()):
                 try:
-                    signal.signal(s, h)
+                    # a handler installed after ours stays: its owner puts
+                    # back what it found when it is done
+                    if signal.getsignal(s) is _handler:
+                        signal.signal(s, h)
                 except (ValueError, OSError, TypeError):  # pragma: no cover
                     pass
             _previous.clear()

@@ -11,9 +11,9 @@ the run settings (see :func:`cache_info`).
 
 The run is a nested ``lax.scan``: the outer scan has one iteration per log
 sample, which computes and records the logged outputs and then advances
-``log_every`` major steps (skipped by a ``lax.cond`` after the last
-sample): the first with the outputs just logged, the others with the inner
-scan; the steps left over when ``log_every`` does not
+``log_every`` major steps with the inner scan (skipped by a ``lax.cond``
+after the last sample; logging every step, the sample and its step are one
+branch of that cond, which computes the outputs once); the steps left over when ``log_every`` does not
 divide the step count run after it. Only the decimated log leaves the
 program: one copy. Each inner step computes its outputs first and then
 integrates (see ``Program.run``), so the outputs and the derivatives of one
@@ -335,47 +335,63 @@ class Program:
                     Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
                 return (X0, held(Y0), tl.value if rows else None)
 
-            def after(carry, Y, k):
-                # the updates and the solver step of step k, whose outputs
-                # Y were computed already
-                X, _, N = carry
-                t = t0 + k * dt
-                with tally(rows, N) as tl:
-                    X = eng.update(t, X, Y, eng.hits(k))
-                    X = self._integrate(t, X, Y)
-                return (X, held(Y), tl.value if rows else None)
-
             def step(carry, k):
                 X, Yp, N = carry
+                t = t0 + k * dt
+                hit = eng.hits(k)
                 with tally(rows, N) as tl:
-                    Y = eng.major_outputs(t0 + k * dt, X, Yp, eng.hits(k))
-                return after((X, Yp, tl.value if rows else None), Y, k)
+                    Y = eng.major_outputs(t, X, Yp, hit)
+                    X = eng.update(t, X, Y, hit)
+                    X = self._integrate(t, X, Y)
+                return (X, held(Y), tl.value if rows else None)
 
             # The step loop carries its state packed where the step is
             # elementwise (see .carry): one fused loop per step, not several.
             def advance(carry, k0, count):
                 return scan_steps(step, carry, k0 + jnp.arange(count), fdt)
 
-            # A sample's first step takes the outputs the sample logged (they
-            # are that step's outputs: computing them twice cost a second
-            # neighbour search per sample, i.e. per step when every step is
-            # logged); the other log_every - 1 steps run in the loop.
-            def advance_le(carry, Y, k0):
-                carry = after(carry, Y, k0)
-                return advance(carry, k0 + 1, le - 1) if le > 1 else carry
+            def advance_le(carry, k0):
+                return advance(carry, k0, le)
 
             if remat:
                 advance_le = jax.checkpoint(advance_le)
 
-            def outer(carry, i):
-                k = i * le
+            def sample(carry, k):
                 with tally(rows, carry[2]) as tl:
                     Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
-                carry = (carry[0], carry[1], tl.value if rows else None)
-                row = [Y[j][o] for j, o in idx]
-                carry = lax.cond(i < nlog - 1, lambda c, Y: advance_le(c, Y, k),
-                                 lambda c, Y: c, carry, Y)
+                return (carry[0], carry[1], tl.value if rows else None), \
+                    [Y[j][o] for j, o in idx]
+
+            def outer(carry, i):
+                k = i * le
+                carry, row = sample(carry, k)
+                carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, k),
+                                 lambda c: c, carry)
                 return carry, row
+
+            if le == 1 and not remat:
+                # Logging every step: the step computes its outputs once and
+                # logs them (computing them for the sample and again in the
+                # step cost a second neighbour search per step); the sample
+                # after the last step only computes its outputs. Both in the
+                # branches of one cond, so a step's outputs fuse with its
+                # integration as in the loop. With log_every > 1 the loop
+                # computes the sample's outputs again: one evaluation more
+                # per sample, not per step.
+                def outer(carry, i):    # noqa: F811
+                    k = i * le
+
+                    def go(c):
+                        X, Yp, N = c
+                        t = t0 + k * dt
+                        with tally(rows, N) as tl:
+                            Y = eng.major_outputs(t, X, Yp, eng.hits(k))
+                            X = eng.update(t, X, Y, eng.hits(k))
+                            X = self._integrate(t, X, Y)
+                        return (X, held(Y), tl.value if rows else None), \
+                            [Y[j][o] for j, o in idx]
+
+                    return lax.cond(i < nlog - 1, go, lambda c: sample(c, k), carry)
 
             rem = self.nsteps - (nlog - 1) * le
 

@@ -158,3 +158,18 @@ def test_the_students_functions_trace_under_jax():
         s_jx, o_jx, r_jx, _, _ = step(s_jx, a.astype(np.float32))
         np.testing.assert_allclose(np.asarray(o_jx), o_np, atol=1e-4)
         np.testing.assert_allclose(np.asarray(r_jx), r_np, atol=1e-4)
+
+
+def test_a_run_late_enough_to_use_up_the_margin_is_flown_again():
+    """The emulator check flies a failed run again when the machine did not
+    keep real time: a step late by L lets a robot go on SPEED_MAX * L along
+    its last command, so a lateness that covers the episode's margin to a
+    contact (0.1 m at sqrt(2) m/s: 70.7 ms) is a disturbed run."""
+    from avblocks.labs import lab7_learning as L
+    assert L.DISTURBED_LATENESS * L.SPEED_MAX == pytest.approx(L.MARGIN, rel=1e-12)
+    assert L.DISTURBED_LATENESS == pytest.approx(0.0707107, rel=1e-5)
+    # the run seen on a loaded machine: 2 of 60 steps late, the worst 212 ms
+    assert L.disturbed(60, 2, 0.212)
+    assert not L.disturbed(60, 2, 0.005)         # a quiet machine: a few ms
+    assert not L.disturbed(60, 12, 0.05)         # 20 % of the steps late: not yet
+    assert L.disturbed(60, 13, 0.0)              # more than 20 %

@@ -104,3 +104,24 @@ def test_a_handler_installed_after_the_guards_is_not_undone_when_robots_stop():
     _guard.unregister(r)
     assert signal.getsignal(signal.SIGINT) is later
     signal.signal(signal.SIGINT, before)
+
+
+def test_an_inherited_ignore_still_stops_the_run():
+    """A process started in the background inherits "ignore SIGINT"; a
+    SIGINT sent to it while robots fly stops them and ends the run (it
+    used to stop them and let the run go on commanding them: seen as a
+    fleet that kept flying after Ctrl-C when the suite ran in a background
+    job)."""
+    before = signal.getsignal(signal.SIGINT)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    r = _Robot()
+    try:
+        _guard.register(r)
+        with pytest.raises(KeyboardInterrupt):
+            signal.getsignal(signal.SIGINT)(signal.SIGINT, None)
+        assert r.stopped == [(True, False)]
+        _guard.unregister(r)
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        _guard.unregister(r)
+        signal.signal(signal.SIGINT, before)

@@ -231,3 +231,35 @@ def test_navigation_reward_weights_first_hit_and_success_bonus():
     assert float(d.build().blocks[d.build().index("task")].first_hit) == 4.0
     with pytest.raises(ParameterError, match="first_hitt"):
         navigation.make_diagram(weights={"first_hitt": 1.0})
+
+
+def test_packing_bound_holds_for_lattices_and_big_teams_skip_the_separation():
+    """``packing_bound`` is an upper bound (a square lattice min_sep apart
+    fits in it) and, past it, free_points keeps only the obstacle test: a
+    scenario asking for thousands of agents in the 3 m arena no longer
+    runs the separation pass, quadratic in N (2.3 million agents found by
+    the schema fuzz: hours; now the obstacle test alone)."""
+    from avblocks.core import rng
+    from avblocks.environment import EdgeGrid
+    from avblocks.tasks.common import packing_bound
+    for side, sep in [(0.0, 0.4), (2.5, 0.4), (1.0, 0.1), (7.3, 0.5), (10.0, 1.0)]:
+        lattice = (int(side / sep) + 1) ** 2
+        assert lattice <= packing_bound(side, sep)
+    assert packing_bound(0.0, 0.4) == 1
+    assert packing_bound(2.5, 0.4) == 66              # the navigation arena
+    from avblocks.scenarios._task import free_points
+    grid = EdgeGrid(navigation.arena(), 0.25)
+    polys = _world()
+    p = free_points(rng.key(3), 5000, 1.5, grid, 0.25, np, min_sep=0.4)
+    assert p.shape == (5000, 2) and (np.abs(p) <= 1.25).all()
+    inside = [q for q in p[:300] if min(P.distance(Point(q)) for P in polys) <= 0.25]
+    # 24 tries a point: the few left without a free candidate keep their first
+    assert len(inside) <= 3
+    # past the bound: the obstacle test's picks, exactly; up to it the
+    # separation pass still moves points (best effort, as before)
+    np.testing.assert_array_equal(p, free_points(rng.key(3), 5000, 1.5, grid, 0.25, np))
+    q = free_points(rng.key(3), 30, 1.5, grid, 0.25, np, min_sep=0.4)
+    q0 = free_points(rng.key(3), 30, 1.5, grid, 0.25, np)
+    assert not np.array_equal(q, q0)
+    d = lambda x: np.sort(np.linalg.norm(x[:, None] - x[None], axis=-1)[np.triu_indices(30, 1)])
+    assert (d(q)[:10] > d(q0)[:10]).sum() >= 8        # its closest pairs pushed apart

@@ -85,18 +85,32 @@ def uniform_points(key, n, half, xp, min_sep=0.0, tries=8):
     return best
 
 
+def packing_bound(side, min_sep):
+    """The most points that can lie pairwise at least ``min_sep`` apart in a
+    square of ``side``: discs of radius ``min_sep / 2`` around them do not
+    overlap and lie in the square grown by ``min_sep / 2``, so ``n <= (side +
+    min_sep)^2 / (pi min_sep^2 / 4)``."""
+    side = max(float(side), 0.0)
+    return int((side + min_sep) ** 2 / (np.pi * min_sep ** 2 / 4))
+
+
 def free_points(key, n, half, grid, clearance, xp, tries=24, min_sep=0.0):
     """``n`` points uniform in ``[-(half - clearance), half - clearance]^2``
     farther than ``clearance`` from every obstacle (``grid``: an
     :class:`~avblocks.environment.EdgeGrid` of the world built for reach >=
     ``clearance``; its closed disc test) and (best effort) ``min_sep``
     apart: ``tries`` candidates per point, the first that fits is kept
-    (traceable)."""
+    (traceable). Separation is sought only while ``n`` points can be
+    ``min_sep`` apart at all (:func:`packing_bound`; 66 in the navigation
+    arena): its pass is quadratic in ``n`` (a scenario file asking for two
+    million agents used to take hours here)."""
     from avblocks.core import rng
     c = rng.uniform(key, (tries, n, 2), xp, -(half - clearance), half - clearance)
     ok = ~xp.reshape(grid.disc_hits(xp.reshape(c, (tries * n, 2)), clearance, xp)[0],
                      (tries, n))
-    if min_sep <= 0 or n < 2:
+    if min_sep <= 0 or n < 2 or n > packing_bound(2 * (half - clearance), min_sep):
+        # (more points than fit min_sep apart in the square: the separation
+        # cannot hold, and its pass, quadratic in n, is skipped)
         pick = xp.argmax(ok, axis=0)                            # first valid (or 0)
         return xp.take_along_axis(c, pick[None, :, None], axis=0)[0]
     # separation: agents pick in turn, each the first candidate that fits

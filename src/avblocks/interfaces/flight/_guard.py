@@ -3,8 +3,10 @@
 The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
 the handler first commands every registered robot to zero velocity, then
 hands the signal to the handler that was there before (the CLI's guard
-raises its own interrupt), or raises :class:`KeyboardInterrupt` in the
-main thread. The stop runs on a thread of its own, which the handler
+raises its own interrupt), and raises :class:`KeyboardInterrupt` in the
+main thread, even when the signal was ignored before (a process started
+in the background inherits "ignore SIGINT"; a run that went on after the
+stop would command the robots again). The stop runs on a thread of its own, which the handler
 waits for up to :data:`STOP_WAIT`: a handler runs in the main thread
 between two of its bytecodes, so a lock that thread holds when the signal
 comes (a flight-log line being written, a set-point being sent) would
@@ -53,8 +55,11 @@ def _handler(signum, frame):
     prev = _previous.get(signum)
     if callable(prev):          # e.g. the CLI's guard: it raises its own interrupt
         prev(signum, frame)
-    if prev is not signal.SIG_IGN:
-        raise KeyboardInterrupt(f"signal {signum}")
+    # also when the signal was ignored before (a process started in the
+    # background inherits "ignore SIGINT"): the robots were just stopped,
+    # and a run that went on would command them again (as the console
+    # entry point, which replaces an inherited ignore)
+    raise KeyboardInterrupt(f"signal {signum}")
 
 
 def register(block):

@@ -261,5 +261,7 @@ def test_packing_bound_holds_for_lattices_and_big_teams_skip_the_separation():
     q = free_points(rng.key(3), 30, 1.5, grid, 0.25, np, min_sep=0.4)
     q0 = free_points(rng.key(3), 30, 1.5, grid, 0.25, np)
     assert not np.array_equal(q, q0)
-    d = lambda x: np.sort(np.linalg.norm(x[:, None] - x[None], axis=-1)[np.triu_indices(30, 1)])
-    assert (d(q)[:10] > d(q0)[:10]).sum() >= 8        # its closest pairs pushed apart
+    def gaps(x):
+        return np.sort(np.linalg.norm(x[:, None] - x[None], axis=-1)[np.triu_indices(30, 1)])
+
+    assert (gaps(q)[:10] > gaps(q0)[:10]).sum() >= 8  # its closest pairs pushed apart

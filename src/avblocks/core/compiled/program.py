@@ -13,8 +13,8 @@ The run is a nested ``lax.scan``: the outer scan has one iteration per log
 sample, which computes and records the logged outputs and then advances
 ``log_every`` major steps with the inner scan (skipped by a ``lax.cond``
 after the last sample; logging every step, the sample and its step are one
-branch of that cond, which computes the outputs once); the steps left over when ``log_every`` does not
-divide the step count run after it. Only the decimated log leaves the
+branch of that cond, which computes the outputs once); the steps left over
+when ``log_every`` does not divide the step count run after it. Only the decimated log leaves the
 program: one copy. Each inner step computes its outputs first and then
 integrates (see ``Program.run``), so the outputs and the derivatives of one
 state are traced in one loop body and what blocks share through

@@ -623,6 +623,8 @@ DISTURBED_OVERRUNS = 0.2
 #: machine and was judged, not flown again); a failed disturbed run is
 #: flown again
 DISTURBED_LATENESS = MARGIN / SPEED_MAX
+#: times a failed, disturbed run is flown again before it is judged
+DISTURBED_RETRIES = 2
 
 
 def disturbed(steps, overruns, lateness):
@@ -630,8 +632,6 @@ def disturbed(steps, overruns, lateness):
     the worst by ``lateness`` seconds, says more of the machine than of the
     policy: then a failed run is flown again (:data:`DISTURBED_RETRIES`)."""
     return overruns > DISTURBED_OVERRUNS * max(int(steps), 1) or lateness > DISTURBED_LATENESS
-#: times a failed, disturbed run is flown again before it is judged
-DISTURBED_RETRIES = 2
 
 
 def _fly_on_emulator(w, seed, names, p0, Robots, open_router, stop_emulator):

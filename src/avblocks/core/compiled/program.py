@@ -335,7 +335,8 @@ class Program:
                     Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
                 return (X0, held(Y0), tl.value if rows else None)
 
-            def step(carry, k):
+            def stepped(carry, k):
+                """Step k: its outputs (also returned), updates, solver step."""
                 X, Yp, N = carry
                 t = t0 + k * dt
                 hit = eng.hits(k)
@@ -343,7 +344,10 @@ class Program:
                     Y = eng.major_outputs(t, X, Yp, hit)
                     X = eng.update(t, X, Y, hit)
                     X = self._integrate(t, X, Y)
-                return (X, held(Y), tl.value if rows else None)
+                return (X, held(Y), tl.value if rows else None), Y
+
+            def step(carry, k):
+                return stepped(carry, k)[0]
 
             # The step loop carries its state packed where the step is
             # elementwise (see .carry): one fused loop per step, not several.
@@ -356,42 +360,35 @@ class Program:
             if remat:
                 advance_le = jax.checkpoint(advance_le)
 
+            def logged(Y):
+                return [Y[j][o] for j, o in idx]
+
             def sample(carry, k):
+                """The outputs at sample k, logged, without a step."""
                 with tally(rows, carry[2]) as tl:
                     Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
-                return (carry[0], carry[1], tl.value if rows else None), \
-                    [Y[j][o] for j, o in idx]
+                return (carry[0], carry[1], tl.value if rows else None), logged(Y)
+
+            # Logging every step, a sample and its step are one branch of the
+            # cond: the outputs are computed once, logged and integrated with
+            # (computing them for the sample and again in the step cost a
+            # second neighbour search per step), and fuse with the step as in
+            # the loop; the sample after the last step only computes them.
+            # With log_every > 1 (or checkpointed steps) the loop computes a
+            # sample's outputs again: one evaluation more per sample.
+            once = le == 1 and not remat
 
             def outer(carry, i):
                 k = i * le
+                if once:
+                    def go(c):
+                        c, Y = stepped(c, k)
+                        return c, logged(Y)
+                    return lax.cond(i < nlog - 1, go, lambda c: sample(c, k), carry)
                 carry, row = sample(carry, k)
                 carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, k),
                                  lambda c: c, carry)
                 return carry, row
-
-            if le == 1 and not remat:
-                # Logging every step: the step computes its outputs once and
-                # logs them (computing them for the sample and again in the
-                # step cost a second neighbour search per step); the sample
-                # after the last step only computes its outputs. Both in the
-                # branches of one cond, so a step's outputs fuse with its
-                # integration as in the loop. With log_every > 1 the loop
-                # computes the sample's outputs again: one evaluation more
-                # per sample, not per step.
-                def outer(carry, i):    # noqa: F811
-                    k = i * le
-
-                    def go(c):
-                        X, Yp, N = c
-                        t = t0 + k * dt
-                        with tally(rows, N) as tl:
-                            Y = eng.major_outputs(t, X, Yp, eng.hits(k))
-                            X = eng.update(t, X, Y, eng.hits(k))
-                            X = self._integrate(t, X, Y)
-                        return (X, held(Y), tl.value if rows else None), \
-                            [Y[j][o] for j, o in idx]
-
-                    return lax.cond(i < nlog - 1, go, lambda c: sample(c, k), carry)
 
             rem = self.nsteps - (nlog - 1) * le
 

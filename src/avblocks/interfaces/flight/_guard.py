@@ -6,9 +6,9 @@ hands the signal to the handler that was there before (the CLI's guard
 raises its own interrupt), and raises :class:`KeyboardInterrupt` in the
 main thread, even when the signal was ignored before (a process started
 in the background inherits "ignore SIGINT"; a run that went on after the
-stop would command the robots again). The stop runs on a thread of its own, which the handler
-waits for up to :data:`STOP_WAIT`: a handler runs in the main thread
-between two of its bytecodes, so a lock that thread holds when the signal
+stop would command the robots again). The stop runs on a thread of its
+own, which the handler waits for up to :data:`STOP_WAIT`: a handler runs
+in the main thread between two of its bytecodes, so a lock that thread holds when the signal
 comes (a flight-log line being written, a set-point being sent) would
 deadlock a stop made in the handler itself; the interrupt releases it, and
 the stop goes out after what the main thread was sending. So that

@@ -50,11 +50,12 @@ def test_logging_every_step_evaluates_each_step_once(solver, per_step):
     calls.clear()
     res = r()
     jax.effects_barrier()
-    # the initial outputs, each step's (logged and integrated with) and its
-    # solver's other stages, the sample after the last step; before, every
-    # sample computed its outputs once more than its step (22 calls here
-    # with Euler, 52 with RK4)
-    assert len(calls) == 1 + steps * per_step + 1
+    # each step's outputs (logged and integrated with) and its solver's
+    # other stages, the sample after the last step. Before, every sample
+    # computed its outputs once more than its step (22 calls here with
+    # Euler, 52 with RK4), and the run began with the outputs at t0 that
+    # step 0 computes again (one call more: 12 and 42)
+    assert len(calls) == steps * per_step + 1
     # x' = -x: the log against the exact solution and the NumPy engine
     t = np.asarray(res.t)
     x0 = np.array([[1.0, 2.0], [-3.0, 0.5]])

@@ -292,10 +292,16 @@ class Program:
         canon = jax.dtypes.canonicalize_dtype
         with _jax.x64(self.x64):
             fdt = np.dtype(canon(np.float64))
-            held = [{o: np.zeros(p.shape, canon(p.dtype)) for o, p in b._outputs.items()}
-                    if per else {} for b, per in zip(self.cd.blocks, self.eng.periodic)]
         needs = np.zeros((len(self.need_rows), 4), fdt) if self.need_rows else None
-        return (X0, held, needs)
+        return (X0, self._zero_held(), needs)
+
+    def _zero_held(self):
+        """Zeros in place of the periodic blocks' held outputs (declared
+        shapes, this program's dtypes; ``{}`` for the other blocks)."""
+        canon = _jax.jax().dtypes.canonicalize_dtype
+        with _jax.x64(self.x64):
+            return [{o: np.zeros(p.shape, canon(p.dtype)) for o, p in b._outputs.items()}
+                    if per else {} for b, per in zip(self.cd.blocks, self.eng.periodic)]
 
     def _count_trace(self):
         self.traces += 1
@@ -330,8 +336,20 @@ class Program:
             def held(Y):
                 return [y if p else {} for y, p in zip(Y, eng.periodic)]
 
+            # The first sample (and step) computes the outputs at t0 again,
+            # and every periodic block without an offset hits there: then the
+            # held outputs and the needs tally start as zeros (overwritten at
+            # k = 0, the same values) and the program holds one copy fewer
+            # of the diagram's outputs (its searches included) to compile.
+            # A block with an offset holds its initial output until its first
+            # hit: only then are the outputs at t0 computed here.
+            first_hit_all = all(eng.off_k[i] == 0 for i, p in enumerate(eng.periodic) if p)
+
             def init(X0):
-                with tally(rows, jnp.zeros((len(rows), 4), fdt)) as tl:
+                zeros = jnp.zeros((len(rows), 4), fdt)
+                if first_hit_all:
+                    return (X0, self._zero_held(), zeros if rows else None)
+                with tally(rows, zeros) as tl:
                     Y0 = eng.all_outputs(t0, X0, [dict() for _ in self.cd.blocks])
                 return (X0, held(Y0), tl.value if rows else None)
 

@@ -197,18 +197,20 @@ def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
     system. ``u_nom`` (N, D); ``ei, ej, ok`` (E,) padded edges (``ok``
     False: ignored); ``a`` (E, D); ``c`` (E,).
 
-    Stopping: every ``check`` iterations the primal residual
-    ``max |(u_i, u_j) - z_e|`` and the last change ``max |u^k - u^{k-1}|``
-    are compared with ``tol (1 + max |w|)``; once both are below it the
-    iterate is frozen (a no-op under JAX, an early exit under NumPy: the
-    same numbers). At most ``iterations`` (rounded up to a multiple of
-    ``check``). Measured on random jammed 20-agent clusters (about 100
-    pairs, many active): 100 iterations reach about 1e-6 of the exact
-    solution, 200 about 1e-9; the defaults stop after 40 iterations on
-    average in the swap case study, within 3e-10 of quadprog's exact
-    active-set solution on the test clusters (``rho = 1``, ``alpha =
-    1.6``; the problem is invariant to the scale of ``a``, so ``rho``
-    needs no tuning per problem).
+    Stopping: every ``check`` iterations the primal residual ``max |(u_i,
+    u_j) - z_e|`` and the last change ``max |u^k - u^{k-1}|`` are compared
+    with ``tol (1 + max |w|)``; once both are below it the iterate is frozen
+    (a no-op under JAX, an early exit under NumPy: the same numbers). Under
+    JAX the first ``check - 1`` iterations of each check are one
+    ``fori_loop`` (one copy of the iteration in the compiled program: the
+    swap tests compile about 9 % faster, same bits). At most ``iterations``
+    (rounded up to a multiple of ``check``). Measured on random jammed
+    20-agent clusters (about 100 pairs, many active): 100 iterations reach
+    about 1e-6 of the exact solution, 200 about 1e-9; the defaults stop
+    after 40 iterations on average in the swap case study, within 3e-10 of
+    quadprog's exact active-set solution on the test clusters (``rho = 1``,
+    ``alpha = 1.6``; the problem is invariant to the scale of ``a``, so
+    ``rho`` needs no tuning per problem).
 
     Returns ``(u, residual)``: (N, D) and the last checked residual (a
     scalar; ``<= tol (1 + max|w|)`` when it converged).
@@ -253,8 +255,13 @@ def admm_pair_qp(u_nom, ei, ej, ok, a, c, xp=np, *, iterations=500, tol=1e-10,
     def chunk(st):
         u, z, y, res, done = st
         inner = (u, z, y)
-        for _ in range(check - 1):
-            inner = step(inner)
+        if xp is np:
+            for _ in range(check - 1):
+                inner = step(inner)
+        else:
+            # one copy of the step in the program, not check - 1 unrolled
+            import jax
+            inner = jax.lax.fori_loop(0, check - 1, lambda _, s: step(s), inner)
         prev = inner[0]
         new = step(inner)
         un, z2 = new[0], new[1]

@@ -14,14 +14,14 @@ sample, which computes and records the logged outputs and then advances
 ``log_every`` major steps with the inner scan (skipped by a ``lax.cond``
 after the last sample; logging every step, the sample and its step are one
 branch of that cond, which computes the outputs once); the steps left over
-when ``log_every`` does not divide the step count run after it. Only the decimated log leaves the
-program: one copy. Each inner step computes its outputs first and then
-integrates (see ``Program.run``), so the outputs and the derivatives of one
-state are traced in one loop body and what blocks share through
-:mod:`avblocks.core.memo` is computed once. The inner scan carries the
-states (and the held outputs of periodic blocks) packed into one buffer
-where the step is short elementwise work (:mod:`.carry`): XLA then runs a
-step as one fused loop instead of one per state.
+when ``log_every`` does not divide the step count run after it. Only the
+decimated log leaves the program: one copy. Each inner step computes its
+outputs first and then integrates (see ``Program.run``), so the outputs and
+the derivatives of one state are traced in one loop body and what blocks
+share through :mod:`avblocks.core.memo` is computed once. The inner scan
+carries the states (and the held outputs of periodic blocks) packed into one
+buffer where the step is short elementwise work (:mod:`.carry`): XLA then
+runs a step as one fused loop instead of one per state.
 
 On CPU the programs are compiled with XLA's classic loop emitters
 (:func:`compiler_options`): measured on W1 they run the step 1.5-2.5x
@@ -343,7 +343,7 @@ class Program:
             # of the diagram's outputs (its searches included) to compile.
             # A block with an offset holds its initial output until its first
             # hit: only then are the outputs at t0 computed here.
-            first_hit_all = all(eng.off_k[i] == 0 for i, p in enumerate(eng.periodic) if p)
+            first_hit_all = all(h is not False for h in eng.hits(0))
 
             def init(X0):
                 zeros = jnp.zeros((len(rows), 4), fdt)

@@ -3,22 +3,22 @@
 The robot blocks register here while a run is on. On SIGTERM (and SIGINT)
 the handler first commands every registered robot to zero velocity, then
 hands the signal to the handler that was there before (the CLI's guard
-raises its own interrupt), and raises :class:`KeyboardInterrupt` in the
-main thread, even when the signal was ignored before (a process started
-in the background inherits "ignore SIGINT"; a run that went on after the
-stop would command the robots again). The stop runs on a thread of its
-own, which the handler waits for up to :data:`STOP_WAIT`: a handler runs
-in the main thread between two of its bytecodes, so a lock that thread holds when the signal
+raises its own interrupt), and raises :class:`KeyboardInterrupt` in the main
+thread, even when the signal was ignored before (a process started in the
+background inherits "ignore SIGINT"; a run that went on after the stop would
+command the robots again). The stop runs on a thread of its own, which the
+handler waits for up to :data:`STOP_WAIT`: a handler runs in the main thread
+between two of its bytecodes, so a lock that thread holds when the signal
 comes (a flight-log line being written, a set-point being sent) would
 deadlock a stop made in the handler itself; the interrupt releases it, and
 the stop goes out after what the main thread was sending. So that
 ``simulate()`` takes its interrupted path: it returns the results logged so
 far (the CLI saves them) after calling every block's ``on_stop`` (which
-stops the robots again). An ``atexit`` hook stops any block still
-registered when the interpreter exits. Handlers are installed only from
-the main thread (again by a block that finds another handler over the
-guard's) and the previous ones are restored when the last block stops,
-unless another handler was installed over the guard's since.
+stops the robots again). An ``atexit`` hook stops any block still registered
+when the interpreter exits. Handlers are installed only from the main thread
+(again by a block that finds another handler over the guard's) and the
+previous ones are restored when the last block stops, unless another handler
+was installed over the guard's since.
 """
 
 from __future__ import annotations

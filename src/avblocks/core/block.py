@@ -44,7 +44,7 @@ import numpy as np
 
 from .errors import ParameterError
 from .guarded import _guard_init
-from .params import Param, integer
+from .params import Param, frozen, integer
 from .ports import Port
 from .sample_times import CONTINUOUS, INHERITED, Continuous, Inherited, Periodic  # noqa: F401
 
@@ -183,20 +183,20 @@ class Block:
                                  doc="", agents=True) -> Port:
         """Declare a continuous state with its initial value (float array)."""
         self._check_new(name, state=True)
-        v = np.array(value, dtype=float)
+        v = np.array(value, dtype=float, order="C")
         p = Port(name, v.shape, "float64", unit, tuple(labels), doc, agents)
         self._cstates[name] = p
-        self._init[name] = v
+        self._init[name] = frozen(v)
         return p
 
     def declare_discrete_state(self, name, value, *, dtype=None, unit="",
                                labels=(), doc="", agents=True) -> Port:
         """Declare a discrete state with its initial value."""
         self._check_new(name, state=True)
-        v = np.array(value, dtype=dtype)
+        v = np.array(value, dtype=dtype, order="C")
         p = Port(name, v.shape, v.dtype.name, unit, tuple(labels), doc, agents)
         self._dstates[name] = p
-        self._init[name] = v
+        self._init[name] = frozen(v)
         return p
 
     def declare_random_state(self, name="key") -> Port:
@@ -339,12 +339,12 @@ class Block:
             raise ParameterError("no such state", block=type(self).__name__,
                                  param=name, expected=sorted(self._init), found=name)
         old = self._init[name]
-        v = np.array(value, dtype=old.dtype)
+        v = np.array(value, dtype=old.dtype, order="C")
         if v.shape != old.shape:
             raise ParameterError("initial value has the wrong shape",
                                  block=type(self).__name__, param=name,
                                  expected=old.shape, found=v.shape)
-        self._init[name] = v
+        self._init[name] = frozen(v)
 
     @property
     def has_derivative(self) -> bool:
@@ -376,15 +376,15 @@ class Block:
         """Replace a declared state's initial value, shape and dtype (for
         shape-polymorphic blocks, in ``configure``)."""
         if name in self._cstates:
-            v = np.array(value, dtype=float)
+            v = np.array(value, dtype=float, order="C")
             self._cstates[name] = replace(self._cstates[name], shape=v.shape)
         elif name in self._dstates:
-            v = np.array(value, dtype=dtype)
+            v = np.array(value, dtype=dtype, order="C")
             self._dstates[name] = replace(self._dstates[name], shape=v.shape,
                                           dtype=v.dtype.name)
         else:
             raise ParameterError("no such state", block=type(self).__name__, param=name)
-        self._init[name] = v
+        self._init[name] = frozen(v)
 
     def output(self, t, x, u, xp):
         """Outputs at time ``t`` (dict by output name). Default: none."""

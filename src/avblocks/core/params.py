@@ -14,11 +14,24 @@ from .errors import ParameterError
 
 def _as_float(value, block, name):
     try:
-        a = np.array(value, dtype=float)
+        a = np.array(value, dtype=float, order="C")
     except (TypeError, ValueError):
         raise ParameterError("must be numeric", block=block, param=name,
                              expected="a number or array of numbers",
                              found=repr(value)[:80]) from None
+    return a
+
+
+def frozen(a):
+    """``a`` (an array that owns its data) made read-only and returned.
+
+    A block's parameter values and declared initial states are frozen: a
+    new value replaces the array (:meth:`Block.set_parameter`,
+    :meth:`Block.set_initial`), it is never written in place. So an array's
+    identity stands for its contents, which lets a compiled runner keep its
+    copy on the device between calls (:mod:`avblocks.core.compiled.runner`)
+    and :meth:`Block.param_flag` keep its verdicts."""
+    a.flags.writeable = False
     return a
 
 
@@ -155,7 +168,7 @@ class Param:
         if hi is not None and np.any(a > hi):
             raise ParameterError("above its upper bound", block=block, param=self.name,
                                  expected=f"<= {hi}", found=float(a.max()))
-        return a
+        return frozen(a)
 
     def __repr__(self):
         b = "" if self.bounds == (None, None) else f", bounds={self.bounds}"

@@ -108,19 +108,23 @@ class Placement:
         """``tree`` (dicts/lists of arrays) placed on the devices."""
         if self.split is None:
             return tree
-        jax = _jax.jax()
+        return _jax.jax().tree_util.tree_map(self.put, tree)
 
-        def one(a):
-            a = np.asarray(a) if not hasattr(a, "sharding") else a
-            where = self.divided if (np.ndim(a) >= 1 and np.shape(a)[0] == self.split) \
-                else self.replicated
-            if not where.is_fully_addressable and not hasattr(a, "sharding"):
-                # devices of other processes (jax.distributed): every process
-                # holds the same host array and places its own devices' parts
-                return jax.make_array_from_callback(np.shape(a), where,
-                                                    lambda idx, a=a: a[idx])
-            return self._put(a, where)
-        return jax.tree_util.tree_map(one, tree)
+    def put(self, a):
+        """One array placed as :meth:`__call__` places it (on the one
+        device when nothing is split); a JAX array, its transfer started."""
+        jax = _jax.jax()
+        if self.split is None:
+            return jax.device_put(a, self.devices[0])
+        a = np.asarray(a) if not hasattr(a, "sharding") else a
+        where = self.divided if (np.ndim(a) >= 1 and np.shape(a)[0] == self.split) \
+            else self.replicated
+        if not where.is_fully_addressable and not hasattr(a, "sharding"):
+            # devices of other processes (jax.distributed): every process
+            # holds the same host array and places its own devices' parts
+            return jax.make_array_from_callback(np.shape(a), where,
+                                                lambda idx, a=a: a[idx])
+        return self._put(a, where)
 
 
 def host(a):

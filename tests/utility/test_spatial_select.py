@@ -8,7 +8,9 @@ import numpy as np
 import pytest
 
 from avblocks.utility import spatial as sp
-from avblocks.utility.spatial.queries import PASSES_WIDTH, _group, _slots, _tournament
+from avblocks.utility.spatial import queries as Q
+from avblocks.utility.spatial.queries import (PASSES_WIDTH, _group, _slots, _smallest_keyed,
+                                              _tournament)
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
@@ -17,24 +19,119 @@ TOP = np.iinfo(np.int64).max
 
 @pytest.mark.parametrize("width", [3, 16, 17, 32, 33, 50, 100, 257, 1100])
 @pytest.mark.parametrize("m", [1, 13])
-def test_tournament_takes_the_smallest_keys_in_order(width, m):
+@pytest.mark.parametrize("bits", [64, 32])
+def test_tournament_takes_the_smallest_keys_in_order(width, m, bits):
     """Against NumPy's sort; widths on both sides of the passes/tournament
-    switch (``PASSES_WIDTH``) and groups of 8, 16 and 32."""
+    switch (``PASSES_WIDTH``) and groups of 8, 16 and 32; int64 keys (a
+    float64 program) and int32 keys (a float32 program: no 64-bit types)."""
     assert PASSES_WIDTH == 32
     assert _group(50) == 8 and _group(456) == 16 and _group(1100) == 32
     rng = np.random.default_rng(width * 31 + m)
     rows = 70
+    it = np.int64 if bits == 64 else np.int32
+    top = np.iinfo(it).max
     # unique keys per row, from a narrow range so neighbours in value sit in
-    # different groups; some rows with fewer real keys than m (TOP-padded)
+    # different groups; some rows with fewer real keys than m (top-padded)
     keys = np.stack([rng.choice(4 * width, width, replace=False) for _ in range(rows)])
-    keys = keys.astype(np.int64)
-    keys[:10, 2:] = TOP
+    keys = keys.astype(it)
+    keys[:10, 2:] = top
     want = np.sort(keys, axis=1)[:, :m]
-    with jax.enable_x64(True):
+    with jax.enable_x64(bits == 64):
         got = np.asarray(jax.jit(lambda k: _tournament(k, min(m, width), jnp))(keys))
-    real = want < TOP
+    assert got.dtype == it
+    real = want < top
     np.testing.assert_array_equal(got[:, :want.shape[1]][real], want[real])
-    assert (got[:, :want.shape[1]][~real] == TOP).all()
+    assert (got[:, :want.shape[1]][~real] == top).all()
+
+
+def _lexsmallest(d2, k):
+    """Columns of the ``k`` smallest ``(d2, column)`` of each row, ``-1``
+    where a row has fewer finite distances: the exact order."""
+    cols = np.lexsort((np.broadcast_to(np.arange(d2.shape[1]), d2.shape), d2), axis=1)[:, :k]
+    return np.where(np.isfinite(np.take_along_axis(d2, cols, 1)), cols, -1)
+
+
+@pytest.mark.parametrize("width", [12, 24, 32, 40, 56, 240, 1100])
+def test_float32_keys_order_as_the_distances_or_say_not(width):
+    """The 32-bit keys of a float32 program (a rank of ``d2`` scaled to the
+    row's largest finite distance, then the column): each row (one call
+    per row, so ``exact`` speaks for it) either selects the exact ``k``
+    smallest ``(d2, column)`` or says it may not (``exact`` False), and says
+    so only where two of its ``k + 1`` smallest distances are within the
+    rank's resolution. Rows: distances spread evenly with some infinite
+    (out of range), equal distances (a lattice), zeros, a far outlier that
+    stretches the row's span, tiny spans (1e-33: ``2^q / span`` would
+    overflow float32), nothing in range."""
+    k = 12
+    rng = np.random.default_rng(width)
+    spread = (rng.uniform(0, 70, (300, width))).astype(np.float32)
+    spread[rng.uniform(size=spread.shape) < 0.4] = np.inf
+    ties = np.round(rng.uniform(0, 3, (20, width))).astype(np.float32) ** 2
+    zeros = spread[:10].copy()
+    zeros[:, :3] = 0.0
+    outlier = spread[10:20].copy()
+    outlier[:, -1] = 3.0e38
+    tiny = (rng.uniform(0.1, 1, (10, width)) * 1e-33).astype(np.float32)
+    empty = np.full((5, width), np.inf, np.float32)
+    rows = np.concatenate([spread, ties, zeros, outlier, tiny, empty])
+    idx = np.broadcast_to(np.arange(width, dtype=np.int32), (1, width)) * 3 + 7
+    with jax.enable_x64(False):
+        one = jax.jit(jax.vmap(lambda r: _smallest_keyed(r[None], jnp.asarray(idx), k, jnp)))
+        sel, exact = (np.asarray(a) for a in one(jnp.asarray(rows)))
+    sel = sel[:, 0]
+    want = _lexsmallest(rows, min(k, width))
+    want = np.where(want >= 0, want * 3 + 7, -1)
+    np.testing.assert_array_equal(sel[exact][:, :want.shape[1]], want[exact])
+    # not exact only where the k + 1 smallest finite distances come close
+    srt = np.sort(rows, axis=1)[:, :k + 1].astype(np.float64)
+    fin = np.isfinite(srt)
+    top = np.max(np.where(np.isfinite(rows), rows, 0), axis=1, keepdims=True).astype(np.float64)
+    with np.errstate(invalid="ignore"):                  # inf - inf past a row's end
+        gap = np.diff(srt, axis=1) / np.where(top > 0, top, 1)
+    close = np.any(fin[:, 1:] & (gap < 2.0 ** -(min(31 - (width - 1).bit_length(), 24) - 2)),
+                   axis=1)
+    assert not np.any(~exact & ~close)
+    assert exact[:300].mean() > 0.9              # evenly spread rows are ranked
+    assert not exact[300:320].any()              # a lattice's equal distances are not
+    assert exact[-5:].all() and (sel[-5:] == -1).all()
+
+
+def test_a_float32_search_by_keys_equals_its_exact_passes(monkeypatch):
+    """Bit for bit (indices and distances): the traced k-nearest search of
+    a float32 program by its keys against the same search made to take the
+    exact passes everywhere; a random crowd (rows past the passes' width,
+    in the tournament), a lattice (equal distances), a field of view, a
+    periodic box, 3-D."""
+    rng = np.random.default_rng(8)
+    cloud = np.concatenate([rng.uniform(0, 40, (1500, 2)), 20 + rng.normal(0, 0.6, (500, 2))])
+    grid = np.stack(np.meshgrid(np.arange(30.0), np.arange(30.0)), -1).reshape(-1, 2)
+    cases = [("cloud", cloud, {}), ("lattice", grid, {}),
+             ("fov", cloud, {"heading": rng.uniform(-3, 3, len(cloud)), "fov": 2.0}),
+             ("box", cloud, {"box": (40.0, 40.0)}),
+             ("3d", rng.uniform(0, 12, (2000, 3)), {})]
+    r, k = 1.6, 9
+    for name, p, kw in cases:
+        box = kw.pop("box", None)
+        plan = sp.plan_cells(p, r, box=box)
+        heading = kw.pop("heading", None)
+
+        def search(a, h):
+            return sp.nearest(plan, a, r, k, xp=jnp, heading=h, **kw)[:2]
+        args = (p.astype(np.float32), None if heading is None else heading.astype(np.float32))
+        with jax.enable_x64(False):
+            traced = []
+            with monkeypatch.context() as m:
+                m.setattr(Q, "_smallest_keyed", lambda *a: traced.append(1) or _smallest_keyed(*a))
+                keyed = [np.asarray(a) for a in jax.jit(search)(*args)]
+            assert traced, name                      # the keys were used
+            with monkeypatch.context() as m:
+                m.setattr(Q, "_smallest_keyed", lambda d2, idx, kk, xp: (
+                    _smallest_keyed(d2, idx, kk, xp)[0], jnp.asarray(False)))
+                exact = [np.asarray(a) for a in jax.jit(search)(*args)]
+        assert keyed[1].dtype == np.float32, name
+        np.testing.assert_array_equal(keyed[0], exact[0], err_msg=name)
+        np.testing.assert_array_equal(keyed[1], exact[1], err_msg=name)
+        assert (keyed[0] >= 0).sum() > len(p), name           # neighbours were found
 
 
 @pytest.mark.parametrize("width", [40, 50, 240, 472, 480, 1100])

@@ -471,32 +471,61 @@ def _make_bits_min():
 
 
 def _smallest_keyed(d2, idx, k, xp):
-    """Traced, 64-bit: the ``k`` smallest ``(d2, idx)`` pairs of each row,
-    as the ``k + 1`` smallest of one integer key per candidate
-    (:func:`_tournament`): the bits of ``d2`` (a float >= 0: its bits order
-    as it does) with the low ``b = bit_length(W - 1)`` bits replaced by the
-    candidate's column (unique in a row). Returns ``(idx (Q, k), exact)``,
-    ``-1`` where a row has fewer: the key orders like ``(d2, idx)`` unless
-    two of a row's ``k + 1`` smallest distances agree in all but their low
-    ``b`` bits (relative difference below ``2^(b - 52)``, equal distances
-    included), where ``exact`` is False and the caller takes the exact
-    passes of :func:`k_smallest`. The column, not ``idx``, in the low bits:
-    fewer bits (10 for a row of a thousand candidates, against 17 for the
-    slot of one of 10^5 points), and the tournament reads each minimum's
-    group from its key. The distances of the selected points are
-    recomputed by the caller (same arithmetic, same values)."""
+    """Traced: the ``k`` smallest ``(d2, idx)`` pairs of each row, as the
+    ``k + 1`` smallest of one integer key per candidate
+    (:func:`_tournament`): a rank of ``d2`` in the high bits, the
+    candidate's column (unique in a row) in the low ``b = bit_length(W -
+    1)`` bits. Returns ``(idx (Q, k), exact)``, ``-1`` where a row has
+    fewer. The column, not ``idx``, in the low bits: fewer bits (10 for a
+    row of a thousand candidates, against 17 for the slot of one of 10^5
+    points), and the tournament reads each minimum's group from its key.
+    The distances of the selected points are recomputed by the caller
+    (same arithmetic, same values).
+
+    The rank of ``d2`` is any function of it that never decreases, so the
+    keys order like ``(d2, idx)`` unless two of a row's ``k + 1`` smallest
+    keys have the same rank (equal distances included); then ``exact`` is
+    False and the caller takes the exact passes of :func:`k_smallest`
+    (if ``d2_a < d2_b`` but ``a`` is not taken before ``b``, they share a
+    rank, and so does every key taken between them).
+
+    - 64-bit (a float64 program): the bits of ``d2`` (a float >= 0 orders
+      as its bits do) with the low ``b`` bits cleared: equal ranks only
+      for distances within ``2^(b - 52)`` of each other (relative).
+    - 32-bit (a float32 program, which has no 64-bit integers): the
+      float32 bits would keep ``23 - b`` bits of the distance (13 for rows
+      of a thousand: near-equal ranks in most rows, so most chunks would
+      take the exact passes), so the rank is ``d2`` scaled to the row's largest
+      finite ``d2`` in ``q = min(31 - b, 24)`` bits, ``floor(d2 / max d2 *
+      (2^q - 2))``, a distance ``2^-q`` of the row's span apart from the next
+      (``q = 21`` at a thousand candidates). In 2-D ``d2`` of points spread
+      evenly is spread evenly, which such a fixed-point rank suits."""
     import jax
     qn, w = d2.shape
     b = max(1, int(w - 1).bit_length())
     kk = min(int(k), w)
     passes = min(kk + 1, w)
-    bits = jax.lax.bitcast_convert_type(d2, np.int64)
-    low = np.int64((1 << b) - 1)
-    key = (bits & ~low) | xp.arange(w, dtype=np.int64)[None, :]
+    wide = np.dtype(d2.dtype).itemsize == 8
+    it = np.int64 if wide else np.int32
+    low = it((1 << b) - 1)
+    col = xp.arange(w, dtype=it)[None, :]
+    if wide:
+        bits = jax.lax.bitcast_convert_type(d2, np.int64)
+        key = (bits & ~low) | col
+        none = int(np.array(np.inf).view(np.int64)) & ~int(low)   # the rank of inf
+    else:
+        q = min(31 - b, 24)
+        qmax = (1 << q) - 2                    # exact in float32 (q <= 24)
+        fin = d2 < np.inf                      # NaN and inf: no candidate
+        span = xp.max(xp.where(fin, d2, 0), axis=1, keepdims=True)
+        # d2 / span <= 1 (no overflow, even for a subnormal span)
+        r = xp.floor(xp.where(fin, d2, 0) / xp.where(span > 0, span, 1) * qmax)
+        rank = xp.where(fin, xp.minimum(r, qmax), qmax + 1).astype(it)
+        key = (rank << b) | col
+        none = (qmax + 1) << b
     got = _tournament(key, passes, xp, col_bits=b)
-    inf_bits = int(np.array(np.inf).view(np.int64)) & ~int(low)
     trunc = got & ~low
-    finite = trunc < inf_bits
+    finite = trunc < none
     exact = ~xp.any(finite[:, 1:] & (trunc[:, 1:] == trunc[:, :-1]))
     col = xp.where(finite[:, :kk], got[:, :kk] & low, 0)
     sel = xp.where(finite[:, :kk], xp.take_along_axis(idx, col, axis=1), -1)
@@ -534,8 +563,9 @@ def _slots(w):
 
 
 def _tournament(key, m, xp, col_bits=None):
-    """Traced: the ``m`` smallest of each row of ``key`` (Q, W) int64, keys
-    unique within a row (equal keys count once), ascending: (Q, m).
+    """Traced: the ``m`` smallest of each row of ``key`` (Q, W) int64 or
+    int32, keys unique within a row (equal keys count once), ascending:
+    (Q, m).
 
     A tournament, not ``m`` passes over all ``W`` candidates: the row is cut
     into groups of :func:`_group` candidates, each group's minimum kept; a pass takes
@@ -549,15 +579,29 @@ def _tournament(key, m, xp, col_bits=None):
     (no arg-minimum; the row's width is then best a multiple of
     ``_group(W)``, else it is padded).
     """
-    top = np.int64(np.iinfo(np.int64).max)
+    top = key.dtype.type(np.iinfo(key.dtype).max)
     qn, w = key.shape
     group = _group(w)
     if w <= PASSES_WIDTH:               # few candidates: passes over the row
-        got, kt, v = [], key.T, None
-        for _ in range(m):              # the smallest key above the last one taken
-            v = xp.min(kt if v is None else xp.where(kt > v[None, :], kt, top), axis=0)
-            got.append(v)
-        return xp.stack(got, axis=1)
+        kt = key.T
+        if xp is np:
+            got, v = [], None
+            for _ in range(m):          # the smallest key above the last one taken
+                v = xp.min(kt if v is None else xp.where(kt > v[None, :], kt, top), axis=0)
+                got.append(v)
+            return xp.stack(got, axis=1)
+        # traced: the passes in a loop, so the keys are made once; unrolled,
+        # XLA fused the keys' arithmetic and the transpose into every pass
+        # (float32 keys: 55 of 124 ms a step at 10^5 flocking agents)
+        import jax
+
+        def one(j, c):
+            got, v = c
+            v = xp.min(xp.where(kt > v[None, :], kt, top), axis=0)
+            return got.at[:, j].set(v), v
+        first = xp.min(kt, axis=0)
+        got = xp.zeros((qn, m), key.dtype).at[:, 0].set(first)
+        return jax.lax.fori_loop(1, m, one, (got, first))[0]
     ng = -(-w // group)
     if ng * group > w:
         key = xp.concatenate([key, xp.full((qn, ng * group - w), top, key.dtype)], 1)
@@ -570,7 +614,7 @@ def _tournament(key, m, xp, col_bits=None):
         if col_bits is None:
             j = xp.argmin(gmin, axis=1)
         else:                           # a spent row (all top) reads any group
-            j = xp.minimum((v & np.int64((1 << col_bits) - 1)) // group, ng - 1)
+            j = xp.minimum((v & key.dtype.type((1 << col_bits) - 1)) // group, ng - 1)
         got.append(v)
         grp = xp.take_along_axis(key, j[:, None, None], axis=1)[:, 0, :]
         nxt = xp.min(xp.where(grp > v[:, None], grp, top), axis=1)
@@ -810,8 +854,7 @@ def nearest(cells, points, radius, k, queries=None, xp=np, *, heading=None,
     n = points.shape[0]
     # the key holds a candidate's column in its row, not its point index:
     # any number of points (the index is gathered for the selected columns)
-    keyed = (xp is not np and np.dtype(points.dtype).itemsize == 8 and k > 0
-             and not cells.brute)
+    keyed = xp is not np and k > 0 and not cells.brute
 
     def exact(d2, idx):
         od, oi = k_smallest(d2, idx, k, xp)

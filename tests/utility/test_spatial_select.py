@@ -9,8 +9,13 @@ import pytest
 
 from avblocks.utility import spatial as sp
 from avblocks.utility.spatial import queries as Q
-from avblocks.utility.spatial.queries import (PASSES_WIDTH, _group, _slots, _smallest_keyed,
-                                              _tournament)
+from avblocks.utility.spatial.queries import (
+    PASSES_WIDTH,
+    _group,
+    _slots,
+    _smallest_keyed,
+    _tournament,
+)
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
@@ -115,13 +120,14 @@ def test_a_float32_search_by_keys_equals_its_exact_passes(monkeypatch):
         plan = sp.plan_cells(p, r, box=box)
         heading = kw.pop("heading", None)
 
-        def search(a, h):
+        def search(a, h, plan=plan, kw=kw):
             return sp.nearest(plan, a, r, k, xp=jnp, heading=h, **kw)[:2]
         args = (p.astype(np.float32), None if heading is None else heading.astype(np.float32))
         with jax.enable_x64(False):
             traced = []
             with monkeypatch.context() as m:
-                m.setattr(Q, "_smallest_keyed", lambda *a: traced.append(1) or _smallest_keyed(*a))
+                m.setattr(Q, "_smallest_keyed",
+                          lambda *a, t=traced: t.append(1) or _smallest_keyed(*a))
                 keyed = [np.asarray(a) for a in jax.jit(search)(*args)]
             assert traced, name                      # the keys were used
             with monkeypatch.context() as m:

@@ -298,3 +298,44 @@ def test_planning_from_non_finite_points_names_the_block_or_the_point():
         p[7, 1] = bad
         with pytest.raises(av.ParameterError, match="point 7"):
             sp.plan_cells(p, 1.0)
+
+
+def converging(n=40, t=1.0):
+    """Agents 10 m apart on a line, each moving to the origin at the speed
+    that takes it there at ``t``: one agent per cell until the last step,
+    all of them in one cell at ``t`` (the final sample)."""
+    x0 = np.zeros((n, 2))
+    x0[:, 0] = 10.0 * np.arange(1, n + 1)
+    d = av.Diagram()
+    ag = d.add(av.vehicles.SingleIntegrator(x0), name="ag")
+    v = d.add(av.blocks.Constant(-x0 / t), name="v")
+    nb = d.add(Neighbors(n, 3, radius=1.0, input="position", method="cells"), name="nb")
+    d.connect(v.y, ag.velocity)
+    d.connect(ag.position, nb.position)
+    return d
+
+
+@pytest.mark.parametrize("log_every", [1, 5])
+def test_the_final_samples_search_counts_only_where_it_is_logged(log_every):
+    # the final sample (t = 1, after the last step) is where the swarm
+    # outgrows its plan; a search nothing logged reads there cannot spoil
+    # the results, so a run logging the positions neither raises nor
+    # re-plans (the positions are the NumPy engine's); logging the
+    # neighbours, the same overflow raises, naming the block
+    kw = dict(t_final=1.0, dt=0.1, solver="euler", log_every=log_every)
+    plan_cap = None
+    for log in (["ag.position"], ["nb.neighbors"]):
+        d = converging()
+        runner = av.compile(d, log=log, on_overflow="raise", **kw)
+        plan_cap = runner.plans["nb/0"].capacity
+        assert plan_cap < 40                      # all 40 in one cell is an overflow
+        if log == ["ag.position"]:
+            res = runner()
+            ref = av.simulate(converging(), backend="numpy", progress=False, log=log, **kw)
+            np.testing.assert_allclose(res["ag.position"], ref["ag.position"], rtol=0,
+                                       atol=1e-12)
+            assert np.abs(res["ag.position"][-1]).max() < 1e-9     # all met at the origin
+            assert runner.plans["nb/0"].capacity == plan_cap       # not re-planned
+        else:
+            with pytest.raises(av.SimulationError, match="nb"):
+                runner()

@@ -381,11 +381,23 @@ class Program:
             def logged(Y):
                 return [Y[j][o] for j, o in idx]
 
-            def sample(carry, k):
-                """The outputs at sample k, logged, without a step."""
+            # What a sample's searches needed counts only where a logged
+            # value can read a search at that sample (the final sample: a
+            # sample followed by its step repeats every search there, with
+            # the same needs): else the tally alone kept the searches' sort
+            # and slot ranges alive at every sample (two of each in a call
+            # logged at its ends).
+            reads = self._logged_reads_search()
+
+            def sample(carry, k, final):
+                """The outputs at sample k, logged, without a step;
+                ``final``: a bool, or a traced one (segments)."""
                 with tally(rows, carry[2]) as tl:
                     Y = eng.major_outputs(t0 + k * dt, carry[0], carry[1], eng.hits(k))
-                return (carry[0], carry[1], tl.value if rows else None), logged(Y)
+                N = carry[2]
+                if rows and reads and final is not False:
+                    N = tl.value if final is True else jnp.where(final, tl.value, N)
+                return (carry[0], carry[1], N), logged(Y)
 
             # Logging every step, a sample and its step are one branch of the
             # cond: the outputs are computed once, logged and integrated with
@@ -402,8 +414,8 @@ class Program:
                     def go(c):
                         c, Y = stepped(c, k)
                         return c, logged(Y)
-                    return lax.cond(i < nlog - 1, go, lambda c: sample(c, k), carry)
-                carry, row = sample(carry, k)
+                    return lax.cond(i < nlog - 1, go, lambda c: sample(c, k, True), carry)
+                carry, row = sample(carry, k, i >= nlog - 1)
                 carry = lax.cond(i < nlog - 1, lambda c: advance_le(c, k),
                                  lambda c: c, carry)
                 return carry, row
@@ -417,6 +429,22 @@ class Program:
                 return carry[2] if rows else jnp.zeros((0, 4), fdt)
 
             yield SimpleNamespace(init=init, outer=outer, finish=finish, needs=needs)
+
+    def _logged_reads_search(self) -> bool:
+        """Whether a logged signal can read, at its sample, a neighbour
+        search made there: a block that owns a search is among the logged
+        blocks or upstream of them through direct-feedthrough wires (a
+        block without feedthrough gives its output from its state)."""
+        if not self.need_rows:
+            return False
+        owners = {name for name, _ in self.need_rows}
+        seen, stack = set(), [j for j, _ in self.log_idx]
+        while stack:
+            j = stack.pop()
+            if j not in seen:
+                seen.add(j)
+                stack += [k for _inp, k, _o in self.eng.src_ft[j]]
+        return any(self.cd.names[j] in owners for j in seen)
 
     def needs(self, value):
         """``{(block name, search number): [capacity, hits, reach, span]}``

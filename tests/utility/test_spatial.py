@@ -217,15 +217,28 @@ def test_far_apart_points_report_their_span():
     assert float(need.span) < 1e-10
 
 
-def test_jit_packed_sort_equals_stable_argsort():
+@pytest.mark.parametrize("bits", [64, 32])
+def test_jit_packed_sort_equals_stable_argsort(bits):
+    """Both branches (packed keys, and the argsort where ``cells * N`` is
+    too large to pack), with 64-bit keys and with the 32-bit keys of a
+    float32 program (packed up to ``2^30``)."""
     jax = pytest.importorskip("jax")
     import jax.numpy as jnp
-    keys = np.random.default_rng(0).integers(0, 50, 300)
-    with jax.enable_x64(True):
-        fast = jax.jit(lambda k: sp._sort(k, jnp, 50.0))(jnp.asarray(keys))
-        slow = jax.jit(lambda k: sp._sort(k, jnp, 1e18))(jnp.asarray(keys))
-    np.testing.assert_array_equal(np.asarray(fast), np.argsort(keys, kind="stable"))
-    np.testing.assert_array_equal(np.asarray(slow), np.argsort(keys, kind="stable"))
+    rng = np.random.default_rng(0)
+    keys = rng.integers(0, 50, 300)
+    big = 1e18 if bits == 64 else 2.0 ** 30 / 300 * 1.01
+    cells = int(2.0 ** 30 / 300 * 0.99)           # packed, keys up to near the limit
+    far = np.concatenate([rng.integers(cells - 40, cells, 150), rng.integers(0, 40, 150)])
+    it = np.int64 if bits == 64 else np.int32
+    with jax.enable_x64(bits == 64):
+        k = jnp.asarray(keys.astype(it))
+        fast = jax.jit(lambda k: sp._sort(k, jnp, 50.0))(k)
+        slow = jax.jit(lambda k: sp._sort(k, jnp, big))(k)
+        edge = jax.jit(lambda k: sp._sort(k, jnp, float(cells)))(jnp.asarray(far.astype(it)))
+    want = np.argsort(keys, kind="stable")
+    np.testing.assert_array_equal(np.asarray(fast), want)
+    np.testing.assert_array_equal(np.asarray(slow), want)
+    np.testing.assert_array_equal(np.asarray(edge), np.argsort(far, kind="stable"))
 
 
 @pytest.mark.parametrize("dtype", ["float64", "float32"])

@@ -18,20 +18,25 @@ def _int_type(points, xp):
 
 def _sort(keys, xp, cells=None):
     """Stable argsort of cell keys ``>= 0`` below ``cells`` (an int or an
-    array scalar). Traced with 64-bit keys: one plain sort of ``key * N +
-    index`` (XLA's CPU sort of one operand is ~4x faster than its sort of
-    (key, index) pairs), taken when ``cells * N < 2^62``, else the argsort."""
+    array scalar). Traced: one plain sort of ``key * N + index`` (XLA's
+    CPU sort of one operand is ~4x faster than its sort of (key, index)
+    pairs), taken when ``cells * N`` stays below ``2^62`` (64-bit keys) or
+    ``2^30`` (32-bit keys, a float32 program: up to about 3 x 10^4 agents
+    on a lattice), else the argsort. Measured at 10^5 keys: int32 pairs
+    17.7 ms, int32 alone 3.0 ms, packed int64 3.4 ms."""
     if xp is np:
         return np.argsort(keys, kind="stable")
     n = keys.shape[0]
-    if np.dtype(keys.dtype).itemsize != 8 or cells is None or n < 2:
+    limit = 2.0 ** 62 if np.dtype(keys.dtype).itemsize == 8 else 2.0 ** 30
+    if cells is None or n < 2 or n >= limit:
         return xp.argsort(keys, stable=True)
     import jax
 
     def packed():
         return xp.sort(keys * n + xp.arange(n, dtype=keys.dtype)) % n
 
-    fits = cells * float(n) < 2.0 ** 62
+    # (float32 products hold 24 bits: 2^30 leaves a factor of 2 below int32's end)
+    fits = cells * float(n) < limit
     return jax.lax.cond(fits, packed, lambda: xp.argsort(keys, stable=True))
 
 

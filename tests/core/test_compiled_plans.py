@@ -323,7 +323,6 @@ def test_the_final_samples_search_counts_only_where_it_is_logged(log_every):
     # re-plans (the positions are the NumPy engine's); logging the
     # neighbours, the same overflow raises, naming the block
     kw = dict(t_final=1.0, dt=0.1, solver="euler", log_every=log_every)
-    plan_cap = None
     for log in (["ag.position"], ["nb.neighbors"]):
         d = converging()
         runner = av.compile(d, log=log, on_overflow="raise", **kw)

@@ -151,3 +151,31 @@ def test_unknown_keyword_is_rejected():
 def test_bad_initial_poses(bad):
     with pytest.raises(av.ParameterError, match="pose0"):
         av.vehicles.Unicycle(pose0=bad)
+
+
+def test_feedthrough_ancestors_stop_at_blocks_that_read_their_state():
+    """What a block's output at one time reads at that time: itself and the
+    blocks upstream through direct feedthrough (a gain passes its input
+    through, an integrator's output is its state). Chain c -> g -> i -> h,
+    and a constant k nobody reads."""
+    from avblocks.core.engine import Engine
+    d = av.Diagram()
+    c = d.add(av.blocks.Constant([[1.0]]), name="c")
+    g = d.add(av.blocks.Gain(2.0), name="g")
+    i = d.add(av.blocks.Integrator([[0.0]]), name="i")
+    h = d.add(av.blocks.Gain(3.0), name="h")
+    d.add(av.blocks.Constant([[5.0]]), name="k")
+    d.connect(c.y, g.u)
+    d.connect(g.y, i.u)
+    d.connect(i.y, h.u)
+    cd = d.build()
+    eng = Engine(cd, 0.1)
+    at = {n: j for j, n in enumerate(cd.names)}
+
+    def names(*blocks):
+        return {cd.names[j] for j in eng.feedthrough_ancestors(at[b] for b in blocks)}
+    assert names("h") == {"h", "i"}
+    assert names("g") == {"g", "c"}
+    assert names("i") == {"i"}
+    assert names("h", "g") == {"h", "i", "g", "c"}
+    assert names() == set()

@@ -90,6 +90,19 @@ class Engine:
         self.size = off
         self._kpos = {i: j for j, i in enumerate(self.cont)}
 
+    def feedthrough_ancestors(self, blocks):
+        """The indices of ``blocks`` and of every block upstream of them
+        through direct-feedthrough wires: what their outputs at one time
+        read at that time (a block without feedthrough gives its output
+        from its state alone)."""
+        seen, stack = set(), list(blocks)
+        while stack:
+            j = stack.pop()
+            if j not in seen:
+                seen.add(j)
+                stack += [k for _inp, k, _o in self.src_ft[j]]
+        return seen
+
     # ----------------------------------------------------------------- pieces
     def hits(self, k):
         """Per-block sample-hit flags at major step ``k`` (None if continuous)."""

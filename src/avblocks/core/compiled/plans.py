@@ -156,12 +156,7 @@ def points_at_t0(cd, todo, *, dt, t0=0.0, seed=0, x0=None):
         return [cd.blocks[i].get_parameter(s.points) for i, s in todo]
     sim = Simulator(cd, dt, "euler", seed=seed, t0=t0, x0=x0, check_finite=False)
     eng = sim.eng
-    need, stack = set(), [j for j, _ in srcs]
-    while stack:                                # ancestors through feedthrough wires
-        j = stack.pop()
-        if j not in need:
-            need.add(j)
-            stack += [k for _inp, k, _o in eng.src_ft[j]]
+    need = eng.feedthrough_ancestors(j for j, _ in srcs)
     X = [{} for _ in cd.blocks]
     for j in need:                              # states read, never written: no copies
         b = cd.blocks[j]

@@ -438,13 +438,8 @@ class Program:
         if not self.need_rows:
             return False
         owners = {name for name, _ in self.need_rows}
-        seen, stack = set(), [j for j, _ in self.log_idx]
-        while stack:
-            j = stack.pop()
-            if j not in seen:
-                seen.add(j)
-                stack += [k for _inp, k, _o in self.eng.src_ft[j]]
-        return any(self.cd.names[j] in owners for j in seen)
+        read = self.eng.feedthrough_ancestors(j for j, _ in self.log_idx)
+        return any(self.cd.names[j] in owners for j in read)
 
     def needs(self, value):
         """``{(block name, search number): [capacity, hits, reach, span]}``

@@ -270,3 +270,64 @@ def test_by_default_the_vehicles_stand_on_drone_formations_start_line(router, tm
     with cf_emulator(router, "cf1,cf2,cf3", tmp_path) as log:
         (start,) = events(read_log(log), "start")
     np.testing.assert_array_equal(start["position"], start_positions(3, 0.0))
+
+
+def _pid_of(log):
+    """The emulator process writing ``log`` (its command line names it)."""
+    from pathlib import Path
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if str(log).encode() in (d / "cmdline").read_bytes().split(b"\0"):
+                    return int(d.name)
+            except OSError:
+                continue
+    raise AssertionError(f"no process writes {log}")
+
+
+def test_a_pause_of_the_emulator_itself_is_not_set_point_silence(router, tmp_path):
+    """The firmware's clock never stops. When the emulator process is not
+    running (a loaded host; here SIGSTOP for 0.8 s) while the commander
+    streams on, the set-points sent meanwhile wait in its socket: once it
+    runs again the watchdog must not count the pause as their age. The
+    commander's own silence of the same length (cf2 after the pause) still
+    levels its vehicle out at 0.5 s."""
+    import os
+    import signal
+    with cf_emulator(router, "cf1,cf2", tmp_path) as log:
+        pid = _pid_of(log)
+        link, poses, T = _client(router)
+        try:
+            time.sleep(0.5)
+            tk = [link.client(f"/{nm}/takeoff", T.TAKEOFF) for nm in ("cf1", "cf2")]
+            assert all(c.call(height=0.5, duration=1.0)[0] for c in tk)
+            time.sleep(1.5)
+            pubs = [link.publisher(f"/{nm}/cmd_velocity_world", T.VELOCITY_WORLD)
+                    for nm in ("cf1", "cf2")]
+            time.sleep(0.3)
+
+            def stream(seconds, which):
+                t_end = time.monotonic() + seconds
+                while time.monotonic() < t_end:
+                    for k in which:
+                        pubs[k].put(T.encode_velocity_world((0.0, 0.0, 0.0), 0.0,
+                                                            time.time()))
+                    time.sleep(0.02)
+            stream(0.5, (0, 1))
+            os.kill(pid, signal.SIGSTOP)
+            try:
+                stream(0.8, (0, 1))             # both stream on, unread
+            finally:
+                os.kill(pid, signal.SIGCONT)
+            stream(1.2, (0,))                   # then cf2's commander falls silent
+        finally:
+            link.close()
+    recs = read_log(log)
+    (pause,) = events(recs, "emulator_paused")
+    assert 0.75 < pause["s"] < 1.5
+    assert recs[-1]["ev"] == "end" and 0.7 < recs[-1]["paused_s"] < 1.5
+    assert events(recs, "wdt_level_out", "cf1") == []
+    (lv,) = events(recs, "wdt_level_out", "cf2")
+    assert 0.5 < lv["age"] <= 0.5 + 0.021
+    last = [s for s in events(recs, "setpoint", "cf2") if s["accepted"]][-1]
+    assert lv["at"] - last["at"] == pytest.approx(lv["age"], abs=1e-5)

@@ -55,7 +55,11 @@ commit 2a18fc29; Crazyswarm2 commit f6154e2):
   2 s the motors stop (*exception: free fall*, then *locked* until
   reboot): the vehicle falls. Under the high-level commander the set-point
   is refreshed every tick: no timeout. A relaxed priority (notify) leaves
-  *level out* for *flying* again.
+  *level out* for *flying* again. The age is on the vehicle's clock, which
+  never stops: a pause of the emulator process itself (a loaded host, more
+  than ``PAUSE_MIN`` between two of its ticks; logged ``emulator_paused``)
+  is not counted, since the set-points sent meanwhile were only waiting
+  to be read.
 * **arming** (``supervisor.c`` ``supervisorRequestArming``, ``AUTO_ARMING``;
   ``docs/functional-areas/supervisor/arming.md``; ``configs/cf21bl_defconfig``
   ``CONFIG_MOTORS_REQUIRE_ARMING=y``; ``platform_defaults.h``
@@ -122,6 +126,11 @@ GAINS = {"kv": 4.0, "k_att": 12.0, "k_rate": 40.0}
 WDT_LEVEL_OUT, WDT_SHUTDOWN = 0.5, 2.0
 #: Physics steps one loop iteration may take to catch up with the clock.
 MAX_STEPS = 4
+#: A gap between two loop iterations longer than this [s] means the
+#: emulator process itself was not running (a loaded host descheduled it).
+#: A firmware's clock never stops, and the radio keeps queueing set-points
+#: meanwhile, so the watchdog does not count such a pause as set-point age.
+PAUSE_MIN = 0.1
 #: Status.supervisor_info bits (crazyflie_interfaces/msg/Status).
 CAN_BE_ARMED, IS_ARMED, AUTO_ARM, CAN_FLY, IS_FLYING, IS_LOCKED = 1, 2, 4, 8, 16, 64
 #: The supervisor's arming timeouts [s] (platform_defaults.h:
@@ -246,6 +255,10 @@ class CrazyflieEmulator:
         self.t_first_sp = None
         #: Seconds of wall time the physics could not keep up with (slipped).
         self.lost = 0.0
+        #: Seconds the emulator process itself was stopped (gaps between
+        #: loop iterations over :data:`PAUSE_MIN`); the watchdogs' set-point
+        #: age leaves them out (see :meth:`_references`).
+        self.paused = 0.0
         self._lock = threading.RLock()
         self._log = open(log, "a", buffering=1) if log else None
         self._stop = threading.Event()
@@ -310,7 +323,7 @@ class CrazyflieEmulator:
             mode = self.mode[i]
             ok = mode not in ("landed", "locked", "falling", "drop")
             if ok:
-                sp["t"] = t
+                sp["t"], sp["paused"] = t, self.paused
                 self.sp[i] = sp
                 self.crtp[i] = True
                 if self.traj[i] is not None and self.traj[i]["kind"] == "land":
@@ -324,7 +337,7 @@ class CrazyflieEmulator:
                 if self.t_first_sp is None:
                     self.t_first_sp = t
         rec = {"ev": "setpoint", "vehicle": self.names[i], **{k: v for k, v in sp.items()
-                                                              if k != "t"},
+                                                              if k not in ("t", "paused")},
                "accepted": ok}
         if ok:      # the physics time the firmware stamped it with (its watchdog's
             rec["at"] = round(t, 6)     # reference; "t" is when the line is written)
@@ -437,7 +450,10 @@ class CrazyflieEmulator:
                 continue
             if self.crtp[i]:
                 sp = self.sp[i]
-                age = t - sp["t"]
+                # the age on the vehicle's clock: the emulator's own pauses
+                # (set-points queued, undelivered, while it was not running)
+                # are not the link's silence
+                age = t - sp["t"] - (self.paused - sp["paused"])
                 if age > WDT_SHUTDOWN:
                     self.mode[i] = "falling"
                     events.append({"ev": "wdt_motors_off", "vehicle": self.names[i],
@@ -606,9 +622,14 @@ class CrazyflieEmulator:
         and the log's ``end`` record has it)."""
         nxt = time.monotonic()
         end = None if duration is None else nxt + duration
-        t_sim = t_pose = t_status = self.now()
+        t_sim = t_pose = t_status = t_prev = self.now()
         while not self._stop.is_set() and (end is None or time.monotonic() < end):
             t = self.now()
+            gap, t_prev = t - t_prev, t
+            if gap > PAUSE_MIN:                 # this process was not running
+                with self._lock:
+                    self.paused += gap - self.h
+                self.write({"ev": "emulator_paused", "s": round(gap, 6)})
             self._faults(t)
             behind = t - t_sim - MAX_STEPS * 2 * self.h
             if behind > 0:                      # the vehicles' time slips by this
@@ -632,7 +653,8 @@ class CrazyflieEmulator:
             elif delay < -0.5:                  # far behind: resynchronize the ticks
                 nxt = time.monotonic()
         self.write({"ev": "end", "position": self.x["position"].tolist(),
-                    "modes": list(self.mode), "lost_s": round(self.lost, 6)})
+                    "modes": list(self.mode), "lost_s": round(self.lost, 6),
+                    "paused_s": round(self.paused, 6)})
 
     def stop(self):
         self._stop.set()

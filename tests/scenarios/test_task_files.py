@@ -166,6 +166,25 @@ def test_a_bad_generator_argument_names_the_entry(name, entry, bad, match):
     assert f"blocks.{block}.{entry}" in str(e.value)
 
 
+def test_the_matching_generator_refuses_more_agents_than_it_can_match_in_seconds(tmp_path):
+    """The Hungarian matching takes O(N^3) time, which the memory budget
+    does not bound (4,000 agents: 4.5 s; a fuzzed file once asked for
+    thousands): a file's ``spread_targets`` stops at MAX_MATCHED, before
+    drawing anything, and the error names the entry, the limit and N."""
+    from avblocks.scenarios.spread import MAX_MATCHED
+    sc = load_scenario("spread")
+    sc.data["blocks"]["drive"]["waypoints"] = {
+        "spread_targets": {"agents": MAX_MATCHED + 1, "half": 1.0, "seed": 1}}
+    with pytest.raises(av.ScenarioError, match="agents") as e:
+        sc.build()
+    msg = str(e.value)
+    assert "blocks.drive.waypoints" in msg and f"<= {MAX_MATCHED:,}" in msg
+    assert f"{MAX_MATCHED + 1:,}" in msg
+    out = tmp_path / "out"
+    assert main(["run", "spread", "--set", f"agents={MAX_MATCHED + 1}", "--out",
+                 str(out)]) == 2
+
+
 def test_the_policy_file_is_named_in_the_error_when_it_is_missing(tmp_path):
     with pytest.raises(av.ScenarioError, match="policy") as e:
         load_scenario("navigation").with_overrides(

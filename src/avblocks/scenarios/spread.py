@@ -43,6 +43,7 @@ import numpy as np
 
 from avblocks.blocks import Constant
 from avblocks.core.diagram import Diagram
+from avblocks.core.errors import ParameterError
 from avblocks.scenarios._task import command_source, drive_at_speed, uniform_points
 from avblocks.tasks import SpreadTask, assign_landmarks
 from avblocks.vehicles import SingleIntegrator
@@ -75,12 +76,24 @@ def spread_starts(agents, half, seed, which="agents"):
     return p0 if which == "agents" else lm
 
 
+#: Most agents :func:`spread_targets` matches. The Hungarian method takes
+#: O(N^3) time, which no memory limit bounds: 2,000 agents take about 1 s
+#: here, 4,000 about 4.5 s, 30,000 would take most of an hour. A scenario
+#: file is someone else's file: its generators stay within seconds.
+MAX_MATCHED = 2_000
+
+
 def spread_targets(agents, half, seed):
     """(N, 1, 2): each agent's landmark by the minimum-total-distance
     matching of the starts and landmarks :func:`spread_starts` draws
     (:func:`avblocks.tasks.assign_landmarks`), as one-waypoint lists for
-    ``controllers.HolonomicPointToPoint``. A scenario-file generator."""
+    ``controllers.HolonomicPointToPoint``. A scenario-file generator, for
+    at most :data:`MAX_MATCHED` agents (the matching's time grows as N^3)."""
     n, seed = _checked(agents, seed)
+    if n > MAX_MATCHED:
+        raise ParameterError("spread_targets: the minimum-distance matching takes O(N^3) "
+                             "time", param="agents", expected=f"<= {MAX_MATCHED:,} agents",
+                             found=f"{n:,}", hint="About 1 s at 2,000 agents, 4.5 s at 4,000")
     p0, lm = _starts(n, float(half), seed)
     return assign_landmarks(p0, lm)[:, None, :]
 

@@ -32,6 +32,19 @@ def _client(router):
     return link, poses, T
 
 
+def _airborne(link, T, duration):
+    """Both vehicles taken off to 0.5 m in ``duration`` s and hovering; their
+    takeoff clients and velocity publishers."""
+    time.sleep(0.5)
+    tk = [link.client(f"/{nm}/takeoff", T.TAKEOFF) for nm in ("cf1", "cf2")]
+    assert all(c.call(height=0.5, duration=duration)[0] for c in tk)
+    time.sleep(duration + 0.5)
+    pubs = [link.publisher(f"/{nm}/cmd_velocity_world", T.VELOCITY_WORLD)
+            for nm in ("cf1", "cf2")]
+    time.sleep(0.3)
+    return tk, pubs
+
+
 def _poly(s):
     s = min(max(s, 0.0), 1.0)
     return 35 * s ** 4 - 84 * s ** 5 + 70 * s ** 6 - 20 * s ** 7
@@ -82,13 +95,7 @@ def test_setpoint_watchdog_levels_out_then_cuts_the_motors_and_the_vehicle_falls
     with cf_emulator(router, "cf1,cf2", tmp_path) as log:
         link, poses, T = _client(router)
         try:
-            time.sleep(0.5)
-            tk = [link.client(f"/{nm}/takeoff", T.TAKEOFF) for nm in ("cf1", "cf2")]
-            assert all(c.call(height=0.5, duration=1.5)[0] for c in tk)
-            time.sleep(2.0)
-            pubs = [link.publisher(f"/{nm}/cmd_velocity_world", T.VELOCITY_WORLD)
-                    for nm in ("cf1", "cf2")]
-            time.sleep(0.3)
+            tk, pubs = _airborne(link, T, 1.5)
             for _ in range(20):
                 for p in pubs:
                     p.put(T.encode_velocity_world((0.2, 0.0, 0.0), 0.0, time.time()))
@@ -298,13 +305,7 @@ def test_a_pause_of_the_emulator_itself_is_not_set_point_silence(router, tmp_pat
         pid = _pid_of(log)
         link, poses, T = _client(router)
         try:
-            time.sleep(0.5)
-            tk = [link.client(f"/{nm}/takeoff", T.TAKEOFF) for nm in ("cf1", "cf2")]
-            assert all(c.call(height=0.5, duration=1.0)[0] for c in tk)
-            time.sleep(1.5)
-            pubs = [link.publisher(f"/{nm}/cmd_velocity_world", T.VELOCITY_WORLD)
-                    for nm in ("cf1", "cf2")]
-            time.sleep(0.3)
+            _, pubs = _airborne(link, T, 1.0)
 
             def stream(seconds, which):
                 t_end = time.monotonic() + seconds

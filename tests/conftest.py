@@ -48,23 +48,12 @@ def mujoco_extra():
         pytest.skip(f"mujoco or cv2 unavailable: {e}")
 
 
-def pytest_configure(config):
-    """pytest-xdist's ``load`` scheduling first gives each worker a quarter
-    of its share of the tests as one block from the front of the list:
-    with the longest tests first (below) one worker would get them all. At
-    most two at a time (``--maxschedchunk 2``, unless given) makes every
-    worker take the next test when it is free."""
-    if hasattr(config.option, "maxschedchunk") and config.option.maxschedchunk is None:
-        config.option.maxschedchunk = 2
-
-
 def pytest_collection_modifyitems(session, config, items):
     """The longest tests first (``tests/durations.json``, refreshed by
     ``tests/_durations.py`` from a ``--durations=0`` run), the rest in
-    their collection order: pytest-xdist hands tests out in this order
-    (two at a time: ``pytest_configure``), so a long test no longer starts
-    last and keeps one worker busy while the others are done. Only the
-    order changes."""
+    their collection order: pytest-xdist hands tests out in this order,
+    so a long test no longer starts last and keeps one worker busy while
+    the others are done. Only the order changes."""
     import json
     from pathlib import Path
     try:

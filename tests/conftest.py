@@ -46,20 +46,3 @@ def mujoco_extra():
         if os.environ.get("CI"):
             raise
         pytest.skip(f"mujoco or cv2 unavailable: {e}")
-
-
-def pytest_collection_modifyitems(session, config, items):
-    """The longest tests first (``tests/durations.json``, refreshed by
-    ``tests/_durations.py`` from a ``--durations=0`` run), the rest in
-    their collection order: pytest-xdist hands tests out in this order,
-    so a long test no longer starts last and keeps one worker busy while
-    the others are done. Only the order changes."""
-    import json
-    from pathlib import Path
-    try:
-        secs = json.loads(Path(__file__).with_name("durations.json").read_text())
-    except (OSError, ValueError):
-        return
-    if not isinstance(secs, dict):
-        return
-    items[:] = sorted(items, key=lambda it: -float(secs.get(it.nodeid, 0.0) or 0.0))

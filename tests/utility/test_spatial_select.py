@@ -124,12 +124,19 @@ def test_a_float32_search_by_keys_equals_its_exact_passes(monkeypatch):
             return sp.nearest(plan, a, r, k, xp=jnp, heading=h, **kw)[:2]
         args = (p.astype(np.float32), None if heading is None else heading.astype(np.float32))
         with jax.enable_x64(False):
-            traced = []
+            taken = []                               # each chunk's ``exact``, as run
+
+            def keys(*a, taken=taken):
+                sel, exact = _smallest_keyed(*a)
+                jax.debug.callback(lambda e: taken.append(bool(e)), exact)
+                return sel, exact
             with monkeypatch.context() as m:
-                m.setattr(Q, "_smallest_keyed",
-                          lambda *a, t=traced: t.append(1) or _smallest_keyed(*a))
+                m.setattr(Q, "_smallest_keyed", keys)
                 keyed = [np.asarray(a) for a in jax.jit(search)(*args)]
-            assert traced, name                      # the keys were used
+            jax.effects_barrier()
+            assert taken, name                       # the keys were used
+            if name != "lattice":                    # (equal distances: the passes)
+                assert any(taken), name              # and their selection was kept
             with monkeypatch.context() as m:
                 m.setattr(Q, "_smallest_keyed", lambda d2, idx, kk, xp: (
                     _smallest_keyed(d2, idx, kk, xp)[0], jnp.asarray(False)))

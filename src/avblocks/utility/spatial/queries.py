@@ -508,10 +508,10 @@ def _smallest_keyed(d2, idx, k, xp):
     wide = np.dtype(d2.dtype).itemsize == 8
     it = np.int64 if wide else np.int32
     low = it((1 << b) - 1)
-    col = xp.arange(w, dtype=it)[None, :]
+    column = xp.arange(w, dtype=it)[None, :]
     if wide:
         bits = jax.lax.bitcast_convert_type(d2, np.int64)
-        key = (bits & ~low) | col
+        key = (bits & ~low) | column
         none = int(np.array(np.inf).view(np.int64)) & ~int(low)   # the rank of inf
     else:
         q = min(31 - b, 24)
@@ -521,7 +521,7 @@ def _smallest_keyed(d2, idx, k, xp):
         # d2 / span <= 1 (no overflow, even for a subnormal span)
         r = xp.floor(xp.where(fin, d2, 0) / xp.where(span > 0, span, 1) * qmax)
         rank = xp.where(fin, xp.minimum(r, qmax), qmax + 1).astype(it)
-        key = (rank << b) | col
+        key = (rank << b) | column
         none = (qmax + 1) << b
     got = _tournament(key, passes, xp, col_bits=b)
     trunc = got & ~low

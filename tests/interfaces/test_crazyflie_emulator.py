@@ -320,15 +320,24 @@ def test_a_pause_of_the_emulator_itself_is_not_set_point_silence(router, tmp_pat
                 stream(0.8, (0, 1))             # both stream on, unread
             finally:
                 os.kill(pid, signal.SIGCONT)
-            stream(1.2, (0,))                   # then cf2's commander falls silent
+            # then cf2's commander falls silent (the backlog read after the pause
+            # can take a few tenths of a second on a loaded machine)
+            stream(1.8, (0,))
         finally:
             link.close()
     recs = read_log(log)
-    (pause,) = events(recs, "emulator_paused")
-    assert 0.75 < pause["s"] < 1.5
-    assert recs[-1]["ev"] == "end" and 0.7 < recs[-1]["paused_s"] < 1.5
+    # the SIGSTOP is the longest pause (a loaded machine may add short ones)
+    pauses = events(recs, "emulator_paused")
+    assert 0.75 < max(p["s"] for p in pauses) < 1.5
+    # each pause counts its gap less one tick
+    assert recs[-1]["ev"] == "end"
+    assert 0.7 < recs[-1]["paused_s"] < sum(p["s"] for p in pauses) + 1e-6
     assert events(recs, "wdt_level_out", "cf1") == []
     (lv,) = events(recs, "wdt_level_out", "cf2")
     assert 0.5 < lv["age"] <= 0.5 + 0.021
     last = [s for s in events(recs, "setpoint", "cf2") if s["accepted"]][-1]
-    assert lv["at"] - last["at"] == pytest.approx(lv["age"], abs=1e-5)
+    # its age: the physics time since its last set-point less the emulator's
+    # pauses in between (on a loaded machine Zenoh may drop what was sent to the
+    # stopped process, so that last set-point can precede the SIGSTOP)
+    between = lv["at"] - last["at"]
+    assert lv["age"] - 1e-5 <= between <= lv["age"] + recs[-1]["paused_s"] + 1e-5

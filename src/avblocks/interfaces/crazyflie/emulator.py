@@ -130,7 +130,7 @@ MAX_STEPS = 4
 #: emulator process itself was not running (a loaded host descheduled it).
 #: A firmware's clock never stops, and the radio keeps queueing set-points
 #: meanwhile, so the watchdog does not count such a pause as set-point age.
-PAUSE_MIN = 0.1
+PAUSE_MIN = 0.25
 #: Status.supervisor_info bits (crazyflie_interfaces/msg/Status).
 CAN_BE_ARMED, IS_ARMED, AUTO_ARM, CAN_FLY, IS_FLYING, IS_LOCKED = 1, 2, 4, 8, 16, 64
 #: The supervisor's arming timeouts [s] (platform_defaults.h:
@@ -338,7 +338,10 @@ class CrazyflieEmulator:
                     self.t_first_sp = t
         rec = {"ev": "setpoint", "vehicle": self.names[i], **{k: v for k, v in sp.items()
                                                               if k not in ("t", "paused")},
-               "accepted": ok}
+               "accepted": ok,
+               # the sender's clock when it was put (header.stamp): the
+               # order it was sent in, which Zenoh's threads may not keep
+               "stamp": m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec}
         if ok:      # the physics time the firmware stamped it with (its watchdog's
             rec["at"] = round(t, 6)     # reference; "t" is when the line is written)
         else:

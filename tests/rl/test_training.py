@@ -10,11 +10,33 @@ pytest.importorskip("optax")
 from avblocks import rl  # noqa: E402
 from avblocks.rl import apg, ppo  # noqa: E402
 
+#: XLA programs built in this process (JAX's monitoring event for each
+#: backend compile), appended by a listener registered once
+_BUILT = []
+
+
+def _listen(event, secs, **kw):
+    if event == "/jax/core/compile/backend_compile_duration":
+        _BUILT.append(secs)
+
+
+jax.monitoring.register_event_duration_secs_listener(_listen)
+
+
+def _programs(fn, *a, **kw):
+    """``fn(*a, **kw)`` and how many XLA programs it built."""
+    n = len(_BUILT)
+    out = fn(*a, **kw)
+    return out, len(_BUILT) - n
+
 
 def test_ppo_improves_the_return_on_navigation():
     env = rl.functional("navigation", max_steps=30)
     cfg = ppo.Config(num_envs=16, updates=30, hidden=(32, 32), lr=1e-3, normalize_obs=True)
-    res = ppo.train(env, cfg, seed=0)
+    res, built = _programs(ppo.train, env, cfg, seed=0)
+    # the start (optimizer state, key, statistics), the update and the
+    # action box's transfer; made op by op, the start was 300 programs
+    assert built <= 3, built
     r = np.asarray(res.curve["return"])
     assert r[-5:].mean() > r[:5].mean() + 5.0          # -11 -> about 0 here
     # deterministic evaluation agrees: better than the untrained actor
@@ -33,7 +55,8 @@ def test_apg_lowers_its_cost_and_runs_as_a_block(tmp_path):
     from avblocks.scenarios import navigation
     env = rl.functional("navigation", max_steps=30)
     cfg = apg.Config(num_envs=16, updates=30, hidden=(32,), lr=3e-3, horizon=10)
-    res = apg.train(env, cfg, seed=0, cost=_to_go)
+    res, built = _programs(apg.train, env, cfg, seed=0, cost=_to_go)
+    assert built <= 3, built            # the start, the step, the action box
     c = np.asarray(res.curve["cost"])
     assert np.isfinite(c).all() and c[-3:].mean() < 0.8 * c[:3].mean()
     # the same weights in the scenario's diagram: NumPy engine == compiled

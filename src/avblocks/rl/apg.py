@@ -122,12 +122,13 @@ def train(env, cfg=Config(), seed=0, *, cost=None, time_budget_s=None, callback=
     :class:`~avblocks.rl.FunctionalEnv`) by gradient through the episode."""
     import optax
     jax = _engine.jax()
-    jnp = jax.numpy
     t0 = time.perf_counter()
-    w = {k: jnp.asarray(v, jnp.float32) for k, v in
+    # cast by NumPy and transferred; the optimizer state and the key made by
+    # one compiled program (op by op, each op of each shape was compiled)
+    w = {k: jax.device_put(np.array(v, np.float32)) for k, v in
          mlp_init([env.obs_dim, *cfg.hidden, env.act_dim], seed=seed, gain_last=0.1).items()}
     opt = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(cfg.lr))
-    carry = (w, opt.init(w), jax.random.PRNGKey(seed))
+    carry = (w, *jax.jit(lambda w: (opt.init(w), jax.random.PRNGKey(seed)))(w))
     update = make_step(env, cfg, opt, cost)
     curve = {"cost": [], "return": [], "success": [], "env_steps": [], "wall_s": []}
     for u in range(cfg.updates):

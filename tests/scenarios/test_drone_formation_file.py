@@ -7,6 +7,7 @@ import inspect
 import json
 
 import numpy as np
+import pytest
 
 import avblocks as av
 from avblocks.cli import load_any, main
@@ -65,3 +66,27 @@ def test_the_fleet_is_one_block_that_robots_replace():
     assert isinstance(fleet, av.vehicles.VelocityControlledQuadrotor)
     assert sorted(fleet.input_ports) == ["velocity"]
     assert fleet.input_ports["velocity"].shape == (5, 3)
+
+
+def test_min_separation_is_the_3d_closest_pair_with_memory_linear_in_vehicles():
+    import tracemalloc
+
+    from avblocks.scenarios.drone_formation import min_separation
+    rng = np.random.default_rng(5)
+    p = rng.uniform(0, 10, size=(6, 30, 3))
+    p[4, 7] = p[4, 19] + [0.0, 0.0, 0.013]      # one pair apart in height only
+    brute = min(np.linalg.norm(p[k, i] - p[k, j]) for k in range(6)
+                for i in range(30) for j in range(i))
+    assert min_separation({"fleet.position": p}) == pytest.approx(brute, rel=1e-12)
+    assert brute == pytest.approx(0.013)
+    q = p.copy()
+    q[2, 3, 1] = np.nan                         # not a number: said, not skipped
+    assert np.isnan(min_separation({"fleet.position": q}))
+    big = rng.uniform(0, 300, size=(3, 3000, 3))
+    tracemalloc.start()
+    try:
+        min_separation({"fleet.position": big})
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 30e6, peak     # all pairs of all samples: 3 x 3000^2 x 24 B = 648 MB

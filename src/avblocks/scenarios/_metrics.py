@@ -15,15 +15,19 @@ def first_time_all(t, flags):
     return float(t[int(np.argmax(allk))]) if allk.any() else None
 
 
-def min_pairwise_distance(positions):
-    """Smallest distance between two agents over the run, and its time
-    index: ``(d, k)``. Uses a k-d tree per sample."""
+def min_pairwise_distance(positions, dims=2):
+    """Smallest distance between two agents over the run, in their first
+    ``dims`` coordinates, and its time index: ``(d, k)``. Uses a k-d tree
+    per sample (memory linear in the agents). A sample with a position
+    that is not finite gives ``(nan, k)`` at the first such sample."""
     from scipy.spatial import cKDTree
-    p = np.asarray(positions, float)[..., :2]
+    p = np.asarray(positions, float)[..., :dims]
     best, kbest = np.inf, 0
     for k in range(p.shape[0]):
         if p.shape[1] < 2:
             break
+        if not np.isfinite(p[k]).all():
+            return float("nan"), k
         dist, _ = cKDTree(p[k]).query(p[k], k=2)
         m = float(dist[:, 1].min())
         if m < best:

@@ -7,7 +7,10 @@ about 9 others within r), random velocities in [-2, 2]^2 m/s; every step
 ``environment.Neighbors`` lists the K = 12 nearest others within
 r = 1.2 d = 8.4 m (held over the step), ``controllers.Flocking``
 (Algorithm 1 + gamma term towards a target moving from the lattice's
-centre) gives the accelerations; RK4, dt = 0.02 s. Columns, seconds per
+centre) gives the accelerations; RK4, dt = 0.02 s. The agents are stored
+in the lattice's order (row by row), nearly the search's cell order; a
+random order was 5-15 % slower per step at N = 10^5 on the 2-core CPU
+(compiled, float64; run to run spread about 15 %). Columns, seconds per
 step (median over the rounds; each (column, N) runs in a fresh process, the
 columns alternate within a round, so a shared machine disturbs them alike):
 
@@ -60,7 +63,11 @@ peak device memory (10^6 also the search alone); a profile of one call at
 10^7 in its own process (``cProfile`` of the host's Python and a
 ``jax.profiler`` trace, summarised: busy time and top spans of the host
 and each device; the Perfetto file copied to ``--out-dir``); a check of
-the device against the NumPy engine (N = 2000); sharded runs
+the device against the NumPy engine (N = 2000); N = 10^6 float32 with the
+agents stored in a random order, then sorted by the search's cells (the
+other rows store them in the lattice's order, row by row, nearly the
+cells' already): what keeping agents in cell order between steps could
+gain on that device, measured before it is built; sharded runs
 (``shard="agents"``) on the machine's devices, then on its CPU split into
 16 devices (1, 2, 4, 8, 16); and N = 10^6 over 4 s (the flock contracts,
 one re-plan). The script sets ``AVBLOCKS_CACHE=off`` (unless set):
@@ -110,9 +117,30 @@ def initial(n, seed=0):
     return p0, v0, centre
 
 
-def diagram(n):
+#: storage orders of the agents (``diagram(n, order)``): the lattice's own
+#: (row by row: nearly the search's cell order), a random permutation, and
+#: sorted by the search's cells (side r, x-major)
+ORDERS = ("lattice", "random", "cell")
+
+
+def ordered(p0, v0, order):
+    """``(p0, v0)`` with the agents stored in ``order`` (:data:`ORDERS`)."""
+    if order == "random":
+        perm = np.random.default_rng(1).permutation(len(p0))
+    elif order == "cell":
+        c = np.floor((p0 - p0.min(axis=0)) / R).astype(np.int64)
+        perm = np.lexsort((c[:, 1], c[:, 0]))
+    elif order == "lattice":
+        return p0, v0
+    else:
+        raise ValueError(f"order must be one of {ORDERS}, got {order!r}")
+    return p0[perm], v0[perm]
+
+
+def diagram(n, order="lattice"):
     import avblocks as av
     p0, v0, centre = initial(n)
+    p0, v0 = ordered(p0, v0, order)
     dg = av.Diagram("flocking-bench")
     flock = dg.add(av.vehicles.DoubleIntegrator(p0, velocity0=v0), name="flock")
     nb = dg.add(av.environment.Neighbors(n, K, radius=R, input="position", period=DT),
@@ -522,7 +550,7 @@ def _timed_calls(runner, calls):
     return min(walls), walls, res
 
 
-def _gpu_runner_row(n, dtype, steps, calls=3):
+def _gpu_runner_row(n, dtype, steps, calls=3, order="lattice"):
     """One (N, dtype) row on JAX's default device, from two runners of
     ``steps = (s1, s2)`` steps (each planned and compiled, then the best of
     ``calls`` calls after the first): the time of a step, ``(T2 - T1) / (s2
@@ -531,25 +559,26 @@ def _gpu_runner_row(n, dtype, steps, calls=3):
     on the results). ``plan_s``: ``avblocks.compile`` of the first runner
     (the plan: the points the search needs at t0, counted on the host);
     ``first_call_s``: its first call (XLA compile, any re-plan, the run);
-    ``peak_device_mib``: JAX's ``peak_bytes_in_use`` after both."""
+    ``peak_device_mib``: JAX's ``peak_bytes_in_use`` after both. ``order``:
+    how the agents are stored (:data:`ORDERS`)."""
     import jax
 
     import avblocks as av
     s1, s2 = steps if len(steps) > 1 else (steps[0], None)
     t = time.perf_counter()
-    runner = av.compile(diagram(n), s1 * DT, dt=DT, log=["flock.position"],
+    runner = av.compile(diagram(n, order), s1 * DT, dt=DT, log=["flock.position"],
                         log_every=s1, dtype=dtype)
     plan_s = time.perf_counter() - t
     t = time.perf_counter()
     runner()
     first = time.perf_counter() - t
     t1, walls1, res = _timed_calls(runner, calls)
-    row = {"n": n, "dtype": dtype, "steps": [s1] + ([s2] if s2 else []),
+    row = {"n": n, "dtype": dtype, "order": order, "steps": [s1] + ([s2] if s2 else []),
            "device": str(jax.devices()[0]), "plan_s": plan_s, "first_call_s": first,
            "ms_per_call": [round(1e3 * w, 2) for w in walls1],
            "ms_per_step": 1e3 * t1 / s1, "plan": str(next(iter(runner.plans.values())))}
     if s2:
-        r2 = av.compile(diagram(n), s2 * DT, dt=DT, log=["flock.position"],
+        r2 = av.compile(diagram(n, order), s2 * DT, dt=DT, log=["flock.position"],
                         log_every=s2, dtype=dtype)
         r2()
         t2, walls2, res = _timed_calls(r2, calls)
@@ -707,7 +736,8 @@ def gpu_child(case, n, dtypes, steps, out_dir="."):
     """One GPU case in its own process: ``rows`` (one runner row per dtype,
     in order), ``search`` (rows, then the search alone with the
     last row's plan), ``check`` (device against the NumPy engine),
-    ``profile`` (a traced call) or ``devices`` (sharded runs; ``dtypes``
+    ``profile`` (a traced call), ``order`` (float32 rows; ``dtypes`` holds
+    the agents' storage orders) or ``devices`` (sharded runs; ``dtypes``
     holds the device counts)."""
     import jax
     print(f"# device {jax.devices()[0]} (JAX {jax.__version__})", file=sys.stderr, flush=True)
@@ -715,6 +745,13 @@ def gpu_child(case, n, dtypes, steps, out_dir="."):
         return [_gpu_check(n, steps[0])]
     if case == "profile":
         return [_gpu_profile(n, dtypes[0], steps[0], out_dir)]
+    if case == "order":                 # float32 rows, one per storage order
+        rows = []
+        for o in dtypes:
+            r, _ = _gpu_runner_row(n, "float32", steps, order=o)
+            print(json.dumps(r), file=sys.stderr, flush=True)
+            rows.append(r)
+        return rows
     if case == "devices":
         rows = []
         for d in dtypes:
@@ -740,6 +777,7 @@ GPU_CASES = [("search", 10**6, ("float64", "float32"), (10, 50), {}),
              ("rows", 10**7, ("float32", "float64"), (10, 30), {}),
              ("profile", 10**7, ("float32",), (10,), {}),
              ("check", 2000, (), (10,), {}),
+             ("order", 10**6, ("random", "cell"), (10, 50), {}),
              ("devices", 2**20, ("ALL",), (20,), {}),
              ("devices", 2**16, ("1", "2", "4", "8", "16"), (10,),
               {"JAX_PLATFORMS": "cpu", "JAX_NUM_CPU_DEVICES": "16",
@@ -822,7 +860,8 @@ def _gpu_tables(rows, out_dir):
         else:
             sm = f"{r['search_ms']:.2f}" if "search_ms" in r else ""
             fx = f"{r['fixed_ms']:.1f}" if "fixed_ms" in r else ""
-            lines.append(f"| {r['n']} | {r['dtype']} | {r['steps']} | "
+            order = "" if r.get("order", "lattice") == "lattice" else f", {r['order']} order"
+            lines.append(f"| {r['n']} | {r['dtype']}{order} | {r['steps']} | "
                          f"{r['ms_per_step']:.2f} | {fx} | {r['realtime_factor']:.2f} | "
                          f"{r['plan_s']:.1f} | {r['first_call_s']:.1f} | "
                          f"{r['peak_device_mib']:.0f} | {sm} | {r['plan']} |")

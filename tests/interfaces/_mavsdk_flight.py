@@ -72,8 +72,14 @@ def main():
         t_end = time.monotonic() + 20
         while time.monotonic() < t_end and telemetry.landed_state() != LandedState.ON_GROUND:
             time.sleep(0.1)
-        step("landed", landed_state=int(telemetry.landed_state()),
-             armed=bool(telemetry.armed()))
+        step("landed", landed_state=int(telemetry.landed_state()))
+        # PX4 disarms after it detects the landing (COM_DISARM_LAND, 2 s by
+        # default); the disarm reaches MAVSDK with the next HEARTBEAT (1 Hz),
+        # which may come after the EXTENDED_SYS_STATE saying "on ground"
+        t_end = time.monotonic() + 5
+        while time.monotonic() < t_end and telemetry.armed():
+            time.sleep(0.1)
+        step("disarmed", armed=bool(telemetry.armed()))
         return out
     finally:
         m.destroy()

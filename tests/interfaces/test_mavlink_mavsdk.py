@@ -67,7 +67,7 @@ def test_mavsdk_flies_the_emulated_px4_through_action_and_offboard(tmp_path):
     assert "error" not in out, out
     steps = {s["step"]: s for s in out["steps"]}
     assert list(steps) == ["connected", "armed", "takeoff", "up", "offboard", "velocity",
-                           "stop", "stopped", "land", "landed"], out
+                           "stop", "stopped", "land", "landed", "disarmed"], out
     # MAVSDK decoded the emulated PX4's parameters (INT32 byte-wise) itself
     assert out["COM_OBL_RC_ACT"] == 4 and out["COM_OF_LOSS_T"] == pytest.approx(0.5)
     assert out["takeoff_altitude"] == pytest.approx(alt)
@@ -88,5 +88,7 @@ def test_mavsdk_flies_the_emulated_px4_through_action_and_offboard(tmp_path):
     assert pos[i1, 1] - pos[i0, 1] == pytest.approx(v_north * seconds, rel=0.2)
     # landed and disarmed, as MAVSDK also saw (LandedState.ON_GROUND = 1)
     assert pos[-1, 2] == pytest.approx(0.0, abs=0.03) and not samples[-1][4]
-    assert steps["landed"]["landed_state"] == 1 and steps["landed"]["armed"] is False
+    # (the disarm reaches MAVSDK with a HEARTBEAT, at 1 Hz: the script waits
+    # for it after the EXTENDED_SYS_STATE that says "on ground")
+    assert steps["landed"]["landed_state"] == 1 and steps["disarmed"]["armed"] is False
     assert [e for e in em.events if e["ev"] == "landed"]

@@ -121,7 +121,7 @@ def initial(n, seed=0):
 
 #: storage orders of the agents (``diagram(n, order)``): the lattice's own
 #: (row by row: nearly the search's cell order), a random permutation, and
-#: sorted by the search's cells (side r, x-major)
+#: the search's own cell order (``utility.spatial.layout``)
 ORDERS = ("lattice", "random", "cell")
 
 
@@ -130,8 +130,8 @@ def ordered(p0, v0, order):
     if order == "random":
         perm = np.random.default_rng(1).permutation(len(p0))
     elif order == "cell":
-        c = np.floor((p0 - p0.min(axis=0)) / R).astype(np.int64)
-        perm = np.lexsort((c[:, 1], c[:, 0]))
+        from avblocks.utility import spatial
+        perm = spatial.layout(spatial.CellList(R), p0).order
     elif order == "lattice":
         return p0, v0
     else:

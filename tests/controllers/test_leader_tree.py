@@ -18,7 +18,8 @@ def _by_hand(off):
     for i in range(1, len(off)):
         best, arg = math.inf, -1
         for j in range(i):
-            d = math.hypot(off[i][0] - off[j][0], off[i][1] - off[j][1])
+            dx, dy = off[i][0] - off[j][0], off[i][1] - off[j][1]
+            d = math.sqrt(dx * dx + dy * dy)   # a norm's rounding: ties stay ties
             if d < best:                  # strict: a tie keeps the lower index
                 best, arg = d, j
         leader.append(arg)

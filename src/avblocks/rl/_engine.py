@@ -63,6 +63,13 @@ def jax():
     return require_jax()
 
 
+def float32_on_device(x):
+    """``x`` as a float32 device array: cast by NumPy, then only transferred.
+    (In JAX 0.10, ``jnp.asarray`` of a NumPy array and ``jnp.full`` compile
+    a one-op program for each new shape; ``device_put`` compiles nothing.)"""
+    return jax().device_put(np.array(x, np.float32))
+
+
 def outputs_of(eng, which, t, X, Y, hits):
     """``eng.major_outputs`` restricted to the blocks ``which`` (a set of
     indices closed under feedthrough descendants); the others keep ``Y``."""

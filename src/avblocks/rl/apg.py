@@ -123,9 +123,9 @@ def train(env, cfg=Config(), seed=0, *, cost=None, time_budget_s=None, callback=
     import optax
     jax = _engine.jax()
     t0 = time.perf_counter()
-    # cast by NumPy and transferred; the optimizer state and the key made by
-    # one compiled program (op by op, each op of each shape was compiled)
-    w = {k: jax.device_put(np.array(v, np.float32)) for k, v in
+    # transferred, not made by jnp ops; the optimizer state and the key made
+    # by one compiled program (op by op, each op of each shape was compiled)
+    w = {k: _engine.float32_on_device(v) for k, v in
          mlp_init([env.obs_dim, *cfg.hidden, env.act_dim], seed=seed, gain_last=0.1).items()}
     opt = optax.chain(optax.clip_by_global_norm(cfg.max_grad_norm), optax.adam(cfg.lr))
     carry = (w, *jax.jit(lambda w: (opt.init(w), jax.random.PRNGKey(seed)))(w))

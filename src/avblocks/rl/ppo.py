@@ -297,21 +297,16 @@ def _clip(tree, max_norm):
     return jax.tree_util.tree_map(lambda x: x * scale, tree)
 
 
-def _f32(x):
-    """``x`` as a float32 device array: cast by NumPy, then only transferred
-    (``jnp.asarray`` and ``jnp.full`` compile a one-op program per shape)."""
-    return _engine.jax().device_put(np.array(x, np.float32))
-
-
 def init_params(env, cfg, seed=0):
     """Initial actor, critic and log std (float32 device arrays)."""
     sizes = [env.obs_dim, *cfg.hidden]
     actor = mlp_init(sizes + [env.act_dim], seed=seed, gain_last=0.01)
     csizes = [env.obs_dim + (1 if cfg.time_feature else 0), *cfg.hidden, 1]
     critic = mlp_init(csizes, seed=seed + 1, gain_last=1.0)
-    return {"actor": {k: _f32(v) for k, v in actor.items()},
-            "critic": {k: _f32(v) for k, v in critic.items()},
-            "log_std": _f32(np.full((env.act_dim,), cfg.log_std0))}
+    f32 = _engine.float32_on_device
+    return {"actor": {k: f32(v) for k, v in actor.items()},
+            "critic": {k: f32(v) for k, v in critic.items()},
+            "log_std": f32(np.full((env.act_dim,), cfg.log_std0))}
 
 
 def _start(env, cfg, opt, seed):
